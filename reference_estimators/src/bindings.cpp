@@ -1,0 +1,349 @@
+// Python bindings of the core (module reference_estimators._core).  Every batch function
+// allocates its outputs, then releases the GIL for the computation.  Inputs are validated
+// here too (shape, dimension), so no call can read out of bounds; the Python layer adds
+// friendlier messages on top.
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+#include <nanobind/stl/map.h>
+#include <nanobind/stl/pair.h>
+#include <nanobind/stl/shared_ptr.h>
+#include <nanobind/stl/string.h>
+#include <nanobind/stl/vector.h>
+
+#include <cmath>
+#include <sstream>
+
+#include "estimators.h"
+#include "fastmath.h"
+#include "thread_pool.h"
+
+namespace nb = nanobind;
+using namespace nb::literals;
+using namespace re;
+
+namespace {
+
+using InArray = nb::ndarray<const double, nb::c_contig, nb::device::cpu>;
+using OutArray = nb::ndarray<nb::numpy, double>;
+
+const char *kIssueNames[kIssueKinds] = {"nan",         "posinf",   "neginf",  "negative",
+                                        "outside_domain", "zero_pdf", "bad_pdf", "bound_violation"};
+
+// A new numpy array that owns its memory: shape (rows,) when cols == 0, else (rows, cols).
+OutArray new_array(size_t rows, size_t cols, double **data) {
+    size_t size = rows * (cols == 0 ? 1 : cols);
+    double *p = new double[size > 0 ? size : 1];
+    nb::capsule owner(p, [](void *q) noexcept { delete[] static_cast<double *>(q); });
+    *data = p;
+    if (cols == 0) return OutArray(p, {rows}, owner);
+    return OutArray(p, {rows, cols}, owner);
+}
+
+// Points array: shape (n, dim), or (n,) when dim == 1.
+size_t check_points(const InArray &x, int dim, const char *arg) {
+    bool ok = (x.ndim() == 2 && x.shape(1) == size_t(dim)) || (dim == 1 && x.ndim() == 1);
+    if (!ok) {
+        std::ostringstream s;
+        s << "'" << arg << "' must have shape (N, " << dim << ")" << (dim == 1 ? " or (N,)" : "") << ", got (";
+        for (size_t i = 0; i < x.ndim(); ++i) s << (i ? ", " : "") << x.shape(i);
+        s << ")";
+        throw nb::value_error(s.str().c_str());
+    }
+    return x.shape(0);
+}
+
+nb::dict diagnostics_dict(const Diagnostics &d) {
+    nb::dict counts;
+    for (int k = 0; k < kIssueKinds; ++k) counts[kIssueNames[k]] = d.counts[k];
+    nb::list examples;
+    for (auto &e : d.examples) {
+        nb::dict ex;
+        ex["issue"] = kIssueNames[e.kind];
+        ex["index"] = e.index;
+        nb::list pt;
+        for (int j = 0; j < e.dim; ++j) pt.append(e.point[j]);
+        ex["point"] = nb::tuple(pt);
+        ex["value"] = e.value;
+        examples.append(ex);
+    }
+    nb::dict r;
+    r["counts"] = counts;
+    r["examples"] = examples;
+    r["drawn"] = d.drawn;
+    r["candidates"] = d.candidates;
+    return r;
+}
+
+// Final figures from an accumulator state; scale-free ones computed before unscaling, so
+// magnitudes near 1e+-300 report a finite standard error.
+nb::dict estimate_dict(const Estimate &e) {
+    const Moments &m = e.moments;
+    const int E = m.scale_exp;
+    const double n = m.n, nan = std::nan("");
+    double var_s = n > 1 ? m.m2 / (n - 1) : nan;
+    nb::dict r = diagnostics_dict(e.diagnostics);
+    r["n"] = uint64_t(n);
+    r["mean"] = n > 0 ? std::ldexp(m.total.value() / n, E) : nan;
+    r["variance"] = std::ldexp(var_s, 2 * E);
+    r["stderr"] = n > 1 ? std::ldexp(std::sqrt(var_s / n), E) : nan;
+    r["log10_variance"] = var_s > 0 ? std::log10(var_s) + 2 * E * std::log10(2.0) : (var_s == 0 ? -INFINITY : nan);
+    r["skewness"] = m.m2 > 0 ? std::sqrt(n) * m.m3 / std::pow(m.m2, 1.5) : nan;
+    r["kurtosis"] = m.m2 > 0 ? n * m.m4 / (m.m2 * m.m2) : nan;
+    r["min"] = n > 0 ? std::ldexp(m.min, E) : nan;
+    r["max"] = n > 0 ? std::ldexp(m.max, E) : nan;
+    r["seconds"] = e.seconds;
+    r["chunks"] = e.chunks;
+    r["threads"] = e.threads;
+    return r;
+}
+
+RunOptions options(uint64_t seed, uint64_t case_id, uint64_t replica, int threads, bool higher = true) {
+    if (threads < 0) throw nb::value_error("'threads' must be >= 1 (or None for all cores)");
+    RunOptions o;
+    o.key = {seed, case_id, replica, 0};
+    o.threads = threads;
+    o.higher_moments = higher;
+    return o;
+}
+
+void check_n(int64_t n) {
+    if (n <= 0) throw nb::value_error(("'n' must be a positive number of samples, got " + std::to_string(n)).c_str());
+}
+
+const char *technique_kind(TechniqueKind k) {
+    switch (k) {
+        case TechniqueKind::Uniform: return "uniform";
+        case TechniqueKind::Importance: return "importance";
+        case TechniqueKind::HitOrMiss: return "rejection";
+    }
+    return "?";
+}
+
+}  // namespace
+
+NB_MODULE(_core, m) {
+    m.doc() = "C++ core of the reference estimators: PCG32 chunk streams, accumulators, samplers, integrands.";
+    m.attr("CHUNK_SIZE") = kChunkSize;
+    m.attr("ISSUES") = nb::make_tuple("nan", "posinf", "neginf", "negative", "outside_domain", "zero_pdf", "bad_pdf",
+                                      "bound_violation");
+    m.def("hardware_threads", &ThreadPool::default_threads);
+
+    nb::class_<Integrand>(m, "Integrand")
+        .def_ro("name", &Integrand::name)
+        .def_ro("description", &Integrand::description)
+        .def_ro("reference", &Integrand::reference)
+        .def_ro("nonnegative", &Integrand::nonnegative)
+        .def_prop_ro("domain", [](const Integrand &f) { return f.domain.kind_name(); })
+        .def_prop_ro("dim", [](const Integrand &f) { return f.domain.dim; })
+        .def_prop_ro("measure", [](const Integrand &f) { return f.domain.measure(); })
+        .def_prop_ro("bounds", [](const Integrand &f) { return std::make_pair(f.domain.lo, f.domain.hi); })
+        .def("eval", [](const Integrand &f, InArray x) {
+            size_t n = check_points(x, f.domain.dim, "x");
+            double *out;
+            OutArray r = new_array(n, 0, &out);
+            {
+                nb::gil_scoped_release g;
+                f.eval(x.data(), out, n);
+            }
+            return r;
+        }, "x"_a, "f(x) for points of shape (N, dim); 0 outside the domain.")
+        .def("__repr__", [](const Integrand &f) { return "<Integrand " + f.name + " on " + f.domain.kind_name() + ">"; });
+
+    nb::class_<Sampler>(m, "Sampler")
+        .def_ro("name", &Sampler::name)
+        .def_ro("params", &Sampler::params)
+        .def_ro("udim", &Sampler::udim)
+        .def_ro("invertible", &Sampler::invertible)
+        .def_prop_ro("method", [](const Sampler &s) { return s.method == SamplingMethod::Inversion ? "inversion" : "rejection"; })
+        .def_prop_ro("domain", [](const Sampler &s) { return s.domain.kind_name(); })
+        .def_prop_ro("dim", [](const Sampler &s) { return s.domain.dim; })
+        .def("describe", &Sampler::describe)
+        .def("sample", [](const Sampler &s, InArray u) {
+            size_t n = check_points(u, s.udim, "u");
+            double *x, *p;
+            OutArray xs = new_array(n, s.domain.dim == 1 ? 0 : s.domain.dim, &x);
+            OutArray ps = new_array(n, 0, &p);
+            {
+                nb::gil_scoped_release g;
+                s.sample(u.data(), x, p, n);
+            }
+            return nb::make_tuple(xs, ps);
+        }, "u"_a)
+        .def("pdf", [](const Sampler &s, InArray x) {
+            size_t n = check_points(x, s.domain.dim, "x");
+            double *p;
+            OutArray ps = new_array(n, 0, &p);
+            {
+                nb::gil_scoped_release g;
+                s.pdf(x.data(), p, n);
+            }
+            return ps;
+        }, "x"_a)
+        .def("invert", [](const Sampler &s, InArray x) {
+            size_t n = check_points(x, s.domain.dim, "x");
+            double *u;
+            OutArray us = new_array(n, s.udim == 1 ? 0 : s.udim, &u);
+            {
+                nb::gil_scoped_release g;
+                s.invert(x.data(), u, n);
+            }
+            return us;
+        }, "x"_a)
+        .def("draw", [](const Sampler &s, int64_t n, uint64_t seed, uint64_t case_id, uint64_t replica, int threads) {
+            check_n(n);
+            RunOptions o = options(seed, case_id, replica, threads);
+            double *x, *p;
+            OutArray xs = new_array(size_t(n), s.domain.dim == 1 ? 0 : s.domain.dim, &x);
+            OutArray ps = new_array(size_t(n), 0, &p);
+            Diagnostics d;
+            {
+                nb::gil_scoped_release g;
+                d = draw_samples(s, uint64_t(n), o, x, p);
+            }
+            return nb::make_tuple(xs, ps, diagnostics_dict(d));
+        }, "n"_a, "seed"_a = 0, "case_id"_a = 0, "replica"_a = 0, "threads"_a = 0)
+        .def("__repr__", [](const Sampler &s) { return "<Sampler " + s.describe() + ">"; });
+
+    nb::class_<Technique>(m, "Technique")
+        .def_ro("name", &Technique::name)
+        .def_ro("sampler", &Technique::sampler)
+        .def_ro("bound", &Technique::bound)
+        .def_ro("note", &Technique::note)
+        .def_prop_ro("kind", [](const Technique &t) { return technique_kind(t.kind); })
+        .def_prop_ro("finite_variance", [](const Technique &t) -> nb::object {
+            if (t.finite_variance < 0) return nb::none();
+            return nb::bool_(t.finite_variance == 1);
+        })
+        .def("__repr__", [](const Technique &t) { return "<Technique " + t.name + " (" + t.sampler->describe() + ")>"; });
+
+    m.def("catalogue", [] {
+        std::vector<std::pair<IntegrandPtr, std::vector<Technique>>> r;
+        for (auto &e : catalogue()) r.emplace_back(e.integrand, e.techniques);
+        return r;
+    });
+    m.def("sampler_registry", [] {
+        nb::list r;
+        for (auto &i : sampler_registry()) {
+            nb::dict d;
+            d["name"] = i.name; d["method"] = i.method; d["domain"] = i.domain; d["description"] = i.description;
+            nb::dict p;
+            for (auto &[k, v] : i.params) p[k.c_str()] = v;
+            d["params"] = p;
+            d["needs_table"] = i.needs_table;
+            r.append(d);
+        }
+        return r;
+    });
+    m.def("make_sampler", [](const std::string &name, const std::map<std::string, double> &params, nb::object table) {
+        std::vector<double> values;
+        std::vector<size_t> shape;
+        if (!table.is_none()) {
+            InArray t = nb::cast<InArray>(table);
+            values.assign(t.data(), t.data() + t.size());
+            for (size_t i = 0; i < t.ndim(); ++i) shape.push_back(t.shape(i));
+        }
+        return make_sampler(name, params, values, shape);
+    }, "name"_a, "params"_a, "table"_a = nb::none());
+    m.def("make_rejection_sampler", &make_rejection_sampler, "target"_a, "proposal"_a, "c"_a);
+    m.def("make_uniform_sampler", [](const Integrand &f) { return make_uniform_sampler(f.domain); }, "integrand"_a);
+    m.def("uniform_technique", [](const Integrand &f) { return make_uniform_technique(f.domain); }, "integrand"_a);
+    m.def("importance_technique", &make_importance_technique, "sampler"_a);
+    m.def("hit_or_miss_technique", &make_hit_or_miss_technique, "proposal"_a, "c"_a);
+    m.def("tabulated_integrand", [](InArray v, double a, double b) {
+        return make_tabulated_integrand(std::vector<double>(v.data(), v.data() + v.size()), a, b);
+    }, "values"_a, "a"_a, "b"_a);
+
+    auto check_pair = [](const Integrand &f, const Technique &t) {
+        if (t.sampler->domain.dim != f.domain.dim)
+            throw nb::value_error(("technique '" + t.name + "' draws " + std::to_string(t.sampler->domain.dim) +
+                                   "-dimensional points but integrand '" + f.name + "' is " +
+                                   std::to_string(f.domain.dim) + "-dimensional").c_str());
+    };
+    m.def("integrate", [check_pair](const Integrand &f, const Technique &t, int64_t n, uint64_t seed, uint64_t case_id,
+                                    uint64_t replica, int threads, bool higher_moments) {
+        check_n(n);
+        check_pair(f, t);
+        RunOptions o = options(seed, case_id, replica, threads, higher_moments);
+        Estimate e;
+        {
+            nb::gil_scoped_release g;
+            e = integrate(f, t, uint64_t(n), o);
+        }
+        return estimate_dict(e);
+    }, "integrand"_a, "technique"_a, "n"_a, "seed"_a = 0, "case_id"_a = 0, "replica"_a = 0, "threads"_a = 0,
+       "higher_moments"_a = true);
+    m.def("contributions", [check_pair](const Integrand &f, const Technique &t, int64_t n, uint64_t seed,
+                                        uint64_t case_id, uint64_t replica, int threads) {
+        check_n(n);
+        check_pair(f, t);
+        RunOptions o = options(seed, case_id, replica, threads);
+        double *y;
+        OutArray r = new_array(size_t(n), 0, &y);
+        {
+            nb::gil_scoped_release g;
+            contributions(f, t, uint64_t(n), o, y);
+        }
+        return r;
+    }, "integrand"_a, "technique"_a, "n"_a, "seed"_a = 0, "case_id"_a = 0, "replica"_a = 0, "threads"_a = 0);
+    m.def("accumulate", [](InArray y, int threads, bool higher_moments) {
+        if (y.ndim() != 1) throw nb::value_error("'values' must be one-dimensional");
+        RunOptions o = options(0, 0, 0, threads, higher_moments);
+        Estimate e;
+        {
+            nb::gil_scoped_release g;
+            e = accumulate_values(y.data(), y.shape(0), o);
+        }
+        return estimate_dict(e);
+    }, "values"_a, "threads"_a = 0, "higher_moments"_a = true);
+    m.def("estimate_from_samples", [](const Integrand &f, InArray x, InArray pdf, const Sampler *domain_of,
+                                      int threads) {
+        size_t n = check_points(x, f.domain.dim, "points");
+        if (pdf.ndim() != 1 || pdf.shape(0) != n)
+            throw nb::value_error(("'pdf' must have shape (" + std::to_string(n) + ",), one value per point").c_str());
+        const Domain &dom = domain_of ? domain_of->domain : f.domain;
+        RunOptions o = options(0, 0, 0, threads);
+        Estimate e;
+        {
+            nb::gil_scoped_release g;
+            e = estimate_from_samples(f, x.data(), pdf.data(), n, dom, o);
+        }
+        return estimate_dict(e);
+    }, "integrand"_a, "points"_a, "pdf"_a, "sampler"_a = nb::none(), "threads"_a = 0);
+
+    // The canonical uniforms of one chunk's stream, for reproducibility checks.
+    m.def("uniforms", [](int64_t n, uint64_t seed, uint64_t case_id, uint64_t replica, uint64_t chunk) {
+        check_n(n);
+        double *u;
+        OutArray r = new_array(size_t(n), 0, &u);
+        UniformStream s({seed, case_id, replica, chunk});
+        s.fill(u, size_t(n));
+        return r;
+    }, "n"_a, "seed"_a = 0, "case_id"_a = 0, "replica"_a = 0, "chunk"_a = 0);
+    m.def("pcg32_outputs", [](int64_t n, uint64_t seed, uint64_t case_id, uint64_t replica, uint64_t chunk) {
+        check_n(n);
+        Pcg32 g({seed, case_id, replica, chunk});
+        std::vector<uint32_t> out(static_cast<size_t>(n));
+        for (auto &o : out) o = g.next_u32();
+        return out;
+    }, "n"_a, "seed"_a = 0, "case_id"_a = 0, "replica"_a = 0, "chunk"_a = 0);
+
+    // The vectorisable elementary functions, exposed for accuracy tests.
+    m.def("fm_exp", [](InArray x) {
+        double *y;
+        OutArray r = new_array(x.size(), 0, &y);
+        for (size_t i = 0; i < x.size(); ++i) y[i] = fm::exp(x.data()[i]);
+        return r;
+    });
+    m.def("fm_log", [](InArray x) {
+        double *y;
+        OutArray r = new_array(x.size(), 0, &y);
+        for (size_t i = 0; i < x.size(); ++i) y[i] = fm::log(x.data()[i]);
+        return r;
+    });
+    m.def("fm_sincos_2pi", [](InArray x) {
+        double *s, *c;
+        OutArray rs = new_array(x.size(), 0, &s), rc = new_array(x.size(), 0, &c);
+        for (size_t i = 0; i < x.size(); ++i) fm::sincos_2pi(x.data()[i], s[i], c[i]);
+        return nb::make_tuple(rs, rc);
+    });
+}

@@ -1,0 +1,74 @@
+// Integration domains: where points live and what measure pdfs are densities against.
+#pragma once
+#include <cmath>
+#include <limits>
+#include <string>
+#include <vector>
+
+namespace re {
+
+enum class DomainKind { Box, HalfLine, Hemisphere, Sphere };
+
+struct Domain {
+    DomainKind kind = DomainKind::Box;
+    int dim = 1;                   // coordinates per point (3 for directions)
+    std::vector<double> lo, hi;    // Box only
+
+    static Domain box(std::vector<double> lo, std::vector<double> hi) {
+        Domain d;
+        d.kind = DomainKind::Box;
+        d.dim = int(lo.size());
+        d.lo = std::move(lo);
+        d.hi = std::move(hi);
+        return d;
+    }
+    static Domain interval(double a, double b) { return box({a}, {b}); }
+    static Domain half_line() { Domain d; d.kind = DomainKind::HalfLine; d.dim = 1; return d; }
+    static Domain hemisphere() { Domain d; d.kind = DomainKind::Hemisphere; d.dim = 3; return d; }
+    static Domain sphere() { Domain d; d.kind = DomainKind::Sphere; d.dim = 3; return d; }
+
+    // Lebesgue volume (Box), solid angle (directions), or infinity.
+    double measure() const {
+        switch (kind) {
+            case DomainKind::Box: {
+                double v = 1;
+                for (int j = 0; j < dim; ++j) v *= hi[j] - lo[j];
+                return v;
+            }
+            case DomainKind::HalfLine: return std::numeric_limits<double>::infinity();
+            case DomainKind::Hemisphere: return 2 * M_PI;
+            case DomainKind::Sphere: return 4 * M_PI;
+        }
+        return 0;
+    }
+
+    // Closed membership; directions must be unit length to 1e-9 in |w|^2.
+    bool contains(const double *x) const {
+        switch (kind) {
+            case DomainKind::Box:
+                for (int j = 0; j < dim; ++j)
+                    if (!(x[j] >= lo[j] && x[j] <= hi[j])) return false;
+                return true;
+            case DomainKind::HalfLine: return x[0] >= 0 && x[0] <= std::numeric_limits<double>::max();
+            case DomainKind::Hemisphere:
+            case DomainKind::Sphere: {
+                double r2 = x[0] * x[0] + x[1] * x[1] + x[2] * x[2];
+                if (!(std::fabs(r2 - 1.0) <= 1e-9)) return false;
+                return kind == DomainKind::Sphere || x[2] >= 0;
+            }
+        }
+        return false;
+    }
+
+    std::string kind_name() const {
+        switch (kind) {
+            case DomainKind::Box: return dim == 1 ? "interval" : (dim == 2 ? "square" : "box");
+            case DomainKind::HalfLine: return "half_line";
+            case DomainKind::Hemisphere: return "hemisphere";
+            case DomainKind::Sphere: return "sphere";
+        }
+        return "?";
+    }
+};
+
+}  // namespace re

@@ -1,0 +1,47 @@
+// Estimators over chunks: every entry point splits its n samples into fixed-size chunks,
+// gives chunk c the PCG32 stream keyed by (seed, case, replica, c), runs chunks on the
+// thread pool and merges their accumulator states in chunk order.
+#pragma once
+#include <cstdint>
+
+#include "accumulator.h"
+#include "integrands.h"
+#include "pcg32.h"
+
+namespace re {
+
+constexpr uint64_t kChunkSize = uint64_t(1) << 16;  // samples per chunk: fixes the streams
+
+struct Estimate {
+    Moments moments;          // of the finite contributions
+    Diagnostics diagnostics;  // counts and examples of everything excluded or suspicious
+    double seconds = 0;       // wall time of the whole call
+    uint64_t chunks = 0;
+    int threads = 1;
+};
+
+struct RunOptions {
+    StreamKey key;            // chunk field ignored: set per chunk
+    int threads = 0;          // 0: all hardware threads
+    bool higher_moments = true;
+};
+
+// Runs the technique's estimator on the integrand with n samples.
+Estimate integrate(const Integrand &f, const Technique &t, uint64_t n, const RunOptions &opt);
+
+// The per-sample contributions the same call would accumulate (NaN and Inf kept; samples
+// the estimator would drop for a bad pdf or a point outside the sampler's domain are NaN).
+void contributions(const Integrand &f, const Technique &t, uint64_t n, const RunOptions &opt, double *out);
+
+// Moments and diagnostics of given values (chunked the same way; no random numbers).
+Estimate accumulate_values(const double *y, uint64_t n, const RunOptions &opt);
+
+// Importance-sampling estimate f(x)/pdf from points and pdf values drawn elsewhere (a
+// renderer's sampler): reports points outside `sampler_domain` and bad pdfs.
+Estimate estimate_from_samples(const Integrand &f, const double *x, const double *pdf, uint64_t n,
+                               const Domain &sampler_domain, const RunOptions &opt);
+
+// n points and their pdf values from a sampler (any method), chunked like integrate().
+Diagnostics draw_samples(const Sampler &s, uint64_t n, const RunOptions &opt, double *x, double *pdf);
+
+}  // namespace re

@@ -1,0 +1,173 @@
+// PCG32 (O'Neill 2014, XSH-RR 64/32) with one stream per chunk, and a lane-parallel
+// generator that reproduces that single stream eight values at a time.
+//
+// Canonical uniforms are doubles in the open interval (0, 1): sample k of a chunk is
+// built from the stream's 32-bit outputs 2k and 2k+1, keeps 52 bits and is centred in
+// its cell, u = (m + 0.5) * 2^-52.  Open, so -log(u), 1/sqrt(u) and friends never see 0
+// or 1; centred, so E[u] = 1/2 exactly.
+#pragma once
+#include <cstdint>
+#include <cstring>
+
+namespace re {
+
+constexpr uint64_t kPcgMult = 0x5851f42d4c957f2dULL;
+
+inline uint64_t splitmix64(uint64_t x) {
+    x += 0x9e3779b97f4a7c15ULL;
+    x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
+    x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
+    return x ^ (x >> 31);
+}
+
+inline uint32_t pcg32_output(uint64_t old) {
+    uint32_t xorshifted = uint32_t(((old >> 18u) ^ old) >> 27u);
+    uint32_t rot = uint32_t(old >> 59u);
+    return (xorshifted >> rot) | (xorshifted << ((~rot + 1u) & 31u));
+}
+
+// Affine map of the LCG after `delta` steps: state -> mult * state + plus.
+struct LcgJump {
+    uint64_t mult = 1, plus = 0;
+};
+
+inline LcgJump lcg_jump(uint64_t delta, uint64_t inc) {
+    // Brown, "Random number generation with arbitrary strides" (1994): square-and-multiply.
+    LcgJump acc, cur{kPcgMult, inc};
+    while (delta) {
+        if (delta & 1u) {
+            acc.mult *= cur.mult;
+            acc.plus = acc.plus * cur.mult + cur.plus;
+        }
+        cur.plus = (cur.mult + 1u) * cur.plus;
+        cur.mult *= cur.mult;
+        delta >>= 1u;
+    }
+    return acc;
+}
+
+// Where a chunk's stream comes from: every estimate is keyed by these four numbers.
+struct StreamKey {
+    uint64_t seed = 0, case_id = 0, replica = 0, chunk = 0;
+};
+
+// The scalar reference generator: the definition of a chunk's stream.
+struct Pcg32 {
+    uint64_t state = 0, inc = 1;
+
+    explicit Pcg32(const StreamKey &k) {
+        uint64_t h = splitmix64(k.seed ^ splitmix64(k.case_id ^ splitmix64(k.replica ^ splitmix64(k.chunk))));
+        uint64_t initstate = splitmix64(h), initseq = splitmix64(h ^ 0xda3e39cb94b95bdbULL);
+        inc = (initseq << 1u) | 1u;
+        state = 0;
+        next_u32();
+        state += initstate;
+        next_u32();
+    }
+    uint32_t next_u32() {
+        uint64_t old = state;
+        state = old * kPcgMult + inc;
+        return pcg32_output(old);
+    }
+    void advance(uint64_t delta) {
+        LcgJump j = lcg_jump(delta, inc);
+        state = j.mult * state + j.plus;
+    }
+};
+
+// 64 random bits -> double in (0, 1), exactly (m + 0.5) * 2^-52 with m the top 52 bits.
+inline double bits_to_open_unit(uint64_t bits) {
+    uint64_t m = bits >> 12u;
+    double d;
+    uint64_t b = 0x4330000000000000ULL | m;  // the double 2^52 + m
+    std::memcpy(&d, &b, sizeof d);
+    return (d - 4503599627370495.5) * 0x1p-52;  // (2^52 + m) - (2^52 - 0.5), exact
+}
+
+// Lanes over ONE PCG32 stream: lane l produces uniforms l, l+L, l+2L, ... so a fill yields
+// exactly the sequence of the scalar generator, while the lanes run in SIMD registers.
+// Uniform k uses outputs 2k (high word) and 2k+1 (low word).  L = 32: four independent
+// vectors of 8, because each lane's two dependent 64-bit multiplies per uniform would
+// otherwise leave the loop waiting on multiplier latency.
+class LaneGenerator {
+  public:
+    static constexpr int kVec = 8, kVecs = 4, kLanes = kVec * kVecs;
+
+    explicit LaneGenerator(const StreamKey &key) {
+        Pcg32 g(key);
+        jump_ = lcg_jump(2 * kLanes - 1, g.inc);
+        inc_ = g.inc;
+        for (int l = 0; l < kLanes; ++l) {
+            state_[l] = g.state;
+            g.advance(2);
+        }
+    }
+
+    // Fills out[0..rows*L) with the next rows*L uniforms of the stream.  Written with
+    // GCC/Clang vector extensions: compilers do not vectorise PCG's output on their own.
+    // The 32-bit rotate runs on the 64-bit lanes viewed as pairs of 32-bit words: the low
+    // word of each lane is PCG's output, the high word is garbage that the shifts below
+    // discard, which saves packing to 32-bit lanes and back.
+    void fill(double *out, size_t rows) {
+        typedef uint64_t u64v __attribute__((vector_size(8 * kVec)));
+        typedef uint32_t u32v __attribute__((vector_size(8 * kVec)));
+        typedef double f64v __attribute__((vector_size(8 * kVec)));
+        u64v s[kVecs];
+        std::memcpy(s, state_, sizeof s);
+        const u64v zero = {}, mult = zero + kPcgMult, inc = zero + inc_;
+        const u64v jm = zero + jump_.mult, jp = zero + jump_.plus;
+        const u64v exponent = zero + 0x4330000000000000ULL, low = zero + 0xffffffffULL;
+        const f64v offset = f64v{} + 4503599627370495.5;  // 2^52 - 0.5
+        auto output = [](u64v old) {  // PCG32 XSH-RR in the low word of each lane
+            u32v x = (u32v)(((old >> 18u) ^ old) >> 27u), rot = (u32v)(old >> 59u);
+            return (u64v)((x >> rot) | (x << ((-rot) & 31u)));
+        };
+        for (size_t r = 0; r < rows; ++r) {
+            for (int v = 0; v < kVecs; ++v) {
+                u64v s1 = s[v] * mult + inc;
+                u64v bits = exponent | (((output(s[v]) << 32u) | (output(s1) & low)) >> 12u);
+                s[v] = s1 * jm + jp;
+                f64v d;
+                std::memcpy(&d, &bits, sizeof d);
+                d = (d - offset) * 0x1p-52;  // exactly (m + 0.5) 2^-52, see bits_to_open_unit
+                std::memcpy(out + r * kLanes + v * kVec, &d, sizeof d);
+            }
+        }
+        std::memcpy(state_, s, sizeof s);
+    }
+
+  private:
+    uint64_t state_[kLanes];
+    uint64_t inc_;
+    LcgJump jump_;
+};
+
+// Scalar consumer of a LaneGenerator, for code that needs one uniform at a time (rejection).
+class UniformStream {
+  public:
+    explicit UniformStream(const StreamKey &key) : gen_(key) {}
+    double next() {
+        if (pos_ == kBuf) {
+            gen_.fill(buf_, kBuf / LaneGenerator::kLanes);
+            pos_ = 0;
+        }
+        return buf_[pos_++];
+    }
+    // Next `count` uniforms (count a multiple of 8 and the stream row-aligned: fast path).
+    void fill(double *out, size_t count) {
+        size_t i = 0;
+        while (i < count && pos_ != kBuf) out[i++] = buf_[pos_++];
+        size_t rows = (count - i) / LaneGenerator::kLanes;
+        gen_.fill(out + i, rows);
+        i += rows * LaneGenerator::kLanes;
+        while (i < count) out[i++] = next();
+    }
+
+  private:
+    static constexpr size_t kBuf = 256;
+    LaneGenerator gen_;
+    double buf_[kBuf];
+    size_t pos_ = kBuf;
+};
+
+}  // namespace re

@@ -1,0 +1,507 @@
+#include "samplers.h"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+#include "integrands.h"
+#include "sampling.h"
+
+namespace re {
+
+void Sampler::invert(const double *, double *, size_t) const {
+    throw std::invalid_argument("sampler '" + name + "' has no inverse (" +
+                                (method == SamplingMethod::Rejection ? "rejection sampler" : "not invertible") + ")");
+}
+
+void Sampler::draw(UniformStream &stream, double *x, double *pdf, size_t n, uint64_t, Diagnostics &diag) const {
+    constexpr size_t kBlock = 256;
+    std::vector<double> u(kBlock * udim);
+    for (size_t i = 0; i < n; i += kBlock) {
+        size_t m = std::min(kBlock, n - i);
+        stream.fill(u.data(), m * udim);
+        sample(u.data(), x + i * domain.dim, pdf + i, m);
+    }
+    diag.candidates += n;
+}
+
+std::string Sampler::describe() const {
+    std::ostringstream s;
+    s << name;
+    if (!params.empty()) {
+        s << "(";
+        bool first = true;
+        for (auto &[k, v] : params) { s << (first ? "" : ", ") << k << "=" << v; first = false; }
+        s << ")";
+    }
+    return s.str();
+}
+
+namespace {
+
+// Batch loops over the scalar triples of sampling.h; D supplies sample_one/pdf_one/invert_one.
+template <class D>
+class Pointwise : public Sampler {
+  public:
+    void sample(const double *u, double *x, double *p, size_t n) const override {
+        const D &d = static_cast<const D &>(*this);
+        const int ud = udim, xd = domain.dim;
+        for (size_t i = 0; i < n; ++i) p[i] = d.sample_one(u + i * ud, x + i * xd);
+    }
+    void pdf(const double *x, double *p, size_t n) const override {
+        const D &d = static_cast<const D &>(*this);
+        const int xd = domain.dim;
+        for (size_t i = 0; i < n; ++i) p[i] = d.pdf_one(x + i * xd);
+    }
+    void invert(const double *x, double *u, size_t n) const override {
+        const D &d = static_cast<const D &>(*this);
+        const int ud = udim, xd = domain.dim;
+        for (size_t i = 0; i < n; ++i) d.invert_one(x + i * xd, u + i * ud);
+    }
+};
+
+class UniformBox final : public Pointwise<UniformBox> {
+  public:
+    explicit UniformBox(const Domain &d) : inv_measure_(1.0 / d.measure()) {
+        name = "uniform_box";
+        domain = d;
+        udim = d.dim;
+    }
+    double sample_one(const double *u, double *x) const {
+        for (int j = 0; j < domain.dim; ++j) x[j] = domain.lo[j] + (domain.hi[j] - domain.lo[j]) * u[j];
+        return inv_measure_;
+    }
+    double pdf_one(const double *x) const { return domain.contains(x) ? inv_measure_ : 0.0; }
+    void invert_one(const double *x, double *u) const {
+        bool in = domain.contains(x);
+        for (int j = 0; j < domain.dim; ++j) u[j] = in ? (x[j] - domain.lo[j]) / (domain.hi[j] - domain.lo[j]) : kNaN;
+    }
+
+  private:
+    double inv_measure_;
+};
+
+class Exponential final : public Pointwise<Exponential> {
+  public:
+    explicit Exponential(double a) : a_(a) { name = "exponential"; params = {{"rate", a}}; domain = Domain::half_line(); }
+    double sample_one(const double *u, double *x) const { x[0] = sample_exponential(u[0], a_); return exponential_pdf(x[0], a_); }
+    double pdf_one(const double *x) const { return exponential_pdf(x[0], a_); }
+    void invert_one(const double *x, double *u) const { u[0] = invert_exponential(x[0], a_); }
+  private:
+    double a_;
+};
+
+class Linear final : public Pointwise<Linear> {
+  public:
+    Linear(double a, double b) : a_(a), b_(b) { name = "linear"; params = {{"a", a}, {"b", b}}; domain = Domain::interval(0, 1); }
+    double sample_one(const double *u, double *x) const { x[0] = sample_linear(u[0], a_, b_); return linear_pdf(x[0], a_, b_); }
+    double pdf_one(const double *x) const { return linear_pdf(x[0], a_, b_); }
+    void invert_one(const double *x, double *u) const { u[0] = invert_linear(x[0], a_, b_); }
+  private:
+    double a_, b_;
+};
+
+class Power final : public Pointwise<Power> {
+  public:
+    explicit Power(double k) : k_(k) { name = "power"; params = {{"k", k}}; domain = Domain::interval(0, 1); }
+    double sample_one(const double *u, double *x) const { x[0] = sample_power(u[0], k_); return power_pdf(x[0], k_); }
+    double pdf_one(const double *x) const { return power_pdf(x[0], k_); }
+    void invert_one(const double *x, double *u) const { u[0] = invert_power(x[0], k_); }
+  private:
+    double k_;
+};
+
+class Lomax final : public Pointwise<Lomax> {
+  public:
+    explicit Lomax(double s) : s_(s) { name = "lomax"; params = {{"shape", s}}; domain = Domain::half_line(); }
+    double sample_one(const double *u, double *x) const { x[0] = sample_lomax(u[0], s_); return lomax_pdf(x[0], s_); }
+    double pdf_one(const double *x) const { return lomax_pdf(x[0], s_); }
+    void invert_one(const double *x, double *u) const { u[0] = invert_lomax(x[0], s_); }
+  private:
+    double s_;
+};
+
+class TrimmedLogistic final : public Pointwise<TrimmedLogistic> {
+  public:
+    TrimmedLogistic(double mu, double s, double a, double b) : mu_(mu), s_(s), a_(a), b_(b) {
+        name = "trimmed_logistic";
+        params = {{"mu", mu}, {"s", s}, {"a", a}, {"b", b}};
+        domain = Domain::interval(a, b);
+    }
+    double sample_one(const double *u, double *x) const {
+        x[0] = sample_trimmed_logistic(u[0], mu_, s_, a_, b_);
+        return trimmed_logistic_pdf(x[0], mu_, s_, a_, b_);
+    }
+    double pdf_one(const double *x) const { return trimmed_logistic_pdf(x[0], mu_, s_, a_, b_); }
+    void invert_one(const double *x, double *u) const { u[0] = invert_trimmed_logistic(x[0], mu_, s_, a_, b_); }
+  private:
+    double mu_, s_, a_, b_;
+};
+
+class UniformHemisphere final : public Pointwise<UniformHemisphere> {
+  public:
+    UniformHemisphere() { name = "uniform_hemisphere"; domain = Domain::hemisphere(); udim = 2; }
+    double sample_one(const double *u, double *w) const { sample_uniform_hemisphere(u[0], u[1], w); return uniform_hemisphere_pdf(w); }
+    double pdf_one(const double *w) const { return domain.contains(w) ? uniform_hemisphere_pdf(w) : 0.0; }
+    void invert_one(const double *w, double *u) const {
+        bool in = domain.contains(w);
+        u[0] = in ? w[2] : kNaN;
+        u[1] = in ? azimuth_fraction(w) : kNaN;
+    }
+};
+
+class UniformSphere final : public Pointwise<UniformSphere> {
+  public:
+    UniformSphere() { name = "uniform_sphere"; domain = Domain::sphere(); udim = 2; }
+    double sample_one(const double *u, double *w) const { sample_uniform_sphere(u[0], u[1], w); return uniform_sphere_pdf(w); }
+    double pdf_one(const double *w) const { return domain.contains(w) ? uniform_sphere_pdf(w) : 0.0; }
+    void invert_one(const double *w, double *u) const {
+        bool in = domain.contains(w);
+        u[0] = in ? (1 - w[2]) / 2 : kNaN;
+        u[1] = in ? azimuth_fraction(w) : kNaN;
+    }
+};
+
+class CosineHemisphere final : public Pointwise<CosineHemisphere> {
+  public:
+    CosineHemisphere() { name = "cosine_hemisphere"; domain = Domain::hemisphere(); udim = 2; }
+    double sample_one(const double *u, double *w) const { sample_cosine_hemisphere(u[0], u[1], w); return cosine_hemisphere_pdf(w); }
+    double pdf_one(const double *w) const { return domain.contains(w) ? cosine_hemisphere_pdf(w) : 0.0; }
+    void invert_one(const double *w, double *u) const {
+        bool in = domain.contains(w);
+        u[0] = in ? w[0] * w[0] + w[1] * w[1] : kNaN;
+        u[1] = in ? azimuth_fraction(w) : kNaN;
+    }
+};
+
+class UniformCone final : public Pointwise<UniformCone> {
+  public:
+    explicit UniformCone(double cos_max) : c_(cos_max) {
+        name = "uniform_cone"; params = {{"cos_max", cos_max}}; domain = Domain::sphere(); udim = 2;
+    }
+    double sample_one(const double *u, double *w) const { sample_uniform_cone(u[0], u[1], c_, w); return uniform_cone_pdf(w, c_); }
+    double pdf_one(const double *w) const { return domain.contains(w) ? uniform_cone_pdf(w, c_) : 0.0; }
+    void invert_one(const double *w, double *u) const {
+        bool in = domain.contains(w) && w[2] >= c_;
+        u[0] = in ? (1 - w[2]) / (1 - c_) : kNaN;
+        u[1] = in ? azimuth_fraction(w) : kNaN;
+    }
+  private:
+    double c_;
+};
+
+class Ggx final : public Pointwise<Ggx> {
+  public:
+    explicit Ggx(double alpha) : a_(alpha) { name = "ggx"; params = {{"alpha", alpha}}; domain = Domain::hemisphere(); udim = 2; }
+    double sample_one(const double *u, double *w) const { sample_ggx(u[0], u[1], a_, w); return ggx_pdf(w, a_); }
+    double pdf_one(const double *w) const { return domain.contains(w) ? ggx_pdf(w, a_) : 0.0; }
+    void invert_one(const double *w, double *u) const {
+        bool in = domain.contains(w) && w[2] > 0;
+        double t2 = (w[0] * w[0] + w[1] * w[1]) / (w[2] * w[2]), a2 = a_ * a_;
+        u[0] = in ? t2 / (a2 + t2) : kNaN;
+        u[1] = in ? azimuth_fraction(w) : kNaN;
+    }
+  private:
+    double a_;
+};
+
+// pbrt-v4's PiecewiseConstant1D over [a, b]: a CDF table, binary search to sample.
+class PiecewiseConstant1D final : public Pointwise<PiecewiseConstant1D> {
+  public:
+    PiecewiseConstant1D(std::vector<double> values, double a, double b) : f_(std::move(values)), a_(a), b_(b) {
+        name = "piecewise_constant_1d";
+        params = {{"a", a}, {"b", b}, {"bins", double(f_.size())}};
+        domain = Domain::interval(a, b);
+        cdf_.assign(f_.size() + 1, 0.0);
+        CompensatedSum s;
+        for (size_t i = 0; i < f_.size(); ++i) { s.add(f_[i]); cdf_[i + 1] = s.value(); }
+        total_ = s.value();
+        for (auto &c : cdf_) c /= total_;
+        cdf_.back() = 1.0;
+        scale_ = double(f_.size()) / (total_ * (b - a));
+    }
+    double sample_one(const double *u, double *x) const {
+        size_t o = bin_of_u(u[0]);
+        double du = (u[0] - cdf_[o]) / (cdf_[o + 1] - cdf_[o]);
+        double t = (double(o) + du) / double(f_.size());
+        x[0] = std::min(a_ + t * (b_ - a_), b_);
+        return f_[o] * scale_;
+    }
+    double pdf_one(const double *x) const {
+        if (!(x[0] >= a_ && x[0] <= b_)) return 0.0;
+        return f_[bin_of_x(x[0])] * scale_;
+    }
+    void invert_one(const double *x, double *u) const {
+        if (!(x[0] >= a_ && x[0] <= b_)) { u[0] = kNaN; return; }
+        size_t o = bin_of_x(x[0]);
+        double t = (x[0] - a_) / (b_ - a_) * double(f_.size()) - double(o);
+        u[0] = cdf_[o] + t * (cdf_[o + 1] - cdf_[o]);
+    }
+    size_t bins() const { return f_.size(); }
+
+  private:
+    size_t bin_of_u(double u) const {  // last o with cdf[o] <= u and a non-empty bin
+        size_t o = size_t(std::upper_bound(cdf_.begin(), cdf_.end(), u) - cdf_.begin());
+        o = o == 0 ? 0 : o - 1;
+        o = std::min(o, f_.size() - 1);
+        while (o > 0 && cdf_[o + 1] == cdf_[o]) --o;
+        return o;
+    }
+    size_t bin_of_x(double x) const {
+        double t = (x - a_) / (b_ - a_) * double(f_.size());
+        return std::min(size_t(t), f_.size() - 1);
+    }
+    std::vector<double> f_, cdf_;
+    double a_, b_, total_, scale_;
+};
+
+// pbrt-v4's PiecewiseConstant2D over [0,1]^2: a marginal over rows (y) and one conditional
+// per row over columns (x).  Table shape (rows, cols), row-major.
+class PiecewiseConstant2D final : public Pointwise<PiecewiseConstant2D> {
+  public:
+    PiecewiseConstant2D(const std::vector<double> &values, size_t rows, size_t cols) : rows_(rows), cols_(cols) {
+        name = "piecewise_constant_2d";
+        params = {{"rows", double(rows)}, {"cols", double(cols)}};
+        domain = Domain::box({0, 0}, {1, 1});
+        udim = 2;
+        std::vector<double> row_sums(rows);
+        for (size_t r = 0; r < rows; ++r) {
+            std::vector<double> row(values.begin() + r * cols, values.begin() + (r + 1) * cols);
+            CompensatedSum s;
+            for (double v : row) s.add(v);
+            row_sums[r] = s.value() / double(cols);
+            if (!(s.value() > 0)) row.assign(cols, 1.0);  // an empty row is never selected
+            conditional_.emplace_back(std::move(row), 0.0, 1.0);
+        }
+        marginal_ = std::make_unique<PiecewiseConstant1D>(row_sums, 0.0, 1.0);
+    }
+    double sample_one(const double *u, double *x) const {
+        double y, py, px;
+        py = marginal_->sample_one(u + 1, &y);
+        size_t r = std::min(size_t(y * double(rows_)), rows_ - 1);
+        px = conditional_[r].sample_one(u, x);
+        x[1] = y;
+        return py * px;
+    }
+    double pdf_one(const double *x) const {
+        if (!domain.contains(x)) return 0.0;
+        size_t r = std::min(size_t(x[1] * double(rows_)), rows_ - 1);
+        return marginal_->pdf_one(x + 1) * conditional_[r].pdf_one(x);
+    }
+    void invert_one(const double *x, double *u) const {
+        if (!domain.contains(x)) { u[0] = u[1] = kNaN; return; }
+        size_t r = std::min(size_t(x[1] * double(rows_)), rows_ - 1);
+        conditional_[r].invert_one(x, u);
+        marginal_->invert_one(x + 1, u + 1);
+    }
+
+  private:
+    size_t rows_, cols_;
+    std::vector<PiecewiseConstant1D> conditional_;
+    std::unique_ptr<PiecewiseConstant1D> marginal_;
+};
+
+class Rejection final : public Sampler {
+  public:
+    Rejection(IntegrandPtr target, SamplerPtr proposal, double c)
+        : target_(std::move(target)), proposal_(std::move(proposal)), c_(c) {
+        name = "rejection";
+        params = {{"c", c}};
+        domain = target_->domain;
+        udim = proposal_->udim + 1;
+        method = SamplingMethod::Rejection;
+        invertible = false;
+    }
+    void sample(const double *, double *, double *, size_t) const override {
+        throw std::invalid_argument(
+            "sampler 'rejection' consumes a variable number of uniforms per point; use draw(n, seed=...)");
+    }
+    void pdf(const double *x, double *p, size_t n) const override {
+        target_->eval(x, p, n);
+        for (size_t i = 0; i < n; ++i) p[i] /= target_->reference;
+    }
+    void draw(UniformStream &stream, double *x, double *pdf, size_t n, uint64_t first_index,
+              Diagnostics &diag) const override {
+        constexpr size_t kBlock = 64;
+        const int xd = domain.dim, ud = proposal_->udim;
+        std::vector<double> u(kBlock * ud), xi(kBlock), cand(kBlock * xd), p(kBlock), f(kBlock);
+        size_t got = 0, dry = 0;
+        while (got < n) {
+            // A target that is 0 wherever the proposal goes would loop forever.
+            if (dry > kMaxDryCandidates)
+                throw std::runtime_error("rejection sampler: no candidate accepted in " +
+                                         std::to_string(kMaxDryCandidates) + " tries (target '" + target_->name +
+                                         "', proposal '" + proposal_->describe() + "')");
+            size_t before = got;
+            stream.fill(u.data(), kBlock * ud);
+            stream.fill(xi.data(), kBlock);
+            proposal_->sample(u.data(), cand.data(), p.data(), kBlock);
+            target_->eval(cand.data(), f.data(), kBlock);
+            for (size_t i = 0; i < kBlock && got < n; ++i) {
+                diag.candidates++;
+                if (!(f[i] >= 0 && f[i] <= std::numeric_limits<double>::max())) {
+                    diag.record(Issue::BadPdf, first_index + got, &cand[i * xd], xd, f[i]);
+                    continue;
+                }
+                double bound = c_ * p[i];
+                if (f[i] > bound)
+                    diag.record(Issue::BoundViolation, first_index + got, &cand[i * xd], xd, f[i] / bound);
+                if (xi[i] * bound < f[i]) {
+                    for (int j = 0; j < xd; ++j) x[got * xd + j] = cand[i * xd + j];
+                    pdf[got] = f[i] / target_->reference;
+                    ++got;
+                }
+            }
+            dry = got == before ? dry + kBlock : 0;
+        }
+    }
+    const Integrand &target() const { return *target_; }
+
+  private:
+    static constexpr size_t kMaxDryCandidates = size_t(1) << 26;
+    IntegrandPtr target_;
+    SamplerPtr proposal_;
+    double c_;
+};
+
+[[noreturn]] void bad_param(const std::string &sampler, const std::string &p, const std::string &rule, double got) {
+    std::ostringstream s;
+    s << "sampler '" << sampler << "': parameter '" << p << "' must be " << rule << ", got " << got;
+    throw std::invalid_argument(s.str());
+}
+
+}  // namespace
+
+const std::vector<SamplerInfo> &sampler_registry() {
+    static const std::vector<SamplerInfo> r = {
+        {"exponential", "inversion", "half_line", "p(x) = rate exp(-rate x)", {{"rate", 1.0}}},
+        {"linear", "inversion", "interval", "p(x) proportional to (1-x) a + x b on [0,1]", {{"a", 1.0}, {"b", 0.5}}},
+        {"power", "inversion", "interval", "p(x) = (k+1) x^k on (0,1], k > -1", {{"k", -0.5}}},
+        {"lomax", "inversion", "half_line", "p(x) = shape (1+x)^-(shape+1)", {{"shape", 1.0}}},
+        {"trimmed_logistic", "inversion", "interval", "logistic(mu, s) restricted to [a, b]",
+         {{"mu", 0.5}, {"s", 0.1}, {"a", 0.0}, {"b", 1.0}}},
+        {"piecewise_constant_1d", "inversion", "interval", "tabulated 1D density on [a, b]", {{"a", 0.0}, {"b", 1.0}}, true},
+        {"piecewise_constant_2d", "inversion", "square", "tabulated 2D density on [0,1]^2 (rows = y)", {}, true},
+        {"uniform_hemisphere", "inversion", "hemisphere", "1 / (2 pi) per steradian", {}},
+        {"cosine_hemisphere", "inversion", "hemisphere", "cos(theta) / pi per steradian", {}},
+        {"uniform_sphere", "inversion", "sphere", "1 / (4 pi) per steradian", {}},
+        {"uniform_cone", "inversion", "sphere", "uniform in the cone cos(theta) >= cos_max", {{"cos_max", 0.9}}},
+        {"ggx", "inversion", "hemisphere", "GGX D(w) cos(theta), roughness alpha", {{"alpha", 0.1}}},
+    };
+    return r;
+}
+
+SamplerPtr make_sampler(const std::string &name, const std::map<std::string, double> &given,
+                        const std::vector<double> &table, const std::vector<size_t> &shape) {
+    const SamplerInfo *info = nullptr;
+    for (auto &i : sampler_registry())
+        if (i.name == name) info = &i;
+    if (!info) {
+        std::string names;
+        for (auto &i : sampler_registry()) names += (names.empty() ? "" : ", ") + i.name;
+        throw std::invalid_argument("unknown sampler '" + name + "'; known samplers: " + names);
+    }
+    std::map<std::string, double> p;
+    for (auto &[k, v] : info->params) p[k] = v;
+    for (auto &[k, v] : given) {
+        if (!p.count(k)) {
+            std::string names;
+            for (auto &[pk, pv] : info->params) names += (names.empty() ? "" : ", ") + pk;
+            throw std::invalid_argument("sampler '" + name + "' has no parameter '" + k + "'; its parameters: " +
+                                        (names.empty() ? "(none)" : names));
+        }
+        if (!std::isfinite(v)) bad_param(name, k, "finite", v);
+        p[k] = v;
+    }
+    if (info->needs_table) {
+        if (table.empty()) throw std::invalid_argument("sampler '" + name + "' needs a table of values");
+        double total = 0;
+        for (size_t i = 0; i < table.size(); ++i) {
+            if (!(table[i] >= 0 && std::isfinite(table[i]))) {
+                std::ostringstream s;
+                s << "sampler '" << name << "': table values must be finite and >= 0, got " << table[i] << " at index " << i;
+                throw std::invalid_argument(s.str());
+            }
+            total += table[i];
+        }
+        if (!(total > 0)) throw std::invalid_argument("sampler '" + name + "': table values must not all be 0");
+    } else if (!table.empty()) {
+        throw std::invalid_argument("sampler '" + name + "' takes no table");
+    }
+    if (name == "exponential") {
+        if (!(p["rate"] > 0)) bad_param(name, "rate", "> 0", p["rate"]);
+        return std::make_shared<Exponential>(p["rate"]);
+    }
+    if (name == "linear") {
+        if (!(p["a"] >= 0)) bad_param(name, "a", ">= 0", p["a"]);
+        if (!(p["b"] >= 0)) bad_param(name, "b", ">= 0", p["b"]);
+        if (!(p["a"] + p["b"] > 0)) bad_param(name, "a + b", "> 0", p["a"] + p["b"]);
+        return std::make_shared<Linear>(p["a"], p["b"]);
+    }
+    if (name == "power") {
+        if (!(p["k"] > -1)) bad_param(name, "k", "> -1", p["k"]);
+        return std::make_shared<Power>(p["k"]);
+    }
+    if (name == "lomax") {
+        if (!(p["shape"] > 0)) bad_param(name, "shape", "> 0", p["shape"]);
+        return std::make_shared<Lomax>(p["shape"]);
+    }
+    if (name == "trimmed_logistic") {
+        if (!(p["s"] > 0)) bad_param(name, "s", "> 0", p["s"]);
+        if (!(p["b"] > p["a"])) bad_param(name, "b", "> a", p["b"]);
+        return std::make_shared<TrimmedLogistic>(p["mu"], p["s"], p["a"], p["b"]);
+    }
+    if (name == "piecewise_constant_1d") {
+        if (!(p["b"] > p["a"])) bad_param(name, "b", "> a", p["b"]);
+        if (!shape.empty() && shape.size() != 1)
+            throw std::invalid_argument("sampler 'piecewise_constant_1d': table must be 1-dimensional");
+        return std::make_shared<PiecewiseConstant1D>(table, p["a"], p["b"]);
+    }
+    if (name == "piecewise_constant_2d") {
+        if (shape.size() != 2)
+            throw std::invalid_argument("sampler 'piecewise_constant_2d': table must be 2-dimensional (rows, cols)");
+        return std::make_shared<PiecewiseConstant2D>(table, shape[0], shape[1]);
+    }
+    if (name == "uniform_hemisphere") return std::make_shared<UniformHemisphere>();
+    if (name == "cosine_hemisphere") return std::make_shared<CosineHemisphere>();
+    if (name == "uniform_sphere") return std::make_shared<UniformSphere>();
+    if (name == "uniform_cone") {
+        if (!(p["cos_max"] > -1 && p["cos_max"] < 1)) bad_param(name, "cos_max", "in (-1, 1)", p["cos_max"]);
+        return std::make_shared<UniformCone>(p["cos_max"]);
+    }
+    if (name == "ggx") {
+        if (!(p["alpha"] > 0)) bad_param(name, "alpha", "> 0", p["alpha"]);
+        return std::make_shared<Ggx>(p["alpha"]);
+    }
+    throw std::logic_error("sampler registry and factory disagree on '" + name + "'");
+}
+
+SamplerPtr make_rejection_sampler(IntegrandPtr target, SamplerPtr proposal, double c) {
+    if (!target) throw std::invalid_argument("rejection sampler: target integrand is missing");
+    if (!proposal) throw std::invalid_argument("rejection sampler: proposal sampler is missing");
+    if (proposal->method != SamplingMethod::Inversion)
+        throw std::invalid_argument("rejection sampler: the proposal must be an inversion sampler, got '" +
+                                    proposal->name + "'");
+    if (proposal->domain.dim != target->domain.dim)
+        throw std::invalid_argument("rejection sampler: proposal '" + proposal->name + "' draws " +
+                                    std::to_string(proposal->domain.dim) + "-dimensional points, target '" +
+                                    target->name + "' needs " + std::to_string(target->domain.dim));
+    if (!target->nonnegative)
+        throw std::invalid_argument("rejection sampler: target '" + target->name + "' takes negative values");
+    if (!(c > 0 && std::isfinite(c))) bad_param("rejection", "c", "finite and > 0", c);
+    if (!(target->reference > 0))
+        throw std::invalid_argument("rejection sampler: target '" + target->name + "' must integrate to > 0");
+    return std::make_shared<Rejection>(std::move(target), std::move(proposal), c);
+}
+
+SamplerPtr make_uniform_sampler(const Domain &d) {
+    switch (d.kind) {
+        case DomainKind::Box: return std::make_shared<UniformBox>(d);
+        case DomainKind::Hemisphere: return std::make_shared<UniformHemisphere>();
+        case DomainKind::Sphere: return std::make_shared<UniformSphere>();
+        case DomainKind::HalfLine: break;
+    }
+    throw std::invalid_argument("uniform sampling needs a domain of finite measure, got '" + d.kind_name() + "'");
+}
+
+}  // namespace re

@@ -1,0 +1,65 @@
+// Samplers as batch objects over arrays: sample(u) -> (x, pdf), pdf(x), invert(x), and a
+// stream-driven draw() that also serves samplers needing a variable number of uniforms
+// (rejection).  One virtual call per block, never per sample.
+#pragma once
+#include <map>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "accumulator.h"
+#include "domain.h"
+#include "pcg32.h"
+
+namespace re {
+
+class Integrand;
+
+enum class SamplingMethod { Inversion, Rejection };
+
+class Sampler {
+  public:
+    virtual ~Sampler() = default;
+
+    std::string name;                        // registry name, e.g. "ggx"
+    std::map<std::string, double> params;    // its parameters, for display and re-creation
+    Domain domain;                           // where its points live
+    int udim = 1;                            // canonical uniforms per point (inversion)
+    SamplingMethod method = SamplingMethod::Inversion;
+    bool invertible = true;
+
+    // x[n * domain.dim] and pdf[n] from u[n * udim].  Inversion samplers only.
+    virtual void sample(const double *u, double *x, double *pdf, size_t n) const = 0;
+    virtual void pdf(const double *x, double *p, size_t n) const = 0;
+    // u[n * udim] from x; NaN rows for points outside the support.
+    virtual void invert(const double *x, double *u, size_t n) const;
+    // n points from a stream; rejection samplers count candidates and bound violations.
+    virtual void draw(UniformStream &stream, double *x, double *pdf, size_t n, uint64_t first_index,
+                      Diagnostics &diag) const;
+    std::string describe() const;
+};
+
+using SamplerPtr = std::shared_ptr<const Sampler>;
+
+// Registry: names, parameter names with defaults, and what each sampler is.
+struct SamplerInfo {
+    std::string name, method, domain, description;
+    std::vector<std::pair<std::string, double>> params;  // name, default
+    bool needs_table = false;                            // piecewise-constant: values
+};
+const std::vector<SamplerInfo> &sampler_registry();
+
+// Builds a sampler; unknown names, unknown or invalid parameters throw std::invalid_argument
+// naming the parameter and the rule.  `table` / `table_shape` feed piecewise-constant ones.
+SamplerPtr make_sampler(const std::string &name, const std::map<std::string, double> &params,
+                        const std::vector<double> &table = {}, const std::vector<size_t> &table_shape = {});
+
+// The rejection method: points with density target(x) / target.reference, from a
+// proposal with the user's bound c (target(x) <= c * proposal_pdf(x) must hold).
+SamplerPtr make_rejection_sampler(std::shared_ptr<const Integrand> target, SamplerPtr proposal, double c);
+
+// Uniform density over a finite domain (box, hemisphere, sphere).
+SamplerPtr make_uniform_sampler(const Domain &domain);
+
+}  // namespace re

@@ -1,0 +1,115 @@
+// A small persistent thread pool that runs fn(i) for i in [0, count).  Which thread runs
+// which index does not matter: callers write per-index results and merge them in index
+// order, so results are bitwise identical for any thread count.
+#pragma once
+#include <atomic>
+#include <condition_variable>
+#include <exception>
+#include <functional>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+namespace re {
+
+class ThreadPool {
+  public:
+    static ThreadPool &instance() {
+        static ThreadPool pool;
+        return pool;
+    }
+
+    static int default_threads() {
+        unsigned h = std::thread::hardware_concurrency();
+        return h == 0 ? 1 : int(h);
+    }
+
+    // Runs on `threads` threads in total, the caller included.  Rethrows the first exception.
+    void run(size_t count, int threads, const std::function<void(size_t)> &fn) {
+        if (threads < 1) threads = 1;
+        if (size_t(threads) > count) threads = int(count > 0 ? count : 1);
+        std::lock_guard<std::mutex> one_job_at_a_time(run_mutex_);
+        if (threads == 1) {
+            for (size_t i = 0; i < count; ++i) fn(i);
+            return;
+        }
+        grow(threads - 1);
+        {
+            std::lock_guard<std::mutex> lk(m_);
+            job_ = &fn;
+            count_ = count;
+            next_.store(0);
+            helpers_ = threads - 1;
+            active_ = threads - 1;
+            error_ = nullptr;
+            ++generation_;
+        }
+        cv_.notify_all();
+        work();
+        std::unique_lock<std::mutex> lk(m_);
+        done_cv_.wait(lk, [&] { return active_ == 0; });
+        job_ = nullptr;
+        if (error_) std::rethrow_exception(error_);
+    }
+
+    ~ThreadPool() {
+        {
+            std::lock_guard<std::mutex> lk(m_);
+            stop_ = true;
+        }
+        cv_.notify_all();
+        for (auto &t : workers_) t.join();
+    }
+
+  private:
+    ThreadPool() = default;
+
+    void grow(int n) {
+        while (int(workers_.size()) < n) {
+            int id = int(workers_.size());
+            workers_.emplace_back([this, id] { loop(id); });
+        }
+    }
+
+    void work() {
+        for (;;) {
+            size_t i = next_.fetch_add(1);
+            if (i >= count_) return;
+            try {
+                (*job_)(i);
+            } catch (...) {
+                std::lock_guard<std::mutex> lk(m_);
+                if (!error_) error_ = std::current_exception();
+                next_.store(count_);  // stop handing out work
+            }
+        }
+    }
+
+    void loop(int id) {
+        size_t seen = 0;
+        for (;;) {
+            {
+                std::unique_lock<std::mutex> lk(m_);
+                cv_.wait(lk, [&] { return stop_ || generation_ != seen; });
+                if (stop_) return;
+                seen = generation_;
+                if (id >= helpers_) continue;
+            }
+            work();
+            std::lock_guard<std::mutex> lk(m_);
+            if (--active_ == 0) done_cv_.notify_all();
+        }
+    }
+
+    std::mutex run_mutex_, m_;
+    std::condition_variable cv_, done_cv_;
+    std::vector<std::thread> workers_;
+    const std::function<void(size_t)> *job_ = nullptr;
+    size_t count_ = 0, generation_ = 0;
+    std::atomic<size_t> next_{0};
+    int helpers_ = 0, active_ = 0;
+    std::exception_ptr error_;
+    bool stop_ = false;
+};
+
+}  // namespace re
