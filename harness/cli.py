@@ -1,0 +1,76 @@
+"""Command line: ``harness run SUITE`` and ``harness list``."""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+import reference_estimators as rest
+
+from .runner import estimates_table, format_table, run_suite
+from .suite import SuiteError, load_suite
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="harness", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+    run = sub.add_parser("run", help="run a suite file and print the table of estimates")
+    run.add_argument("suite", help="suite file (TOML), e.g. suites/default.toml")
+    run.add_argument("--threads", type=int, default=None, help="threads (default: the suite's, else all cores)")
+    run.add_argument("--csv", metavar="PATH", help="also write the table as CSV")
+    sub.add_parser("list", help="list the catalogue's integrands, techniques and samplers")
+    args = parser.parse_args(argv)
+
+    if args.command == "list":
+        return _list()
+    try:
+        suite = load_suite(args.suite)
+    except SuiteError as e:
+        print(f"harness: {e}", file=sys.stderr)
+        return 2
+    if args.threads is not None and args.threads < 1:
+        print("harness: --threads must be >= 1", file=sys.stderr)
+        return 2
+    return _run(suite, args.threads, args.csv)
+
+
+def _run(suite, threads: int | None, csv: str | None) -> int:
+    start = time.perf_counter()
+    tty = sys.stderr.isatty()
+
+    def progress(done: int, total: int, case) -> None:
+        if tty:
+            bar = "#" * (30 * done // total)
+            print(f"\r[{bar:<30}] {done}/{total} {case.integrand}/{case.technique:<30}", end="", file=sys.stderr)
+
+    results = list(run_suite(suite, threads=threads, progress=progress))
+    if tty:
+        print(file=sys.stderr)
+    df = estimates_table(results)
+    print(f"suite {suite.name!r} ({suite.path}): {len(results)} estimates, seed {suite.seed}")
+    print(format_table(df))
+    bad = [(c, e) for c, e in results if not e.ok]
+    print(f"\n{len(results)} estimates in {time.perf_counter() - start:.2f} s; "
+          f"z = (estimate - exact) / stderr; 1/(V·T) in 1/(f² s) (background eq. 5)")
+    for c, e in bad:
+        print(f"  {c.integrand}/{c.technique}: {e.issues}; first: {e.examples[:2]}")
+    if csv:
+        df.to_csv(csv, index=False)
+        print(f"table written to {csv}")
+    return 1 if bad else 0
+
+
+def _list() -> int:
+    print("integrands (exact reference; techniques):")
+    for f in rest.catalogue():
+        print(f"  {f.name:<14} {f.domain:<10} d={f.dim:<3} I={f.reference:<24.17g} {', '.join(rest.techniques(f))}")
+        print(f"  {'':<14} {f.description}")
+    print("\nsamplers:")
+    for s in rest.samplers():
+        params = ", ".join(f"{k}={v:g}" for k, v in s["params"].items())
+        print(f"  {s['name']:<22} {s['method']:<9} {s['domain']:<10} {s['description']} ({params})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,160 @@
+"""Suite files (TOML): what to estimate, with how many samples, from which seed.
+
+At this stage a suite lists cases as integrand x techniques from the reference catalogue:
+
+    [suite]
+    name = "default"
+    seed = 0                  # chunk streams are keyed by (seed, case, replica, chunk)
+    samples = 1_000_000       # per estimate; a case may override it
+
+    [[case]]
+    integrand = "all"         # or a catalogue name
+    techniques = "all"        # or a list of technique names of that integrand
+
+Every mistake is reported as ``file:line: key: what was expected``.
+"""
+from __future__ import annotations
+
+import re
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import reference_estimators as rest
+
+__all__ = ["Suite", "Case", "SuiteError", "load_suite"]
+
+
+class SuiteError(ValueError):
+    """A suite file that cannot be run; the message names file, line and key."""
+
+
+@dataclass(frozen=True)
+class Case:
+    integrand: str
+    technique: str
+    samples: int
+    case_id: int  # position in the suite: keys the case's random streams
+
+
+@dataclass(frozen=True)
+class Suite:
+    name: str
+    path: Path
+    seed: int
+    samples: int
+    threads: int | None
+    cases: tuple[Case, ...]
+
+
+_SUITE_KEYS = {"name": str, "seed": int, "samples": int, "threads": int}
+_CASE_KEYS = {"integrand": str, "techniques": (str, list), "samples": int}
+
+
+def load_suite(path: str | Path) -> Suite:
+    """Parse and validate a suite file; raises SuiteError naming file, line and key."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as e:
+        raise SuiteError(f"{path}: cannot read suite file: {e.strerror}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise SuiteError(f"{path}: not valid TOML: {e}") from None
+    where = _Locator(path, text)
+
+    for key in data:
+        if key not in ("suite", "case"):
+            raise SuiteError(where.at(None, key, f"unknown table {key!r}; expected [suite] and [[case]] tables"))
+    head = data.get("suite", {})
+    if not isinstance(head, dict):
+        raise SuiteError(where.at(None, "suite", "expected a [suite] table"))
+    _check_keys(head, _SUITE_KEYS, where, "suite")
+    samples = head.get("samples", 1_000_000)
+    _positive(samples, where, "suite", "samples")
+    seed = head.get("seed", 0)
+    if seed < 0:
+        raise SuiteError(where.at("suite", "seed", f"expected an integer >= 0, got {seed}"))
+    threads = head.get("threads")
+    if threads is not None and threads < 0:
+        raise SuiteError(where.at("suite", "threads", f"expected an integer >= 0 (0: all cores), got {threads}"))
+
+    raw_cases = data.get("case", [])
+    if not isinstance(raw_cases, list) or not raw_cases:
+        raise SuiteError(where.at(None, "case", "expected at least one [[case]] table"))
+    cases: list[Case] = []
+    for i, c in enumerate(raw_cases):
+        table = ("case", i)
+        _check_keys(c, _CASE_KEYS, where, table)
+        if "integrand" not in c:
+            raise SuiteError(where.at(table, None, "missing key 'integrand' (a catalogue name or \"all\")"))
+        names = [f.name for f in rest.catalogue()] if c["integrand"] == "all" else [c["integrand"]]
+        case_samples = c.get("samples", samples)
+        _positive(case_samples, where, table, "samples")
+        for name in names:
+            try:
+                known = rest.techniques(name)
+            except ValueError as e:
+                raise SuiteError(where.at(table, "integrand", str(e))) from None
+            wanted = c.get("techniques", "all")
+            if wanted == "all":
+                wanted = list(known)
+            elif isinstance(wanted, str):
+                wanted = [wanted]
+            for t in wanted:
+                if not isinstance(t, str) or t not in known:
+                    raise SuiteError(where.at(table, "techniques",
+                                              f"unknown technique {t!r} for integrand {name!r}; "
+                                              f"expected one of: {', '.join(known)}"))
+                cases.append(Case(name, t, case_samples, len(cases)))
+    return Suite(head.get("name", path.stem), path, seed, samples, threads or None, tuple(cases))
+
+
+def _check_keys(table: dict[str, Any], spec: dict[str, Any], where: "_Locator", name: Any) -> None:
+    for key, value in table.items():
+        if key not in spec:
+            raise SuiteError(where.at(name, key, f"unknown key {key!r}; expected one of: {', '.join(spec)}"))
+        want = spec[key]
+        if isinstance(value, bool) or not isinstance(value, want):
+            kinds = " or ".join(t.__name__ for t in (want if isinstance(want, tuple) else (want,)))
+            raise SuiteError(where.at(name, key, f"expected {kinds}, got {type(value).__name__} {value!r}"))
+
+
+def _positive(v: int, where: "_Locator", table: Any, key: str) -> None:
+    if v <= 0:
+        raise SuiteError(where.at(table, key, f"expected a budget > 0 samples, got {v}"))
+
+
+class _Locator:
+    """Finds the line of a key in the raw text (tomllib keeps no positions)."""
+
+    def __init__(self, path: Path, text: str):
+        self.path = path
+        self.lines = text.splitlines()
+
+    def at(self, table: Any, key: str | None, message: str) -> str:
+        line = self._find(table, key)
+        prefix = f"{self.path}:{line}" if line else f"{self.path}"
+        return f"{prefix}: {key + ': ' if key else ''}{message}"
+
+    def _find(self, table: Any, key: str | None) -> int | None:
+        start, end = 0, len(self.lines)
+        if table is not None:
+            name, index = (table, 0) if isinstance(table, str) else table
+            header = re.compile(r"^\s*\[\[\s*%s\s*\]\]" % re.escape(name) if not isinstance(table, str)
+                                else r"^\s*\[\s*%s\s*\]" % re.escape(name))
+            starts = [i for i, l in enumerate(self.lines) if header.match(l)]
+            if index >= len(starts):
+                return None
+            start = starts[index]
+            nxt = [i for i, l in enumerate(self.lines) if i > start and re.match(r"^\s*\[", l)]
+            end = nxt[0] if nxt else len(self.lines)
+            if key is None:
+                return start + 1
+        pattern = re.compile(r"^\s*(\[+\s*)?%s\s*(=|\]|\.)" % re.escape(key or ""))
+        for i in range(start, end):
+            if pattern.match(self.lines[i]):
+                return i + 1
+        return None
