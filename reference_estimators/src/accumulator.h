@@ -87,11 +87,32 @@ inline int scale_exponent_for(double maxabs) {
     return std::clamp(e, -1000, 1000);
 }
 
-constexpr size_t kLanes = 8;
-typedef double f64x8 __attribute__((vector_size(8 * kLanes)));  // GCC/Clang vector extension
+// Block reductions run over 8 logical lanes in a fixed order, held in native-width vectors
+// (GCC/Clang vector extensions): 1 x 8 with AVX-512, 2 x 4 with AVX, 4 x 2 otherwise.  The
+// arithmetic per logical lane is the same in all three, so results are bitwise identical
+// across ISAs; wider-than-native vector types are lowered badly by GCC 12 (10x slower).
+#if defined(__AVX512F__)
+constexpr size_t kVecWidth = 8;
+#elif defined(__AVX__)
+constexpr size_t kVecWidth = 4;
+#else
+constexpr size_t kVecWidth = 2;
+#endif
+constexpr size_t kLanes = 8, kParts = kLanes / kVecWidth;
+typedef double f64v __attribute__((vector_size(8 * kVecWidth)));
+typedef int64_t i64v __attribute__((vector_size(8 * kVecWidth)));
+#define RE_INLINE inline __attribute__((always_inline))
 
-inline f64x8 load8(const double *p) { f64x8 v; std::memcpy(&v, p, sizeof v); return v; }
-inline double lane_sum(f64x8 v) { return ((v[0] + v[1]) + (v[2] + v[3])) + ((v[4] + v[5]) + (v[6] + v[7])); }
+RE_INLINE f64v loadv(const double *p) { f64v v; std::memcpy(&v, p, sizeof v); return v; }
+
+// Sum of the 8 logical lanes of parts[0..kParts), always in the same tree order.
+template <class V>
+RE_INLINE double lane_sum(const V (&parts)[kParts]) {
+    double l[kLanes];
+    for (size_t k = 0; k < kParts; ++k)
+        for (size_t w = 0; w < kVecWidth; ++w) l[k * kVecWidth + w] = double(parts[k][w]);
+    return ((l[0] + l[1]) + (l[2] + l[3])) + ((l[4] + l[5]) + (l[6] + l[7]));
+}
 
 // One vector pass over a block: non-finite and negative counts, the largest magnitude,
 // and the lane sums of the (unscaled) values.
@@ -100,26 +121,27 @@ struct BlockScan {
     double maxabs = 0, sum = 0;
 };
 
-inline BlockScan scan_block(const double *y, size_t count) {
-    typedef int64_t i64x8 __attribute__((vector_size(8 * kLanes)));
+RE_INLINE BlockScan scan_block(const double *y, size_t count) {
     const size_t full = count / kLanes * kLanes;
-    const f64x8 zero = {};
-    const f64x8 big = zero + std::numeric_limits<double>::max();
-    f64x8 amax = zero, s = zero;
-    i64x8 bad = {}, neg = {};
-    for (size_t i = 0; i < full; i += kLanes) {
-        f64x8 v = load8(y + i), a = v < 0 ? -v : v;
-        bad -= !(a <= big);  // comparisons give -1 for true
-        neg -= v < 0;
-        amax = a > amax ? a : amax;
-        s += v;
-    }
+    const f64v zero = {}, big = zero + std::numeric_limits<double>::max();
+    f64v amax[kParts], s[kParts];
+    i64v bad[kParts], neg[kParts];
+    for (size_t k = 0; k < kParts; ++k) { amax[k] = s[k] = zero; bad[k] = neg[k] = i64v{}; }
+    for (size_t i = 0; i < full; i += kLanes)
+        for (size_t k = 0; k < kParts; ++k) {
+            f64v v = loadv(y + i + k * kVecWidth), a = v < 0 ? -v : v;
+            bad[k] -= !(a <= big);  // comparisons give -1 for true
+            neg[k] -= v < 0;
+            amax[k] = a > amax[k] ? a : amax[k];
+            s[k] += v;
+        }
     BlockScan r;
-    for (size_t l = 0; l < kLanes; ++l) {
-        r.nonfinite += size_t(bad[l]);
-        r.negative += size_t(neg[l]);
-        r.maxabs = std::max(r.maxabs, amax[l]);
-    }
+    for (size_t k = 0; k < kParts; ++k)
+        for (size_t w = 0; w < kVecWidth; ++w) {
+            r.nonfinite += size_t(bad[k][w]);
+            r.negative += size_t(neg[k][w]);
+            r.maxabs = std::max(r.maxabs, amax[k][w]);
+        }
     r.sum = lane_sum(s);
     for (size_t i = full; i < count; ++i) {
         double v = y[i], a = std::fabs(v);
@@ -132,13 +154,12 @@ inline BlockScan scan_block(const double *y, size_t count) {
 }
 
 // Adds y[0..count) (finite, unscaled; `scan` is scan_block of them) as one block: two-pass
-// within the block, then merge.  The passes run on 8-wide vectors with a fixed lane order, so
-// the result is the same whatever the ISA; compilers' own vectorisation of these reductions
-// was 2-3x slower.
-inline void accumulate_block(Moments &acc, const double *y, size_t count, bool higher, const BlockScan &scan) {
+// within the block, then merge.  Compilers' own vectorisation of these reductions was 2-3x
+// slower than these explicit lanes.
+RE_INLINE void accumulate_block(Moments &acc, const double *y, size_t count, bool higher, const BlockScan &scan) {
     if (count == 0) return;
     const size_t full = count / kLanes * kLanes;
-    const f64x8 zero = {}, inf = zero + std::numeric_limits<double>::infinity();
+    const f64v zero = {}, inf = zero + std::numeric_limits<double>::infinity();
     // The scale follows the largest magnitude seen so far, so scaled values stay <= 2.
     if (scan.maxabs > 0) {
         int e = scale_exponent_for(scan.maxabs);
@@ -149,26 +170,31 @@ inline void accumulate_block(Moments &acc, const double *y, size_t count, bool h
     // then the sum is redone on scaled values (same lane order, so a deterministic choice).
     double sum = scan.sum * scale;
     if (!(std::fabs(scan.sum) <= std::numeric_limits<double>::max()) || scan.maxabs < 0x1p-1000) {
-        f64x8 s = zero;
-        for (size_t i = 0; i < full; i += kLanes) s += load8(y + i) * scale;
+        f64v s[kParts];
+        for (size_t k = 0; k < kParts; ++k) s[k] = zero;
+        for (size_t i = 0; i < full; i += kLanes)
+            for (size_t k = 0; k < kParts; ++k) s[k] += loadv(y + i + k * kVecWidth) * scale;
         sum = lane_sum(s);
         for (size_t i = full; i < count; ++i) sum += y[i] * scale;
     }
     const double nb = double(count), mb = sum / nb;
 
-    f64x8 c2 = zero, c3 = zero, c4 = zero, lo = inf, hi = -inf;
+    f64v c2[kParts], c3[kParts], c4[kParts], lo[kParts], hi[kParts];
+    for (size_t k = 0; k < kParts; ++k) { c2[k] = c3[k] = c4[k] = zero; lo[k] = inf; hi[k] = -inf; }
     if (higher) {
-        for (size_t i = 0; i < full; i += kLanes) {
-            f64x8 v = load8(y + i) * scale, d = v - mb, d2 = d * d;
-            c2 += d2; c3 += d2 * d; c4 += d2 * d2;
-            lo = v < lo ? v : lo; hi = v > hi ? v : hi;
-        }
+        for (size_t i = 0; i < full; i += kLanes)
+            for (size_t k = 0; k < kParts; ++k) {
+                f64v v = loadv(y + i + k * kVecWidth) * scale, d = v - mb, d2 = d * d;
+                c2[k] += d2; c3[k] += d2 * d; c4[k] += d2 * d2;
+                lo[k] = v < lo[k] ? v : lo[k]; hi[k] = v > hi[k] ? v : hi[k];
+            }
     } else {
-        for (size_t i = 0; i < full; i += kLanes) {
-            f64x8 v = load8(y + i) * scale, d = v - mb;
-            c2 += d * d;
-            lo = v < lo ? v : lo; hi = v > hi ? v : hi;
-        }
+        for (size_t i = 0; i < full; i += kLanes)
+            for (size_t k = 0; k < kParts; ++k) {
+                f64v v = loadv(y + i + k * kVecWidth) * scale, d = v - mb;
+                c2[k] += d * d;
+                lo[k] = v < lo[k] ? v : lo[k]; hi[k] = v > hi[k] ? v : hi[k];
+            }
     }
     Moments b;
     b.scale_exp = acc.scale_exp;
@@ -178,7 +204,8 @@ inline void accumulate_block(Moments &acc, const double *y, size_t count, bool h
     b.m2 = lane_sum(c2);
     b.m3 = lane_sum(c3);
     b.m4 = lane_sum(c4);
-    for (size_t l = 0; l < kLanes; ++l) { b.min = std::min(b.min, lo[l]); b.max = std::max(b.max, hi[l]); }
+    for (size_t k = 0; k < kParts; ++k)
+        for (size_t w = 0; w < kVecWidth; ++w) { b.min = std::min(b.min, lo[k][w]); b.max = std::max(b.max, hi[k][w]); }
     for (size_t i = full; i < count; ++i) {
         double v = y[i] * scale, d = v - mb, d2 = d * d;
         b.m2 += d2;

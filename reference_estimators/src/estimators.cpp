@@ -10,7 +10,7 @@
 namespace re {
 namespace {
 
-constexpr size_t kBlock = 512;  // samples per block: a few KiB, stays in L1
+constexpr size_t kBlock = 2048;  // samples per block: u and y (16 KiB each) stay in L1
 constexpr double kMax = std::numeric_limits<double>::max();
 
 uint64_t chunk_count(uint64_t n) { return (n + kChunkSize - 1) / kChunkSize; }

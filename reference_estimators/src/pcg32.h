@@ -8,6 +8,9 @@
 #pragma once
 #include <cstdint>
 #include <cstring>
+#if defined(__AVX512F__)
+#include <immintrin.h>
+#endif
 
 namespace re {
 
@@ -86,12 +89,20 @@ inline double bits_to_open_unit(uint64_t bits) {
 
 // Lanes over ONE PCG32 stream: lane l produces uniforms l, l+L, l+2L, ... so a fill yields
 // exactly the sequence of the scalar generator, while the lanes run in SIMD registers.
-// Uniform k uses outputs 2k (high word) and 2k+1 (low word).  L = 32: four independent
-// vectors of 8, because each lane's two dependent 64-bit multiplies per uniform would
-// otherwise leave the loop waiting on multiplier latency.
+// Uniform k uses outputs 2k (high word) and 2k+1 (low word).  L = 32 (four vectors of 8
+// with AVX-512): independent vectors hide the latency of each lane's two dependent 64-bit
+// multiplies per uniform.
 class LaneGenerator {
   public:
-    static constexpr int kVec = 8, kVecs = 4, kLanes = kVec * kVecs;
+    // Native vector width (see accumulator.h: wider types are lowered badly), 32 lanes.
+#if defined(__AVX512F__)
+    static constexpr int kVec = 8;
+#elif defined(__AVX__)
+    static constexpr int kVec = 4;
+#else
+    static constexpr int kVec = 2;
+#endif
+    static constexpr int kLanes = 32, kVecs = kLanes / kVec;
 
     explicit LaneGenerator(const StreamKey &key) {
         Pcg32 g(key);
@@ -105,9 +116,9 @@ class LaneGenerator {
 
     // Fills out[0..rows*L) with the next rows*L uniforms of the stream.  Written with
     // GCC/Clang vector extensions: compilers do not vectorise PCG's output on their own.
-    // The 32-bit rotate runs on the 64-bit lanes viewed as pairs of 32-bit words: the low
-    // word of each lane is PCG's output, the high word is garbage that the shifts below
-    // discard, which saves packing to 32-bit lanes and back.
+    // The 32-bit rotate runs on the 64-bit lanes viewed as pairs of 32-bit words (the low
+    // word of each lane is PCG's output, the high word is ignored), and one shuffle pairs the
+    // two outputs of a uniform into a 64-bit lane: no packing to 32-bit lanes and back.
     void fill(double *out, size_t rows) {
         typedef uint64_t u64v __attribute__((vector_size(8 * kVec)));
         typedef uint32_t u32v __attribute__((vector_size(8 * kVec)));
@@ -116,17 +127,28 @@ class LaneGenerator {
         std::memcpy(s, state_, sizeof s);
         const u64v zero = {}, mult = zero + kPcgMult, inc = zero + inc_;
         const u64v jm = zero + jump_.mult, jp = zero + jump_.plus;
-        const u64v exponent = zero + 0x4330000000000000ULL, low = zero + 0xffffffffULL;
+        const u64v exponent = zero + 0x4330000000000000ULL;
         const f64v offset = f64v{} + 4503599627370495.5;  // 2^52 - 0.5
-        auto output = [](u64v old) {  // PCG32 XSH-RR in the low word of each lane
+        auto output = [](u64v old) __attribute__((always_inline)) {  // PCG32 XSH-RR, low word of each lane
             u32v x = (u32v)(((old >> 18u) ^ old) >> 27u), rot = (u32v)(old >> 59u);
-            return (u64v)((x >> rot) | (x << ((-rot) & 31u)));
+#if defined(__AVX512F__)
+            return (u32v)_mm512_rorv_epi32((__m512i)x, (__m512i)rot);
+#else
+            return (x >> rot) | (x << ((-rot) & 31u));
+#endif
         };
         for (size_t r = 0; r < rows; ++r) {
             for (int v = 0; v < kVecs; ++v) {
                 u64v s1 = s[v] * mult + inc;
-                u64v bits = exponent | (((output(s[v]) << 32u) | (output(s1) & low)) >> 12u);
+                // Lane i = (output(s) << 32) | output(s1): low word from s1, high from s.
+                u32v hi = output(s[v]), lo = output(s1);
+#if defined(__AVX512F__)
+                u64v pair = (u64v)__builtin_shufflevector(lo, hi, 0, 16, 2, 18, 4, 20, 6, 22, 8, 24, 10, 26, 12, 28, 14, 30);
+#else
+                u64v pair = ((u64v)hi << 32u) | (((u64v)lo << 32u) >> 32u);
+#endif
                 s[v] = s1 * jm + jp;
+                u64v bits = exponent | (pair >> 12u);
                 f64v d;
                 std::memcpy(&d, &bits, sizeof d);
                 d = (d - offset) * 0x1p-52;  // exactly (m + 0.5) 2^-52, see bits_to_open_unit
