@@ -1,0 +1,101 @@
+"""The command line and suite files, run as a user runs them: the real console script."""
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import reference_estimators as rest
+from harness import SuiteError, load_suite
+
+HARNESS = str(Path(sys.executable).with_name("harness"))
+
+
+def run(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([HARNESS, *args], capture_output=True, text=True, cwd=cwd, timeout=300)
+
+
+def test_main_job_prints_every_case_of_the_default_suite(root):
+    r = run("run", "suites/default.toml", cwd=root)
+    assert r.returncode == 0, r.stderr
+    suite = load_suite(root / "suites" / "default.toml")
+    lines = r.stdout.splitlines()
+    header = next(l for l in lines if l.lstrip().startswith("integrand"))
+    for col in ("technique", "n", "estimate ± stderr", "exact", "z", "time [s]", "1/(V·T)"):
+        assert col in header, col
+    for case in suite.cases:
+        assert any(case.integrand in l and case.technique in l for l in lines), case
+    assert f"{len(suite.cases)} estimates in" in r.stdout
+    every = {(f.name, t) for f in rest.catalogue() for t in rest.techniques(f)}
+    assert every <= {(c.integrand, c.technique) for c in suite.cases}
+
+
+def test_csv_output(root, tmp_path):
+    out = tmp_path / "table.csv"
+    r = run("run", "suites/default.toml", "--csv", str(out), "--threads", "1", cwd=root)
+    assert r.returncode == 0, r.stderr
+    import pandas as pd
+
+    df = pd.read_csv(out)
+    assert {"integrand", "technique", "n", "estimate", "stderr", "exact", "z", "seconds", "log10_efficiency"} <= set(df)
+    assert len(df) == len(load_suite(root / "suites" / "default.toml").cases)
+
+
+def test_list_shows_catalogue_and_samplers():
+    r = run("list")
+    assert r.returncode == 0
+    for f in rest.catalogue():
+        assert f.name in r.stdout
+    for s in rest.samplers():
+        assert s["name"] in r.stdout
+
+
+def write(tmp_path: Path, text: str) -> Path:
+    p = tmp_path / "suite.toml"
+    p.write_text(text)
+    return p
+
+
+GOOD_HEAD = '[suite]\nname = "t"\nsamples = 1000\n\n'
+BAD_SUITES = [
+    # (file text, line, key, message fragment)
+    (GOOD_HEAD + '[[case]]\nintegrand = "gaussian"\ncolour = "red"\n', 7, "colour", "unknown key 'colour'"),
+    (GOOD_HEAD + '[[case]]\nintegrand = "gausian"\n', 6, "integrand", "unknown integrand 'gausian'"),
+    (GOOD_HEAD + '[[case]]\nintegrand = "gaussian"\ntechniques = ["uniform", "mis"]\n', 7, "techniques",
+     "unknown technique 'mis' for integrand 'gaussian'"),
+    ('[suite]\nsamples = 0\n\n[[case]]\nintegrand = "gaussian"\n', 2, "samples", "expected a budget > 0 samples, got 0"),
+    (GOOD_HEAD + '[[case]]\nintegrand = "gaussian"\n\n[[case]]\nintegrand = "step"\nsamples = -3\n', 10, "samples",
+     "expected a budget > 0 samples, got -3"),
+    ('[suite]\nsamples = "many"\n\n[[case]]\nintegrand = "gaussian"\n', 2, "samples", "expected int, got str 'many'"),
+    (GOOD_HEAD + '[[case]]\nintegrand = 3\n', 6, "integrand", "expected str, got int 3"),
+    ('[suite]\nseed = -1\n[[case]]\nintegrand = "gaussian"\n', 2, "seed", "expected an integer >= 0"),
+    ('[suites]\nname = "x"\n', 1, "suites", "unknown table 'suites'"),
+    (GOOD_HEAD, None, "case", "expected at least one [[case]] table"),
+    (GOOD_HEAD + '[[case]]\ntechniques = "all"\n', 5, None, "missing key 'integrand'"),
+]
+
+
+@pytest.mark.parametrize("text, line, key, fragment", BAD_SUITES)
+def test_malformed_suites_name_file_line_and_key(tmp_path, text, line, key, fragment):
+    path = write(tmp_path, text)
+    with pytest.raises(SuiteError) as err:
+        load_suite(path)
+    msg = str(err.value)
+    where = f"{path}:{line}: " if line else f"{path}: "
+    assert msg.startswith(where + (f"{key}: " if key else "")), msg
+    assert fragment in msg, msg
+    r = run("run", str(path))
+    assert r.returncode == 2 and msg in r.stderr
+
+
+def test_invalid_toml_names_the_file_and_position(tmp_path):
+    path = write(tmp_path, '[suite]\nsamples = = 3\n')
+    with pytest.raises(SuiteError, match=rf"{path}: not valid TOML: .*line 2"):
+        load_suite(path)
+
+
+def test_missing_file_is_reported(tmp_path):
+    r = run("run", str(tmp_path / "nope.toml"))
+    assert r.returncode == 2 and "cannot read suite file" in r.stderr
