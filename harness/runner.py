@@ -44,6 +44,7 @@ def estimates_table(results: list[tuple[Case, rest.Estimate]]) -> pd.DataFrame:
             "z": e.z_score(),
             "seconds": e.seconds,
             "log10_efficiency": e.log10_efficiency,
+            "efficiency_rel_error": e.variance_rel_error,
             "notes": _notes(e, t),
         })
     return pd.DataFrame(rows)
@@ -61,23 +62,30 @@ def _notes(e: rest.Estimate, t: rest.Technique) -> str:
 
 
 def format_table(df: pd.DataFrame) -> str:
-    """The table as text: estimate ± stderr, efficiency as a power of ten."""
-    out = pd.DataFrame({
-        "integrand": df["integrand"],
-        "technique": df["technique"],
-        "n": df["n"].map(lambda n: f"{n:.0e}" if n >= 10**5 else str(n)),
-        "estimate ± stderr": [f"{m:.9g} ± {s:.2g}" for m, s in zip(df["estimate"], df["stderr"])],
-        "exact": df["exact"].map(lambda v: f"{v:.9g}"),
-        "z": df["z"].map(lambda z: f"{z:+.2f}" if math.isfinite(z) else str(z)),
-        "time [s]": df["seconds"].map(lambda s: f"{s:.3f}"),
-        "1/(V·T)": df["log10_efficiency"].map(_power_of_ten),
-        "notes": df["notes"],
-    })
-    return out.to_string(index=False, justify="left")
+    """The table as aligned text: estimate ± stderr, and the efficiency as a power of ten
+    with its statistical uncertainty (from the variance's own error; timing noise excluded)."""
+    columns = {
+        "integrand": (df["integrand"], "<"),
+        "technique": (df["technique"], "<"),
+        "n": (df["n"].map(lambda n: f"{n:.0e}" if n >= 10**5 else str(n)), ">"),
+        "estimate ± stderr": ([f"{m:.9g} ± {s:.2g}" for m, s in zip(df["estimate"], df["stderr"])], ">"),
+        "exact": (df["exact"].map(lambda v: f"{v:.9g}"), ">"),
+        "z": (df["z"].map(lambda z: f"{z:+.2f}" if math.isfinite(z) else str(z)), ">"),
+        "time [s]": (df["seconds"].map(lambda s: f"{s:.3f}"), ">"),
+        "1/(V·T)": ([_power_of_ten(le, r) for le, r in zip(df["log10_efficiency"], df["efficiency_rel_error"])], ">"),
+        "notes": (df["notes"], "<"),
+    }
+    cells = {k: [str(v) for v in vals] for k, (vals, _) in columns.items()}
+    width = {k: max(len(k), *(len(v) for v in cells[k])) for k in cells}
+    lines = ["  ".join(f"{k:{a}{width[k]}}" for k, (_, a) in columns.items()).rstrip()]
+    for i in range(len(df)):
+        lines.append("  ".join(f"{cells[k][i]:{a}{width[k]}}" for k, (_, a) in columns.items()).rstrip())
+    return "\n".join(lines)
 
 
-def _power_of_ten(le: float) -> str:
+def _power_of_ten(le: float, rel: float) -> str:
     if not math.isfinite(le):
         return "inf" if le > 0 else str(le)
     e = math.floor(le)
-    return f"{10 ** (le - e):.2f}e{e:+d}"
+    err = f" ±{100 * rel:.2g}%" if math.isfinite(rel) and rel > 0 else ""
+    return f"{10 ** (le - e):.2f}e{e:+d}{err}"

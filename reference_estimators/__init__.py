@@ -5,7 +5,7 @@
     >>> abs(est.z_score()) < 5
     True
 """
-from . import _core
+from . import _core, sampling
 from .api import *  # noqa: F403
 from .api import __all__ as _api_all
 from .estimate import ERROR_ISSUES, Estimate

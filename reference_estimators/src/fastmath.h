@@ -67,8 +67,10 @@ inline double exp(double x) {
     return x != x ? x : y;
 }
 
-// log(x): x = m 2^e with m in [sqrt(1/2), sqrt(2)), log m = 2 atanh(f), f = (m-1)/(m+1),
-// |f| <= 0.1716, odd series to f^23 (truncation < 1e-18).
+// log(x): x = (1 + f) 2^e with 1 + f in [sqrt(1/2), sqrt(2)) and f exact; with s = f/(2+f),
+// log(1+f) = 2 atanh(s) = f - (f^2/2 - s (f^2/2 + R)), R = 2 s^2/3 + 2 s^4/5 + ... to s^22
+// (truncation < 1e-18): the leading term f carries no rounding error (the arrangement of
+// fdlibm's e_log.c, with a Taylor series instead of its minimax coefficients).
 inline double log(double x) {
     bool sub = x < 0x1p-1022;
     double xs = sub ? x * 0x1p54 : x;
@@ -79,22 +81,22 @@ inline double log(double x) {
     m = big ? m * 0.5 : m;
     e = big ? e + 1 : e;
     e = sub ? e - 54 : e;
-    double f = (m - 1.0) / (m + 1.0);
-    double f2 = f * f;
-    double s = 1.0 / 23.0;
-    s = std::fma(s, f2, 1.0 / 21.0);
-    s = std::fma(s, f2, 1.0 / 19.0);
-    s = std::fma(s, f2, 1.0 / 17.0);
-    s = std::fma(s, f2, 1.0 / 15.0);
-    s = std::fma(s, f2, 1.0 / 13.0);
-    s = std::fma(s, f2, 1.0 / 11.0);
-    s = std::fma(s, f2, 1.0 / 9.0);
-    s = std::fma(s, f2, 1.0 / 7.0);
-    s = std::fma(s, f2, 1.0 / 5.0);
-    s = std::fma(s, f2, 1.0 / 3.0);
-    double lm = 2.0 * f + 2.0 * f * f2 * s;
-    double de = double(e);
-    double y = de * 6.93147180369123816490e-01 + (lm + de * 1.90821492927058770002e-10);
+    double f = m - 1.0;  // exact (Sterbenz)
+    double s = f / (2.0 + f), z = s * s;
+    double r = 2.0 / 23.0;
+    r = std::fma(r, z, 2.0 / 21.0);
+    r = std::fma(r, z, 2.0 / 19.0);
+    r = std::fma(r, z, 2.0 / 17.0);
+    r = std::fma(r, z, 2.0 / 15.0);
+    r = std::fma(r, z, 2.0 / 13.0);
+    r = std::fma(r, z, 2.0 / 11.0);
+    r = std::fma(r, z, 2.0 / 9.0);
+    r = std::fma(r, z, 2.0 / 7.0);
+    r = std::fma(r, z, 2.0 / 5.0);
+    r = std::fma(r, z, 2.0 / 3.0);
+    r *= z;
+    double hfsq = 0.5 * f * f, de = double(e);
+    double y = de * 6.93147180369123816490e-01 - ((hfsq - (s * (hfsq + r) + de * 1.90821492927058770002e-10)) - f);
     y = x == std::numeric_limits<double>::infinity() ? x : y;
     y = x == 0.0 ? -std::numeric_limits<double>::infinity() : y;
     y = x < 0.0 ? std::numeric_limits<double>::quiet_NaN() : y;

@@ -224,7 +224,12 @@ class PiecewiseConstant1D final : public Pointwise<PiecewiseConstant1D> {
         size_t o = bin_of_u(u[0]);
         double du = (u[0] - cdf_[o]) / (cdf_[o + 1] - cdf_[o]);
         double t = (double(o) + du) / double(f_.size());
-        x[0] = std::min(a_ + t * (b_ - a_), b_);
+        double xs = std::min(a_ + t * (b_ - a_), b_);
+        // Rounding can put x on the edge of a neighbouring bin (then pdf(x) would report that
+        // bin's density, possibly 0): step to the nearest double inside bin o.
+        while (bin_of_x(xs) > o) xs = std::nextafter(xs, -INFINITY);
+        while (bin_of_x(xs) < o) xs = std::nextafter(xs, INFINITY);
+        x[0] = xs;
         return f_[o] * scale_;
     }
     double pdf_one(const double *x) const {
