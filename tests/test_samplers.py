@@ -779,3 +779,22 @@ def test_estimate_from_samples_rejects_mismatched_pdf():
         rest.estimate_from_samples("gaussian", np.array([0.1, 0.2, 0.3]), np.array([1.0, 1.0]))
     with pytest.raises(ValueError, match=re.escape("'points' must have shape (N, 1) or (N,), got (3, 2)")):
         rest.estimate_from_samples("gaussian", np.zeros((3, 2)), np.ones(3))
+
+
+# --- pbrt-style names ----------------------------------------------------------------------
+def test_every_analytic_sampler_has_a_complete_triple_by_name():
+    from reference_estimators import sampling
+
+    rng = np.random.default_rng(3)
+    for info in rest.samplers():
+        if info["needs_table"]:
+            continue
+        name = info["name"]
+        fns = [getattr(sampling, f) for f in (f"sample_{name}", f"{name}_pdf", f"invert_{name}")]
+        s = rest.sampler(name)
+        u = rng.random((100, s.udim))
+        x = fns[0](u)
+        np.testing.assert_array_equal(x, s.sample(u)[0], err_msg=name)
+        np.testing.assert_array_equal(fns[1](x), s.pdf(x), err_msg=name)
+        np.testing.assert_array_equal(fns[2](x), s.invert(x), err_msg=name)
+    assert sampling.sample_ggx(np.full((1, 2), 0.5), alpha=0.3)[0, 2] == pytest.approx(1 / math.sqrt(1 + 0.09))
