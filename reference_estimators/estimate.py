@@ -3,7 +3,7 @@ and everything that went wrong while it was computed."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 from scipy import stats
@@ -46,7 +46,6 @@ class Estimate:
     technique: str | None = None
     reference: float | None = None
     nonnegative: bool = False  # the integrand is known to be >= 0
-    extra: dict[str, Any] = field(default_factory=dict)
 
     @classmethod
     def from_core(cls, raw: dict[str, Any], **context: Any) -> "Estimate":

@@ -146,3 +146,16 @@ def test_empty_and_malformed_values_are_rejected():
         rest.accumulate([])
     with pytest.raises(ValueError, match="'values' must be one-dimensional"):
         rest.accumulate(np.ones((3, 2)))
+
+
+def test_examples_name_the_right_sample_after_excluded_ones():
+    """Samples dropped for a bad pdf are removed before the contributions are screened; an
+    infinite contribution later in the same block must still report its own index."""
+    x = np.full(10, 0.5)
+    pdf = np.ones(10)
+    pdf[1] = 0.0        # zero pdf: excluded, reported
+    pdf[4] = 1e-320     # f/p overflows to +inf: excluded, reported
+    est = rest.estimate_from_samples("gaussian", x, pdf)
+    ex = {e["issue"]: e["index"] for e in est.examples}
+    assert ex == {"zero_pdf": 1, "posinf": 4}, est.examples
+    assert est.n == 8 and est.drawn == 10

@@ -281,18 +281,20 @@ struct Diagnostics {
 // Screens a block of contributions and accumulates what is usable: NaN and +-Inf are
 // counted, noted and left out; negatives are counted, noted and kept.  One vector pass when
 // nothing is wrong; the slow path runs only for blocks with something to report.  y is
-// compacted in place.  x (may be null) holds the points, for the examples.
+// compacted in place.  x (may be null) holds the points, for the examples; entry i is sample
+// index[i] when `index` is given (a block compacted before), else first_index + i.
 inline void screen_and_accumulate(Moments &acc, Diagnostics &diag, double *y, const double *x, int dim,
-                                  size_t count, uint64_t first_index, bool higher) {
+                                  size_t count, uint64_t first_index, bool higher, const uint64_t *index = nullptr) {
     BlockScan scan = scan_block(y, count);
     auto point = [&](size_t i) { return x ? x + i * dim : nullptr; };
+    auto sample = [&](size_t i) { return index ? index[i] : first_index + i; };
     const int d = x ? dim : 0;
     if (scan.nonfinite == 0) {
         if (scan.negative) {
             diag.counts[int(Issue::Negative)] += scan.negative;
             size_t want = kMaxExamples - std::min(kMaxExamples, diag.examples_of(Issue::Negative));
             for (size_t i = 0; i < count && want > 0; ++i)
-                if (y[i] < 0.0) { diag.note(Issue::Negative, first_index + i, point(i), d, y[i]); --want; }
+                if (y[i] < 0.0) { diag.note(Issue::Negative, sample(i), point(i), d, y[i]); --want; }
         }
         accumulate_block(acc, y, count, higher, scan);
         return;
@@ -300,11 +302,11 @@ inline void screen_and_accumulate(Moments &acc, Diagnostics &diag, double *y, co
     size_t kept = 0;
     for (size_t i = 0; i < count; ++i) {
         double v = y[i];
-        if (v != v) diag.record(Issue::NaN, first_index + i, point(i), d, v);
-        else if (v == std::numeric_limits<double>::infinity()) diag.record(Issue::PosInf, first_index + i, point(i), d, v);
-        else if (v == -std::numeric_limits<double>::infinity()) diag.record(Issue::NegInf, first_index + i, point(i), d, v);
+        if (v != v) diag.record(Issue::NaN, sample(i), point(i), d, v);
+        else if (v == std::numeric_limits<double>::infinity()) diag.record(Issue::PosInf, sample(i), point(i), d, v);
+        else if (v == -std::numeric_limits<double>::infinity()) diag.record(Issue::NegInf, sample(i), point(i), d, v);
         else {
-            if (v < 0.0) diag.record(Issue::Negative, first_index + i, point(i), d, v);
+            if (v < 0.0) diag.record(Issue::Negative, sample(i), point(i), d, v);
             y[kept++] = v;
         }
     }

@@ -22,6 +22,19 @@ StreamKey chunk_key(StreamKey k, uint64_t c) {
     return k;
 }
 
+// Calls fn(offset, m) for consecutive blocks of at most kBlock samples covering [0, count).
+template <class Fn>
+void for_each_block(uint64_t count, Fn fn) {
+    for (uint64_t b = 0; b < count; b += kBlock) fn(b, size_t(std::min<uint64_t>(kBlock, count - b)));
+}
+
+bool is_unit_box(const Domain &d) {
+    if (d.kind != DomainKind::Box) return false;
+    for (int j = 0; j < d.dim; ++j)
+        if (d.lo[j] != 0.0 || d.hi[j] != 1.0) return false;
+    return true;
+}
+
 // Reusable per-block buffers of one chunk.
 struct Scratch {
     std::vector<double> u, x, p, f, y, xi;
@@ -65,7 +78,7 @@ size_t block_contributions(const Integrand &f, const Technique &t, UniformStream
     if (t.kind == TechniqueKind::Uniform && f.domain.kind == DomainKind::Box) {
         // Eq. 3: Y = |D| f(X), X uniform on the box.  On [0,1]^d the map and the factor
         // |D| = 1 are identities and skipped (bitwise the same result).
-        const bool unit = f.domain.measure() == 1.0 && f.domain.lo == std::vector<double>(xd, 0.0);
+        const bool unit = is_unit_box(f.domain);
         const double vol = f.domain.measure();
         double *x = unit ? s.u.data() : s.x.data();
         stream.fill(s.u.data(), m * xd);
@@ -127,24 +140,26 @@ Estimate run_chunks(uint64_t n, const RunOptions &opt, ChunkFn chunk_fn) {
     return e;
 }
 
-// Moves the kept entries of y (and their points) to the front; returns how many remain.
-size_t compact(double *y, double *x, int xd, const unsigned char *drop, size_t m) {
+// Screens and accumulates one block, first dropping the samples marked in `drop` (already
+// recorded as outside the domain or with a bad pdf); the kept ones remember their sample
+// indices, so later examples in the block still name the right sample.
+void finish_block(double *y, double *x, int xd, size_t m, size_t dropped, const unsigned char *drop, uint64_t first,
+                  Moments &acc, Diagnostics &diag, bool higher) {
+    if (!dropped) {
+        screen_and_accumulate(acc, diag, y, x, xd, m, first, higher);
+        return;
+    }
+    std::vector<uint64_t> index;
+    index.reserve(m);
     size_t k = 0;
     for (size_t i = 0; i < m; ++i) {
         if (drop[i]) continue;
         y[k] = y[i];
         for (int j = 0; j < xd; ++j) x[k * xd + j] = x[i * xd + j];
+        index.push_back(first + i);
         ++k;
     }
-    return k;
-}
-
-// Screens and accumulates one block.  After a compaction the example indices of later
-// issues in the block are approximate; the counts are exact.
-void finish_block(double *y, double *x, int xd, size_t m, size_t dropped, const unsigned char *drop, uint64_t first,
-                  Moments &acc, Diagnostics &diag, bool higher) {
-    if (dropped) m = compact(y, x, xd, drop, m);
-    screen_and_accumulate(acc, diag, y, x, xd, m, first, higher);
+    screen_and_accumulate(acc, diag, y, x, xd, k, first, higher, index.data());
 }
 
 }  // namespace
@@ -154,12 +169,11 @@ Estimate integrate(const Integrand &f, const Technique &t, uint64_t n, const Run
     return run_chunks(n, opt, [&](uint64_t c, uint64_t first, uint64_t count, Moments &acc, Diagnostics &diag) {
         UniformStream stream(chunk_key(opt.key, c));
         Scratch s(std::max(t.sampler->udim, xd), xd);
-        for (uint64_t b = 0; b < count; b += kBlock) {
-            size_t m = size_t(std::min<uint64_t>(kBlock, count - b));
+        for_each_block(count, [&](uint64_t b, size_t m) {
             size_t dropped = block_contributions(f, t, stream, m, first + b, s, diag);
             diag.drawn += m;
             finish_block(s.y.data(), s.points, xd, m, dropped, s.drop.data(), first + b, acc, diag, opt.higher_moments);
-        }
+        });
     });
 }
 
@@ -171,23 +185,21 @@ void contributions(const Integrand &f, const Technique &t, uint64_t n, const Run
         Scratch s(std::max(t.sampler->udim, xd), xd);
         Diagnostics diag;
         uint64_t first = c * kChunkSize, count = std::min(kChunkSize, n - first);
-        for (uint64_t b = 0; b < count; b += kBlock) {
-            size_t m = size_t(std::min<uint64_t>(kBlock, count - b));
+        for_each_block(count, [&](uint64_t b, size_t m) {
             size_t dropped = block_contributions(f, t, stream, m, first + b, s, diag);
             for (size_t i = 0; i < m; ++i) out[first + b + i] = dropped && s.drop[i] ? std::nan("") : s.y[i];
-        }
+        });
     });
 }
 
 Estimate accumulate_values(const double *y, uint64_t n, const RunOptions &opt) {
     return run_chunks(n, opt, [&](uint64_t, uint64_t first, uint64_t count, Moments &acc, Diagnostics &diag) {
         std::vector<double> buf(kBlock);
-        for (uint64_t b = 0; b < count; b += kBlock) {
-            size_t m = size_t(std::min<uint64_t>(kBlock, count - b));
+        for_each_block(count, [&](uint64_t b, size_t m) {
             std::copy(y + first + b, y + first + b + m, buf.begin());
             diag.drawn += m;
             screen_and_accumulate(acc, diag, buf.data(), nullptr, 0, m, first + b, opt.higher_moments);
-        }
+        });
     });
 }
 
@@ -197,8 +209,7 @@ Estimate estimate_from_samples(const Integrand &f, const double *x, const double
     if (sampler_domain.dim != xd) throw std::invalid_argument("sampler domain and integrand differ in dimension");
     return run_chunks(n, opt, [&](uint64_t, uint64_t first, uint64_t count, Moments &acc, Diagnostics &diag) {
         Scratch s(1, xd);
-        for (uint64_t b = 0; b < count; b += kBlock) {
-            size_t m = size_t(std::min<uint64_t>(kBlock, count - b));
+        for_each_block(count, [&](uint64_t b, size_t m) {
             const double *xb = x + (first + b) * xd, *pb = pdf + first + b;
             std::copy(xb, xb + m * xd, s.x.begin());
             std::copy(pb, pb + m, s.p.begin());
@@ -207,7 +218,7 @@ Estimate estimate_from_samples(const Integrand &f, const double *x, const double
             f.eval(s.x.data(), s.f.data(), m);
             for (size_t i = 0; i < m; ++i) s.y[i] = s.f[i] / s.p[i];
             finish_block(s.y.data(), s.x.data(), xd, m, dropped, s.drop.data(), first + b, acc, diag, opt.higher_moments);
-        }
+        });
     });
 }
 

@@ -8,6 +8,7 @@
 #pragma once
 #include <cstdint>
 #include <cstring>
+
 #if defined(__AVX512F__)
 #include <immintrin.h>
 #endif
@@ -78,15 +79,6 @@ struct Pcg32 {
     }
 };
 
-// 64 random bits -> double in (0, 1), exactly (m + 0.5) * 2^-52 with m the top 52 bits.
-inline double bits_to_open_unit(uint64_t bits) {
-    uint64_t m = bits >> 12u;
-    double d;
-    uint64_t b = 0x4330000000000000ULL | m;  // the double 2^52 + m
-    std::memcpy(&d, &b, sizeof d);
-    return (d - 4503599627370495.5) * 0x1p-52;  // (2^52 + m) - (2^52 - 0.5), exact
-}
-
 // Lanes over ONE PCG32 stream: lane l produces uniforms l, l+L, l+2L, ... so a fill yields
 // exactly the sequence of the scalar generator, while the lanes run in SIMD registers.
 // Uniform k uses outputs 2k (high word) and 2k+1 (low word).  L = 32 (four vectors of 8
@@ -151,7 +143,8 @@ class LaneGenerator {
                 u64v bits = exponent | (pair >> 12u);
                 f64v d;
                 std::memcpy(&d, &bits, sizeof d);
-                d = (d - offset) * 0x1p-52;  // exactly (m + 0.5) 2^-52, see bits_to_open_unit
+                // (2^52 + m) - (2^52 - 0.5) = m + 0.5 exactly, times 2^-52: u in (0, 1)
+                d = (d - offset) * 0x1p-52;
                 std::memcpy(out + r * kLanes + v * kVec, &d, sizeof d);
             }
         }
