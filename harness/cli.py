@@ -8,7 +8,7 @@ import time
 
 import reference_estimators as rest
 
-from .runner import estimates_table, format_table, run_suite
+from .runner import bad_verdicts, format_table, results_table, run_suite
 from .suite import SuiteError, load_suite
 
 
@@ -47,18 +47,21 @@ def _run(suite, threads: int | None, csv: str | None) -> int:
     results = list(run_suite(suite, threads=threads, progress=progress))
     if tty:
         print(file=sys.stderr)
-    df = estimates_table(results)
-    print(f"suite {suite.name!r} ({suite.path}): {len(results)} estimates, seed {suite.seed}")
-    print(format_table(df))
-    bad = [(c, e) for c, e in results if not e.ok]
-    print(f"\n{len(results)} estimates in {time.perf_counter() - start:.2f} s; "
-          f"z = (estimate - exact) / stderr; 1/(V·T) in 1/(f² s) (background eq. 5)")
-    for c, e in bad:
-        print(f"  {c.integrand}/{c.technique}: {e.issues}; first: {e.examples[:2]}")
+    df = results_table(results, suite.alpha)
+    print(f"suite {suite.name!r} ({suite.path}): {len(results)} cases, seed {suite.seed}, "
+          f"family-wise alpha {suite.alpha:g} (Holm), {suite.batches} batches per bias test, "
+          f"{suite.replicas} replicas per budget")
+    print(format_table(df, suite.alpha))
+    print(f"\n{len(results)} cases in {time.perf_counter() - start:.1f} s.  t: Student t of {suite.batches} batch means "
+          f"against the exact value; RMSE slope: log-log fit over budgets (expected -0.5 for Monte Carlo); "
+          f"1/(V·T): efficiency (background eq. 5) as a ratio against uniform MC on the same integrand.")
+    bad = bad_verdicts(df)
+    for _, row in bad.iterrows():
+        print(f"  FAILED {row['integrand']}/{row['technique']}: {row['verdict']} (p = {row['pvalue']:.3g}) {row['notes']}")
     if csv:
         df.to_csv(csv, index=False)
         print(f"table written to {csv}")
-    return 1 if bad else 0
+    return 1 if len(bad) else 0
 
 
 def _list() -> int:

@@ -5,7 +5,11 @@ At this stage a suite lists cases as integrand x techniques from the reference c
     [suite]
     name = "default"
     seed = 0                  # chunk streams are keyed by (seed, case, replica, chunk)
-    samples = 1_000_000       # per estimate; a case may override it
+    samples = 1_000_000       # per bias test (split into `batches` replicas); a case may override it
+    alpha = 0.01              # family-wise false-alarm rate of the suite's bias tests (Holm)
+    batches = 64              # independent replicas the bias test compares
+    replicas = 32             # replicas per budget for convergence and efficiency
+    budgets = [1024, 4096]    # optional: convergence budgets (default: samples/1024 .. samples/16)
 
     [[case]]
     integrand = "all"         # or a catalogue name
@@ -46,9 +50,14 @@ class Suite:
     samples: int
     threads: int | None
     cases: tuple[Case, ...]
+    alpha: float = 0.01
+    batches: int = 64
+    replicas: int = 32
+    budgets: tuple[int, ...] | None = None
 
 
-_SUITE_KEYS = {"name": str, "seed": int, "samples": int, "threads": int}
+_SUITE_KEYS = {"name": str, "seed": int, "samples": int, "threads": int, "alpha": float, "batches": int,
+               "replicas": int, "budgets": list}
 _CASE_KEYS = {"integrand": str, "techniques": (str, list), "samples": int}
 
 
@@ -80,6 +89,20 @@ def load_suite(path: str | Path) -> Suite:
     threads = head.get("threads")
     if threads is not None and threads < 0:
         raise SuiteError(where.at("suite", "threads", f"expected an integer >= 0 (0: all cores), got {threads}"))
+    alpha = head.get("alpha", 0.01)
+    if not 0 < alpha < 1:
+        raise SuiteError(where.at("suite", "alpha", f"expected a false-alarm rate in (0, 1), got {alpha}"))
+    batches = head.get("batches", 64)
+    if not 8 <= batches <= samples:
+        raise SuiteError(where.at("suite", "batches", f"expected an integer in [8, samples = {samples}], got {batches}"))
+    replicas = head.get("replicas", 32)
+    if replicas < 2:
+        raise SuiteError(where.at("suite", "replicas", f"expected at least 2 replicas, got {replicas}"))
+    budgets = head.get("budgets")
+    if budgets is not None:
+        if len(budgets) < 3 or any(isinstance(b, bool) or not isinstance(b, int) or b <= 0 for b in budgets):
+            raise SuiteError(where.at("suite", "budgets", f"expected at least 3 positive integer budgets, got {budgets}"))
+        budgets = tuple(sorted(set(budgets)))
 
     raw_cases = data.get("case", [])
     if not isinstance(raw_cases, list) or not raw_cases:
@@ -93,6 +116,9 @@ def load_suite(path: str | Path) -> Suite:
         names = [f.name for f in rest.catalogue()] if c["integrand"] == "all" else [c["integrand"]]
         case_samples = c.get("samples", samples)
         _positive(case_samples, where, table, "samples")
+        if case_samples < batches:
+            raise SuiteError(where.at(table if "samples" in c else "suite", "samples",
+                                      f"expected at least batches = {batches} samples, got {case_samples}"))
         for name in names:
             try:
                 known = rest.techniques(name)
@@ -109,14 +135,15 @@ def load_suite(path: str | Path) -> Suite:
                                               f"unknown technique {t!r} for integrand {name!r}; "
                                               f"expected one of: {', '.join(known)}"))
                 cases.append(Case(name, t, case_samples, len(cases)))
-    return Suite(head.get("name", path.stem), path, seed, samples, threads or None, tuple(cases))
+    return Suite(head.get("name", path.stem), path, seed, samples, threads or None, tuple(cases), float(alpha),
+                 batches, replicas, budgets)
 
 
 def _check_keys(table: dict[str, Any], spec: dict[str, Any], where: "_Locator", name: Any) -> None:
     for key, value in table.items():
         if key not in spec:
             raise SuiteError(where.at(name, key, f"unknown key {key!r}; expected one of: {', '.join(spec)}"))
-        want = spec[key]
+        want = (int, float) if spec[key] is float else spec[key]
         if isinstance(value, bool) or not isinstance(value, want):
             kinds = " or ".join(t.__name__ for t in (want if isinstance(want, tuple) else (want,)))
             raise SuiteError(where.at(name, key, f"expected {kinds}, got {type(value).__name__} {value!r}"))

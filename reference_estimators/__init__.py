@@ -1,14 +1,18 @@
 """Reference Monte Carlo estimators with exact answers, implemented in C++.
 
-    >>> import reference_estimators as re
-    >>> est = re.integrate("gaussian", "uniform", 1_000_000, seed=1)
+    >>> import reference_estimators as rest
+    >>> est = rest.integrate("gaussian", "uniform", 1_000_000, seed=1)
     >>> abs(est.z_score()) < 5
     True
 """
-from . import _core, sampling
-from .api import *  # noqa: F403
-from .api import __all__ as _api_all
-from .estimate import ERROR_ISSUES, Estimate
+from . import _core, sobol
+
+_core.set_sobol_directions(sobol.direction_numbers())
+
+from . import sampling  # noqa: E402  (its functions are built from the registry)
+from .api import *  # noqa: E402,F403
+from .api import __all__ as _api_all  # noqa: E402
+from .estimate import ERROR_ISSUES, Estimate  # noqa: E402
 
 CHUNK_SIZE: int = _core.CHUNK_SIZE
 __all__ = [*_api_all, "Estimate", "ERROR_ISSUES", "CHUNK_SIZE"]

@@ -17,7 +17,8 @@ __all__ = [
     "Integrand", "Sampler", "Technique",
     "catalogue", "integrand", "techniques", "technique",
     "samplers", "sampler", "rejection_sampler", "tabulated_integrand",
-    "uniform", "importance", "rejection",
+    "uniform", "importance", "rejection", "roulette", "splitting", "mis", "snis", "with_points", "clamped",
+    "points",
     "integrate", "contributions", "accumulate", "estimate_from_samples",
 ]
 
@@ -151,10 +152,60 @@ def rejection(proposal: Sampler, c: float) -> Technique:
     return _core.hit_or_miss_technique(_core_sampler(proposal), float(c))
 
 
+def roulette(s: Sampler, q: float, c: float = 0.0, *, reweight: bool = True) -> Technique:
+    """Russian roulette over importance sampling with s: f is evaluated only with survival
+    probability q; survivors count (f/p - (1-q) c) / q, the terminated count c (background
+    section 3.1; unbiased).  ``reweight=False`` is the biased twin: survivors count f/p."""
+    return _core.russian_roulette_technique(_core_sampler(s), float(q), float(c), bool(reweight))
+
+
+def splitting(f: str | Integrand, m: int) -> Technique:
+    """Splitting on a 2-D box: one outer sample x0, m inner samples x1, Y = |D| mean f(x0, x1_j)."""
+    return _core.splitting_technique(integrand(f), _count(m, "m"))
+
+
+def mis(samplers: list[Sampler], heuristic: str = "balance") -> Technique:
+    """Multiple importance sampling, one sample per sampler, with the balance (beta = 1) or
+    power (beta = 2) heuristic (Veach 1997)."""
+    powers = {"balance": 1.0, "power": 2.0}
+    if heuristic not in powers:
+        raise ValueError(f"'heuristic' must be 'balance' or 'power', got {heuristic!r}")
+    return _core.mis_technique([_core_sampler(s) for s in samplers], powers[heuristic])
+
+
+def snis(s: Sampler, batch: int) -> Technique:
+    """Self-normalised importance sampling over batches of ``batch`` samples: the ratio
+    |D| sum f/p / sum 1/p.  Consistent, with a bias of order 1/batch (deliberately biased)."""
+    return _core.self_normalized_technique(_core_sampler(s), _count(batch, "batch"))
+
+
+def with_points(t: Technique, points: str) -> Technique:
+    """Technique t drawing its canonical uniforms from 'random', 'stratified' (jittered) or
+    'sobol' (Owen-scrambled) points."""
+    return _core.with_points(t, points)
+
+
+def clamped(t: Technique, clamp: float) -> Technique:
+    """Technique t with contributions cut at ``clamp`` (deliberately biased low)."""
+    return _core.with_clamp(t, float(clamp))
+
+
+def points(n: int, dim: int, kind: str = "random", *, seed: int = 0, case_id: int = 0, replica: int = 0,
+           threads: int | None = None) -> np.ndarray:
+    """Canonical points of shape (n, dim) in (0, 1): what a technique with this point set and
+    ``dim`` uniforms per sample consumes for an estimate of n samples."""
+    if isinstance(dim, bool) or not isinstance(dim, numbers.Integral) or dim < 1:
+        raise ValueError(f"'dim' must be a positive integer, got {dim!r}")
+    return _core.points(_count(n, "n"), int(dim), kind, _seed(seed), _seed(case_id, "case_id"),
+                        _seed(replica, "replica"), _threads(threads))
+
+
 def integrate(f: str | Integrand, t: str | Technique, n: int, *, seed: int = 0, threads: int | None = None,
               case_id: int = 0, replica: int = 0, higher_moments: bool = True) -> Estimate:
-    """Estimate the integral of f with technique t from n samples.
+    """Estimate the integral of f with technique t from n contributions.
 
+    For stratified or Sobol' point sets the contributions are not independent: the estimate
+    then has ``stderr`` NaN, and its error must come from replicas (``harness.stats``).
     Samples come in chunks of ``CHUNK_SIZE`` with one PCG32 stream per chunk keyed by
     (seed, case_id, replica, chunk), merged in chunk order: the result is bitwise the same
     for any ``threads``.  ``higher_moments`` adds M3/M4 (skewness, kurtosis, the variance's
@@ -165,7 +216,7 @@ def integrate(f: str | Integrand, t: str | Technique, n: int, *, seed: int = 0, 
     raw = _core.integrate(fi, ti, _count(n, "n"), _seed(seed), _seed(case_id, "case_id"), _seed(replica, "replica"),
                           _threads(threads), bool(higher_moments))
     return Estimate.from_core(raw, integrand=fi.name, technique=ti.name, reference=fi.reference,
-                              nonnegative=fi.nonnegative)
+                              nonnegative=fi.nonnegative, iid=ti.iid)
 
 
 def contributions(f: str | Integrand, t: str | Technique, n: int, *, seed: int = 0, threads: int | None = None,

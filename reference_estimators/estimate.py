@@ -20,6 +20,8 @@ _EPS = 2.0**-52
 class Estimate:
     """Mean of per-sample contributions Y with its standard error.
 
+    For non-independent contributions (stratified or Sobol' points, ``iid`` False) ``stderr``
+    is NaN: the error of such an estimate is measured over replicas.
     ``n`` counts the contributions that entered the moments; ``drawn`` counts all samples.
     They differ only when samples were excluded (NaN or infinite contributions, points
     outside the sampler's domain, zero or invalid pdf values): ``counts`` and ``examples``
@@ -46,12 +48,16 @@ class Estimate:
     technique: str | None = None
     reference: float | None = None
     nonnegative: bool = False  # the integrand is known to be >= 0
+    iid: bool = True           # independent contributions (random points)
 
     @classmethod
     def from_core(cls, raw: dict[str, Any], **context: Any) -> "Estimate":
         names = {f for f in cls.__dataclass_fields__}
         values = {k: v for k, v in raw.items() if k in names}
         values["examples"] = tuple(raw["examples"])
+        if not context.get("iid", True):
+            # One randomised point set: its samples' spread says nothing about its error.
+            values["stderr"] = math.nan
         return cls(**values, **context)
 
     # --- verdicts on the computation itself -------------------------------------------------
@@ -99,6 +105,8 @@ class Estimate:
         if ref is None:
             raise ValueError("z_score needs a reference value: this estimate has none")
         err = self.total_error
+        if math.isnan(err):
+            return math.nan  # no error estimate (non-independent contributions): use replicas
         return (self.mean - ref) / err if err > 0 else (0.0 if self.mean == ref else math.copysign(math.inf, self.mean - ref))
 
     @property

@@ -115,8 +115,19 @@ const char *technique_kind(TechniqueKind k) {
         case TechniqueKind::Uniform: return "uniform";
         case TechniqueKind::Importance: return "importance";
         case TechniqueKind::HitOrMiss: return "rejection";
+        case TechniqueKind::RussianRoulette: return "russian_roulette";
+        case TechniqueKind::Splitting: return "splitting";
+        case TechniqueKind::Mis: return "mis";
+        case TechniqueKind::SelfNormalized: return "self_normalized";
     }
     return "?";
+}
+
+PointSetKind point_set(const std::string &name) {
+    if (name == "random") return PointSetKind::Random;
+    if (name == "stratified") return PointSetKind::Stratified;
+    if (name == "sobol") return PointSetKind::Sobol;
+    throw nb::value_error(("'points' must be 'random', 'stratified' or 'sobol', got '" + name + "'").c_str());
 }
 
 }  // namespace
@@ -210,6 +221,13 @@ NB_MODULE(_core, m) {
         .def_ro("bound", &Technique::bound)
         .def_ro("note", &Technique::note)
         .def_prop_ro("kind", [](const Technique &t) { return technique_kind(t.kind); })
+        .def_prop_ro("points", [](const Technique &t) { return point_set_name(t.points); })
+        .def_prop_ro("iid", [](const Technique &t) { return t.points == PointSetKind::Random; },
+                     "contributions are independent (random points): the per-sample variance gives the error")
+        .def_ro("biased", &Technique::biased)
+        .def_ro("mis", &Technique::mis)
+        .def_prop_ro("evaluations", &Technique::evaluations)
+        .def("udim", [](const Technique &t, const Integrand &f) { return t.udim(f); }, "integrand"_a)
         .def_prop_ro("finite_variance", [](const Technique &t) -> nb::object {
             if (t.finite_variance < 0) return nb::none();
             return nb::bool_(t.finite_variance == 1);
@@ -249,16 +267,48 @@ NB_MODULE(_core, m) {
     m.def("uniform_technique", [](const Integrand &f) { return make_uniform_technique(f.domain); }, "integrand"_a);
     m.def("importance_technique", &make_importance_technique, "sampler"_a);
     m.def("hit_or_miss_technique", &make_hit_or_miss_technique, "proposal"_a, "c"_a);
+    m.def("russian_roulette_technique", &make_russian_roulette_technique, "sampler"_a, "q"_a, "c"_a, "reweight"_a);
+    m.def("splitting_technique", [](const Integrand &f, int m) { return make_splitting_technique(f.domain, m); },
+          "integrand"_a, "m"_a);
+    m.def("mis_technique", &make_mis_technique, "samplers"_a, "power"_a);
+    m.def("self_normalized_technique", &make_self_normalized_technique, "sampler"_a, "batch"_a);
+    m.def("with_points", [](const Technique &t, const std::string &points) { return with_points(t, point_set(points)); },
+          "technique"_a, "points"_a);
+    m.def("with_clamp", &with_clamp, "technique"_a, "clamp"_a);
+    m.def("check_technique", &check_technique, "integrand"_a, "technique"_a);
+    m.def("set_sobol_directions", [](nb::ndarray<const uint32_t, nb::ndim<2>, nb::c_contig, nb::device::cpu> v) {
+        if (v.shape(1) != 32) throw nb::value_error("Sobol' direction numbers must have shape (dims, 32)");
+        SobolDirections &d = sobol_directions();
+        d.v.assign(v.data(), v.data() + v.size());
+        d.dims = int(v.shape(0));
+    }, "directions"_a, "Direction numbers v[d, k] (bit k of the index, 32-bit), set once at import.");
+    m.def("points", [](int64_t n, int dim, const std::string &kind, uint64_t seed, uint64_t case_id, uint64_t replica,
+                       int threads) {
+        check_n(n);
+        if (dim < 1) throw nb::value_error("'dim' must be >= 1");
+        PointSetContext ctx;
+        ctx.kind = point_set(kind);
+        ctx.n = uint64_t(n);
+        ctx.key = {seed, case_id, replica, 0};
+        double *u;
+        OutArray r = new_array(size_t(n), size_t(dim), &u);
+        {
+            nb::gil_scoped_release g;
+            const uint64_t nc = (uint64_t(n) + kChunkSize - 1) / kChunkSize;
+            ThreadPool::instance().run(nc, threads > 0 ? threads : ThreadPool::default_threads(), [&](size_t c) {
+                UniformStream stream({seed, case_id, replica, c});
+                uint64_t first = c * kChunkSize, count = std::min<uint64_t>(kChunkSize, uint64_t(n) - first);
+                fill_points(ctx, stream, first, count, dim, u + first * dim);
+            });
+        }
+        return r;
+    }, "n"_a, "dim"_a, "kind"_a = "random", "seed"_a = 0, "case_id"_a = 0, "replica"_a = 0, "threads"_a = 0,
+       "Canonical points (n, dim) of an estimate: exactly what a technique with this point set consumes.");
     m.def("tabulated_integrand", [](InArray v, double a, double b) {
         return make_tabulated_integrand(std::vector<double>(v.data(), v.data() + v.size()), a, b);
     }, "values"_a, "a"_a, "b"_a);
 
-    auto check_pair = [](const Integrand &f, const Technique &t) {
-        if (t.sampler->domain.dim != f.domain.dim)
-            throw nb::value_error(("technique '" + t.name + "' draws " + std::to_string(t.sampler->domain.dim) +
-                                   "-dimensional points but integrand '" + f.name + "' is " +
-                                   std::to_string(f.domain.dim) + "-dimensional").c_str());
-    };
+    auto check_pair = [](const Integrand &f, const Technique &t) { check_technique(f, t); };
     m.def("integrate", [check_pair](const Integrand &f, const Technique &t, int64_t n, uint64_t seed, uint64_t case_id,
                                     uint64_t replica, int threads, bool higher_moments) {
         check_n(n);

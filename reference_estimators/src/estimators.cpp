@@ -37,12 +37,39 @@ bool is_unit_box(const Domain &d) {
 
 // Reusable per-block buffers of one chunk.
 struct Scratch {
-    std::vector<double> u, x, p, f, y, xi;
-    std::vector<unsigned char> drop;
+    std::vector<double> u, x, p, f, y, xi, q, w, cols;
+    std::vector<unsigned char> drop, sub_drop;
+    std::vector<size_t> live;
     double *points = nullptr;  // where this block's points are (x, or u on the unit box)
-    explicit Scratch(int udim, int xdim)
-        : u(kBlock * size_t(udim)), x(kBlock * size_t(xdim)), p(kBlock), f(kBlock), y(kBlock), xi(kBlock), drop(kBlock) {}
+    // evals: f evaluations per contribution; the point buffer holds at least two blocks
+    // (Russian roulette and MIS keep the drawn points after the block's own).
+    Scratch(int udim, int xdim, int evals)
+        : u(kBlock * size_t(udim)), x(kBlock * size_t(xdim) * std::max(evals, 2)), p(kBlock * evals), f(kBlock * evals), y(kBlock),
+          xi(kBlock), q(kBlock * evals), w(kBlock), cols(kBlock * size_t(udim)), drop(kBlock), sub_drop(kBlock * evals) {
+        live.reserve(kBlock);
+    }
 };
+
+// What one estimate needs besides the technique: its point set and dimensions.
+struct Kernel {
+    const Integrand &f;
+    const Technique &t;
+    PointSetContext points;
+    int ud, xd;
+    Kernel(const Integrand &f_, const Technique &t_, uint64_t n, const StreamKey &key)
+        : f(f_), t(t_), ud(t_.udim(f_)), xd(f_.domain.dim) {
+        points.kind = t_.points;
+        points.n = n;
+        points.key = key;
+    }
+    Scratch scratch() const { return Scratch(ud, xd, t.evaluations()); }
+};
+
+// Copies columns [from, from + count) of the m x ud matrix u into out (m x count).
+void take_columns(const double *u, size_t m, int ud, int from, int count, double *out) {
+    for (size_t i = 0; i < m; ++i)
+        for (int j = 0; j < count; ++j) out[i * count + j] = u[i * ud + from + j];
+}
 
 // Checks sampled points against the sampler's domain and pdf values for NaN / Inf / <= 0;
 // records what fails and marks it in `drop`.  Returns the number marked.
@@ -70,36 +97,57 @@ size_t check_samples(const Domain &dom, const double *x, const double *p, size_t
 
 // Fills s.y[0..m) with the contributions of samples first..first+m of this chunk; samples
 // the estimator cannot use are recorded in diag and flagged in s.drop (returns their count).
-size_t block_contributions(const Integrand &f, const Technique &t, UniformStream &stream, size_t m, uint64_t first,
-                           Scratch &s, Diagnostics &diag) {
+size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uint64_t first, Scratch &s,
+                           Diagnostics &diag) {
+    const Integrand &f = k.f;
+    const Technique &t = k.t;
     const Sampler &smp = *t.sampler;
-    const int xd = f.domain.dim;
-    size_t dropped = 0;
-    if (t.kind == TechniqueKind::Uniform && f.domain.kind == DomainKind::Box) {
-        // Eq. 3: Y = |D| f(X), X uniform on the box.  On [0,1]^d the map and the factor
-        // |D| = 1 are identities and skipped (bitwise the same result).
-        const bool unit = is_unit_box(f.domain);
-        const double vol = f.domain.measure();
-        double *x = unit ? s.u.data() : s.x.data();
-        stream.fill(s.u.data(), m * xd);
-        if (!unit)
-            for (size_t i = 0; i < m; ++i)
-                for (int j = 0; j < xd; ++j)
-                    s.x[i * xd + j] = f.domain.lo[j] + (f.domain.hi[j] - f.domain.lo[j]) * s.u[i * xd + j];
-        f.eval(x, unit ? s.y.data() : s.f.data(), m);
-        if (!unit)
-            for (size_t i = 0; i < m; ++i) s.y[i] = vol * s.f[i];
-        s.points = x;
-        diag.candidates += m;
-        return 0;
-    }
+    const int xd = k.xd, ud = k.ud;
+    const bool rejection = smp.method == SamplingMethod::Rejection;
+    if (!rejection) fill_points(k.points, stream, first, m, ud, s.u.data());
     s.points = s.x.data();
-    smp.draw(stream, s.x.data(), s.p.data(), m, first, diag);
-    dropped = check_samples(smp.domain, s.x.data(), s.p.data(), m, first, diag, s.drop.data());
-    f.eval(s.x.data(), s.f.data(), m);
-    if (t.kind == TechniqueKind::HitOrMiss) {
+    size_t dropped = 0;
+    diag.candidates += m;
+
+    switch (t.kind) {
+    case TechniqueKind::Uniform:
+        if (f.domain.kind == DomainKind::Box) {
+            // Eq. 3: Y = |D| f(X), X uniform on the box.  On [0,1]^d the map and the factor
+            // |D| = 1 are identities and skipped (bitwise the same result).
+            const bool unit = is_unit_box(f.domain);
+            const double vol = f.domain.measure();
+            double *x = unit ? s.u.data() : s.x.data();
+            if (!unit)
+                for (size_t i = 0; i < m; ++i)
+                    for (int j = 0; j < xd; ++j)
+                        s.x[i * xd + j] = f.domain.lo[j] + (f.domain.hi[j] - f.domain.lo[j]) * s.u[i * xd + j];
+            f.eval(x, unit ? s.y.data() : s.f.data(), m);
+            if (!unit)
+                for (size_t i = 0; i < m; ++i) s.y[i] = vol * s.f[i];
+            s.points = x;
+            break;
+        }
+        [[fallthrough]];  // uniform on the sphere or hemisphere: f / (1 / |D|) with its sampler
+    case TechniqueKind::Importance:
+        // Eq. 4: Y = f(X) / p(X).
+        if (rejection) {
+            diag.candidates -= m;
+            smp.draw(stream, s.x.data(), s.p.data(), m, first, diag);
+        } else {
+            smp.sample(s.u.data(), s.x.data(), s.p.data(), m);
+        }
+        dropped = check_samples(smp.domain, s.x.data(), s.p.data(), m, first, diag, s.drop.data());
+        f.eval(s.x.data(), s.f.data(), m);
+        for (size_t i = 0; i < m; ++i) s.y[i] = s.f[i] / s.p[i];
+        break;
+    case TechniqueKind::HitOrMiss: {
         // Y = c 1{xi c p(X) < f(X)}; a point with f > c p breaks the method and is reported.
-        stream.fill(s.xi.data(), m);
+        const int sd = smp.udim;
+        take_columns(s.u.data(), m, ud, 0, sd, s.cols.data());
+        take_columns(s.u.data(), m, ud, sd, 1, s.xi.data());
+        smp.sample(s.cols.data(), s.x.data(), s.p.data(), m);
+        dropped = check_samples(smp.domain, s.x.data(), s.p.data(), m, first, diag, s.drop.data());
+        f.eval(s.x.data(), s.f.data(), m);
         const double c = t.bound;
         size_t viol = 0;
         for (size_t i = 0; i < m; ++i) {
@@ -111,10 +159,120 @@ size_t block_contributions(const Integrand &f, const Technique &t, UniformStream
             for (size_t i = 0; i < m; ++i)
                 if (s.f[i] > c * s.p[i])
                     diag.record(Issue::BoundViolation, first + i, &s.x[i * xd], xd, s.f[i] / (c * s.p[i]));
-    } else {
-        // Eq. 4: Y = f(X) / p(X).
-        for (size_t i = 0; i < m; ++i) s.y[i] = s.f[i] / s.p[i];
+        break;
     }
+    case TechniqueKind::RussianRoulette: {
+        // Only survivors (xi < q) are sampled and evaluated: that is where roulette saves time.
+        const int sd = smp.udim;
+        const double q = t.rr_q, c = t.rr_c;
+        take_columns(s.u.data(), m, ud, sd, 1, s.xi.data());
+        s.live.clear();
+        for (size_t i = 0; i < m; ++i) {
+            s.drop[i] = 0;
+            if (s.xi[i] < q) {
+                for (int j = 0; j < sd; ++j) s.cols[s.live.size() * sd + j] = s.u[i * ud + j];
+                s.live.push_back(i);
+            } else {
+                s.y[i] = c;
+                for (int j = 0; j < xd; ++j) s.x[i * xd + j] = std::nan("");  // no point drawn
+            }
+        }
+        const size_t L = s.live.size();
+        double *lx = s.x.data() + m * xd;  // survivors' points, after the block's
+        smp.sample(s.cols.data(), lx, s.p.data(), L);
+        for (size_t a = 0; a < L; ++a) s.sub_drop[a] = 0;
+        size_t bad = check_samples(smp.domain, lx, s.p.data(), L, first, diag, s.sub_drop.data());
+        f.eval(lx, s.f.data(), L);
+        for (size_t a = 0; a < L; ++a) {
+            size_t i = s.live[a];
+            double y = s.f[a] / s.p[a];
+            s.y[i] = t.reweight ? (y - (1 - q) * c) / q : y;
+            for (int j = 0; j < xd; ++j) s.x[i * xd + j] = lx[a * xd + j];
+            if (bad && s.sub_drop[a]) { s.drop[i] = 1; ++dropped; }
+        }
+        break;
+    }
+    case TechniqueKind::Splitting: {
+        // x0 from u[:, 0]; x1_j from u[:, 1 + j]; Y = |D| mean_j f(x0, x1_j).
+        const int M = t.split;
+        const double a0 = f.domain.lo[0], w0 = f.domain.hi[0] - a0, a1 = f.domain.lo[1], w1 = f.domain.hi[1] - a1;
+        const double vol = f.domain.measure();
+        for (size_t i = 0; i < m; ++i)
+            for (int j = 0; j < M; ++j) {
+                double *pt = &s.x[(i * M + j) * 2];
+                pt[0] = a0 + w0 * s.u[i * ud];
+                pt[1] = a1 + w1 * s.u[i * ud + 1 + j];
+            }
+        f.eval(s.x.data(), s.f.data(), m * M);
+        for (size_t i = 0; i < m; ++i) {
+            double sum = 0;
+            for (int j = 0; j < M; ++j) sum += s.f[i * M + j];
+            s.y[i] = vol * sum / M;
+            s.x[i * 2] = s.x[i * M * 2];            // the outer point stands for the sample
+            s.x[i * 2 + 1] = s.x[i * M * 2 + 1];
+        }
+        break;
+    }
+    case TechniqueKind::Mis: {
+        // One sample from each technique i; w_i = p_i^beta / sum_j p_j^beta at X_i.
+        const double beta = t.mis_power;
+        std::fill(s.y.begin(), s.y.begin() + m, 0.0);
+        std::fill(s.drop.begin(), s.drop.begin() + m, 0);
+        int col = 0;
+        double *xi_pts = s.x.data() + m * xd;
+        for (size_t a = 0; a < t.mis.size(); ++a) {
+            const Sampler &sa = *t.mis[a];
+            take_columns(s.u.data(), m, ud, col, sa.udim, s.cols.data());
+            col += sa.udim;
+            sa.sample(s.cols.data(), xi_pts, s.p.data(), m);
+            for (size_t i = 0; i < m; ++i) s.sub_drop[i] = 0;
+            size_t bad = check_samples(sa.domain, xi_pts, s.p.data(), m, first, diag, s.sub_drop.data());
+            // denominator: sum over all techniques of p_j(X_a)^beta
+            for (size_t i = 0; i < m; ++i) s.w[i] = 0;
+            for (size_t b = 0; b < t.mis.size(); ++b) {
+                if (b == a) {
+                    for (size_t i = 0; i < m; ++i) s.w[i] += std::pow(s.p[i], beta);
+                } else {
+                    t.mis[b]->pdf(xi_pts, s.q.data(), m);
+                    for (size_t i = 0; i < m; ++i) s.w[i] += std::pow(s.q[i], beta);
+                }
+            }
+            f.eval(xi_pts, s.f.data(), m);
+            for (size_t i = 0; i < m; ++i) {
+                // w_a f / p_a = p_a^(beta-1) f / sum_j p_j^beta
+                double y = std::pow(s.p[i], beta - 1) * s.f[i] / s.w[i];
+                s.y[i] += s.f[i] == 0 ? 0.0 : y;
+                if (bad && s.sub_drop[i] && !s.drop[i]) { s.drop[i] = 1; ++dropped; }
+            }
+            if (a == 0) std::copy(xi_pts, xi_pts + m * xd, s.x.begin());
+        }
+        break;
+    }
+    case TechniqueKind::SelfNormalized: {
+        // Y = |D| sum_b f/p / sum_b 1{X in D}/p over the batch.
+        const int B = t.batch;
+        const double vol = f.domain.measure();
+        smp.sample(s.u.data(), s.x.data(), s.p.data(), m * B);
+        std::fill(s.drop.begin(), s.drop.begin() + m, 0);
+        for (size_t i = 0; i < m * B; ++i) s.sub_drop[i] = 0;
+        size_t bad = check_samples(smp.domain, s.x.data(), s.p.data(), m * B, first * B, diag, s.sub_drop.data());
+        f.eval(s.x.data(), s.f.data(), m * B);
+        for (size_t i = 0; i < m; ++i) {
+            double num = 0, den = 0;
+            for (int b = 0; b < B; ++b) {
+                size_t r = i * B + b;
+                num += s.f[r] / s.p[r];
+                den += f.domain.contains(&s.x[r * xd]) ? 1.0 / s.p[r] : 0.0;
+                if (bad && s.sub_drop[r] && !s.drop[i]) { s.drop[i] = 1; ++dropped; }
+            }
+            s.y[i] = vol * num / den;
+            for (int j = 0; j < xd && B > 1; ++j) s.x[i * xd + j] = s.x[i * B * xd + j];  // batch's first point
+        }
+        break;
+    }
+    }
+    if (t.clamp < std::numeric_limits<double>::infinity())
+        for (size_t i = 0; i < m; ++i) s.y[i] = std::min(s.y[i], t.clamp);
     return dropped;
 }
 
@@ -165,28 +323,30 @@ void finish_block(double *y, double *x, int xd, size_t m, size_t dropped, const 
 }  // namespace
 
 Estimate integrate(const Integrand &f, const Technique &t, uint64_t n, const RunOptions &opt) {
-    const int xd = f.domain.dim;
+    check_technique(f, t);
+    const Kernel k(f, t, n, opt.key);
     return run_chunks(n, opt, [&](uint64_t c, uint64_t first, uint64_t count, Moments &acc, Diagnostics &diag) {
         UniformStream stream(chunk_key(opt.key, c));
-        Scratch s(std::max(t.sampler->udim, xd), xd);
+        Scratch s = k.scratch();
         for_each_block(count, [&](uint64_t b, size_t m) {
-            size_t dropped = block_contributions(f, t, stream, m, first + b, s, diag);
+            size_t dropped = block_contributions(k, stream, m, first + b, s, diag);
             diag.drawn += m;
-            finish_block(s.y.data(), s.points, xd, m, dropped, s.drop.data(), first + b, acc, diag, opt.higher_moments);
+            finish_block(s.y.data(), s.points, k.xd, m, dropped, s.drop.data(), first + b, acc, diag, opt.higher_moments);
         });
     });
 }
 
 void contributions(const Integrand &f, const Technique &t, uint64_t n, const RunOptions &opt, double *out) {
-    const int xd = f.domain.dim;
+    check_technique(f, t);
+    const Kernel k(f, t, n, opt.key);
     const uint64_t nc = chunk_count(n);
     ThreadPool::instance().run(nc, resolve_threads(opt.threads), [&](size_t c) {
         UniformStream stream(chunk_key(opt.key, c));
-        Scratch s(std::max(t.sampler->udim, xd), xd);
+        Scratch s = k.scratch();
         Diagnostics diag;
         uint64_t first = c * kChunkSize, count = std::min(kChunkSize, n - first);
         for_each_block(count, [&](uint64_t b, size_t m) {
-            size_t dropped = block_contributions(f, t, stream, m, first + b, s, diag);
+            size_t dropped = block_contributions(k, stream, m, first + b, s, diag);
             for (size_t i = 0; i < m; ++i) out[first + b + i] = dropped && s.drop[i] ? std::nan("") : s.y[i];
         });
     });
@@ -208,7 +368,7 @@ Estimate estimate_from_samples(const Integrand &f, const double *x, const double
     const int xd = f.domain.dim;
     if (sampler_domain.dim != xd) throw std::invalid_argument("sampler domain and integrand differ in dimension");
     return run_chunks(n, opt, [&](uint64_t, uint64_t first, uint64_t count, Moments &acc, Diagnostics &diag) {
-        Scratch s(1, xd);
+        Scratch s(1, xd, 1);
         for_each_block(count, [&](uint64_t b, size_t m) {
             const double *xb = x + (first + b) * xd, *pb = pdf + first + b;
             std::copy(xb, xb + m * xd, s.x.begin());

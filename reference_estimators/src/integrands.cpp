@@ -285,10 +285,27 @@ std::vector<CatalogueEntry> build_catalogue() {
     const Domain unit = Domain::interval(0, 1);
 
     auto gaussian = std::make_shared<ScaledGaussian>("gaussian", 1.0, "exp(-x^2) on [0,1]");
+    auto linear = sampler("linear", {{"a", 1.0}, {"b", 0.37}});
+    auto uniform01 = make_uniform_sampler(unit);
     add(gaussian, {named(make_uniform_technique(unit), "uniform", 1),
-                   named(make_importance_technique(sampler("linear", {{"a", 1.0}, {"b", 0.37}})), "importance:linear", 1),
-                   named(make_hit_or_miss_technique(make_uniform_sampler(unit), 1.0), "rejection", 1,
-                         "hit-or-miss under c = 1 with uniform proposals")});
+                   named(with_points(make_uniform_technique(unit), PointSetKind::Stratified), "uniform/stratified", 1,
+                         "n strata: error ~ n^-1.5 for a smooth integrand"),
+                   named(with_points(make_uniform_technique(unit), PointSetKind::Sobol), "uniform/sobol", 1,
+                         "Owen-scrambled Sobol': error ~ n^-1.5 for a smooth integrand"),
+                   named(make_importance_technique(linear), "importance:linear", 1),
+                   named(with_points(make_importance_technique(linear), PointSetKind::Sobol), "importance:linear/sobol", 1),
+                   named(make_hit_or_miss_technique(uniform01, 1.0), "rejection", 1,
+                         "hit-or-miss under c = 1 with uniform proposals"),
+                   named(make_russian_roulette_technique(uniform01, 0.5, 0.0, true), "roulette:uniform(q=0.5)", 1,
+                         "f evaluated for half the samples, survivors weighted 1/q"),
+                   named(make_russian_roulette_technique(uniform01, 0.9, 0.0, false), "roulette_biased:uniform(q=0.9)", 1,
+                         "survivors not reweighted: E[Y] = 0.9 I (biased on purpose)"),
+                   named(make_mis_technique({uniform01, linear}, 1), "mis_balance:uniform+linear", 1),
+                   named(make_mis_technique({uniform01, linear}, 2), "mis_power:uniform+linear", 1),
+                   named(with_clamp(make_uniform_technique(unit), 0.9), "clamped:uniform(0.9)", 1,
+                         "contributions above 0.9 cut: bias -0.0206 (biased on purpose)"),
+                   named(make_self_normalized_technique(linear, 4), "snis:linear(b=4)", 1,
+                         "ratio of means over 4 samples: O(1/4) relative bias (biased on purpose)")});
 
     add(std::make_shared<Polynomial>(std::vector<double>{0.1, 0, 0, -4, 5}),
         {named(make_uniform_technique(unit), "uniform", 1),
@@ -304,6 +321,9 @@ std::vector<CatalogueEntry> build_catalogue() {
     const double t = 1 / std::sqrt(2.0);
     add(std::make_shared<Step>(t, 1.0, 0.25),
         {named(make_uniform_technique(unit), "uniform", 1),
+         named(with_points(make_uniform_technique(unit), PointSetKind::Stratified), "uniform/stratified", 1,
+               "one stratum holds the jump: error ~ n^-1"),
+         named(with_points(make_uniform_technique(unit), PointSetKind::Sobol), "uniform/sobol", 1),
          named(make_importance_technique(make_sampler("piecewise_constant_1d", {}, {1.0, 1.0, 0.87, 0.25})),
                "importance:piecewise_constant_1d", 1),
          named(make_hit_or_miss_technique(make_uniform_sampler(unit), 1.0), "rejection", 1)});
@@ -320,7 +340,9 @@ std::vector<CatalogueEntry> build_catalogue() {
     add(std::make_shared<HalfCauchy>(),
         {named(make_importance_technique(sampler("exponential", {{"rate", 1.0}})), "importance:exponential", 0,
                "light-tailed proposal for a heavy tail: f/p unbounded, infinite variance"),
-         named(make_importance_technique(sampler("lomax", {{"shape", 1.0}})), "importance:lomax", 1)});
+         named(make_importance_technique(sampler("lomax", {{"shape", 1.0}})), "importance:lomax", 1),
+         named(make_mis_technique({sampler("exponential", {{"rate", 1.0}}), sampler("lomax", {{"shape", 1.0}})}, 1),
+               "mis_balance:exponential+lomax", 1, "the Lomax partner bounds f/p: finite variance again")});
 
     for (auto [n, s] : {std::pair<const char *, double>{"huge", 1e300}, {"tiny", 1e-300}}) {
         add(std::make_shared<ScaledGaussian>(n, s, std::string(n == std::string("huge") ? "1e300" : "1e-300") + " exp(-x^2) on [0,1]"),
@@ -331,21 +353,33 @@ std::vector<CatalogueEntry> build_catalogue() {
     add(std::make_shared<Offset>(1e8), {named(make_uniform_technique(unit), "uniform", 1)});
 
     auto g16 = std::make_shared<GaussianProduct>(16);
-    add(g16, {named(make_uniform_technique(g16->domain), "uniform", 1)});
+    add(g16, {named(make_uniform_technique(g16->domain), "uniform", 1),
+              named(with_points(make_uniform_technique(g16->domain), PointSetKind::Stratified), "uniform/stratified", 1,
+                    "2^16 strata at most below 3^16 samples: barely better than random"),
+              named(with_points(make_uniform_technique(g16->domain), PointSetKind::Sobol), "uniform/sobol", 1)});
 
     add(std::make_shared<CosinePower>(8),
         {named(make_uniform_technique(Domain::hemisphere()), "uniform", 1),
-         named(make_importance_technique(sampler("cosine_hemisphere")), "importance:cosine_hemisphere", 1)});
+         named(make_importance_technique(sampler("cosine_hemisphere")), "importance:cosine_hemisphere", 1),
+         named(with_points(make_importance_technique(sampler("cosine_hemisphere")), PointSetKind::Sobol),
+               "importance:cosine_hemisphere/sobol", 1),
+         named(make_russian_roulette_technique(sampler("cosine_hemisphere"), 0.25, 0.0, true),
+               "roulette:cosine_hemisphere(q=0.25)", 1)});
 
     const double alpha = 0.01;
     add(std::make_shared<GgxLobe>(alpha),
         {named(make_uniform_technique(Domain::hemisphere()), "uniform", 1, "sharp lobe: variance ~ 1/alpha^2"),
          named(make_importance_technique(sampler("cosine_hemisphere")), "importance:cosine_hemisphere", 1),
-         named(make_importance_technique(sampler("ggx", {{"alpha", alpha}})), "importance:ggx", 1, "p matches f: zero variance")});
+         named(make_importance_technique(sampler("ggx", {{"alpha", alpha}})), "importance:ggx", 1, "p matches f: zero variance"),
+         named(make_mis_technique({sampler("cosine_hemisphere"), sampler("ggx", {{"alpha", alpha}})}, 1),
+               "mis_balance:cosine_hemisphere+ggx", 1),
+         named(make_mis_technique({sampler("cosine_hemisphere"), sampler("ggx", {{"alpha", alpha}})}, 2),
+               "mis_power:cosine_hemisphere+ggx", 1)});
 
     const double cap = std::cos(30 * M_PI / 180);
     add(std::make_shared<SphericalCap>(cap),
         {named(make_uniform_technique(Domain::sphere()), "uniform", 1),
+         named(with_points(make_uniform_technique(Domain::sphere()), PointSetKind::Sobol), "uniform/sobol", 1),
          named(make_importance_technique(sampler("uniform_cone", {{"cos_max", std::cos(40 * M_PI / 180)}})),
                "importance:uniform_cone", 1)});
 
@@ -354,9 +388,15 @@ std::vector<CatalogueEntry> build_catalogue() {
     std::vector<double> table(res * res);
     for (size_t r = 0; r < res; ++r)
         for (size_t k = 0; k < res; ++k) table[r * res + k] = g2->value((k + 0.5) / res, (r + 0.5) / res) + 1e-3;
+    auto table2d = make_sampler("piecewise_constant_2d", {}, table, {res, res});
     add(g2, {named(make_uniform_technique(g2->domain), "uniform", 1),
-             named(make_importance_technique(make_sampler("piecewise_constant_2d", {}, table, {res, res})),
-                   "importance:piecewise_constant_2d", 1, "16x16 table of f at cell centres (+1e-3 floor)")});
+             named(with_points(make_uniform_technique(g2->domain), PointSetKind::Stratified), "uniform/stratified", 1),
+             named(with_points(make_uniform_technique(g2->domain), PointSetKind::Sobol), "uniform/sobol", 1),
+             named(make_splitting_technique(g2->domain, 4), "splitting(M=4)", 1, "1 outer x 4 inner samples"),
+             named(make_importance_technique(table2d), "importance:piecewise_constant_2d", 1,
+                   "16x16 table of f at cell centres (+1e-3 floor)"),
+             named(make_mis_technique({make_uniform_sampler(g2->domain), table2d}, 1),
+                   "mis_balance:uniform_box+piecewise_constant_2d", 1)});
     return c;
 }
 
@@ -392,6 +432,146 @@ Technique make_hit_or_miss_technique(SamplerPtr proposal, double c) {
     t.sampler = std::move(proposal);
     t.bound = c;
     return t;
+}
+
+Technique make_russian_roulette_technique(SamplerPtr sampler, double q, double c, bool reweight) {
+    if (!sampler) throw std::invalid_argument("Russian roulette needs a sampler");
+    if (!(q > 0 && q <= 1)) {
+        std::ostringstream s;
+        s << "Russian roulette's survival probability q must be in (0, 1], got " << q;
+        throw std::invalid_argument(s.str());
+    }
+    if (!std::isfinite(c)) throw std::invalid_argument("Russian roulette's constant c must be finite");
+    Technique t;
+    std::ostringstream name;
+    name << (reweight ? "roulette:" : "roulette_biased:") << sampler->name << "(q=" << q << (c != 0 ? ",c=" : "");
+    if (c != 0) name << c;
+    name << ")";
+    t.name = name.str();
+    t.kind = TechniqueKind::RussianRoulette;
+    t.sampler = std::move(sampler);
+    t.rr_q = q;
+    t.rr_c = c;
+    t.reweight = reweight;
+    t.biased = !reweight;
+    return t;
+}
+
+Technique make_splitting_technique(const Domain &domain, int m) {
+    if (domain.kind != DomainKind::Box || domain.dim != 2)
+        throw std::invalid_argument("splitting needs a 2-dimensional box domain (outer x0, inner x1), got '" +
+                                    domain.kind_name() + "' of dimension " + std::to_string(domain.dim));
+    if (m < 1) throw std::invalid_argument("splitting needs M >= 1 inner samples, got " + std::to_string(m));
+    Technique t;
+    t.name = "splitting(M=" + std::to_string(m) + ")";
+    t.kind = TechniqueKind::Splitting;
+    t.sampler = make_uniform_sampler(domain);
+    t.split = m;
+    return t;
+}
+
+Technique make_mis_technique(std::vector<SamplerPtr> samplers, double power) {
+    if (samplers.size() < 2) throw std::invalid_argument("MIS needs at least two samplers");
+    if (!(power >= 1 && std::isfinite(power))) {
+        std::ostringstream s;
+        s << "MIS heuristic exponent must be >= 1 (1 balance, 2 power), got " << power;
+        throw std::invalid_argument(s.str());
+    }
+    Technique t;
+    t.name = std::string(power == 1 ? "mis_balance:" : (power == 2 ? "mis_power:" : "mis_beta:"));
+    for (size_t i = 0; i < samplers.size(); ++i) {
+        if (!samplers[i]) throw std::invalid_argument("MIS: sampler " + std::to_string(i) + " is missing");
+        if (samplers[i]->method != SamplingMethod::Inversion)
+            throw std::invalid_argument("MIS: sampler '" + samplers[i]->name + "' must be an inversion sampler");
+        if (samplers[i]->domain.dim != samplers[0]->domain.dim)
+            throw std::invalid_argument("MIS: samplers '" + samplers[0]->name + "' and '" + samplers[i]->name +
+                                        "' draw points of different dimension");
+        t.name += (i ? "+" : "") + samplers[i]->name;
+    }
+    t.kind = TechniqueKind::Mis;
+    t.sampler = samplers[0];
+    t.mis = std::move(samplers);
+    t.mis_power = power;
+    return t;
+}
+
+Technique make_self_normalized_technique(SamplerPtr sampler, int batch) {
+    if (!sampler) throw std::invalid_argument("self-normalised IS needs a sampler");
+    if (batch < 1) throw std::invalid_argument("self-normalised IS needs a batch of >= 1 samples, got " + std::to_string(batch));
+    if (sampler->method != SamplingMethod::Inversion)
+        throw std::invalid_argument("self-normalised IS: sampler '" + sampler->name + "' must be an inversion sampler");
+    Technique t;
+    t.name = "snis:" + sampler->name + "(b=" + std::to_string(batch) + ")";
+    t.kind = TechniqueKind::SelfNormalized;
+    t.sampler = std::move(sampler);
+    t.batch = batch;
+    t.biased = batch > 0;  // O(1/b) bias: a ratio of means is not the mean of ratios
+    return t;
+}
+
+Technique with_points(Technique t, PointSetKind points) {
+    if (points != PointSetKind::Random) t.name += std::string("/") + point_set_name(points);
+    t.points = points;
+    return t;
+}
+
+Technique with_clamp(Technique t, double clamp) {
+    if (!(clamp > 0) || std::isnan(clamp)) {
+        std::ostringstream s;
+        s << "clamp must be > 0, got " << clamp;
+        throw std::invalid_argument(s.str());
+    }
+    std::ostringstream name;
+    name << "clamped:" << t.name << "(" << clamp << ")";
+    t.name = name.str();
+    t.clamp = clamp;
+    t.biased = true;
+    return t;
+}
+
+int Technique::udim(const Integrand &f) const {
+    switch (kind) {
+        case TechniqueKind::Uniform: return f.domain.kind == DomainKind::Box ? f.domain.dim : sampler->udim;
+        case TechniqueKind::Importance: return sampler->udim;
+        case TechniqueKind::HitOrMiss:
+        case TechniqueKind::RussianRoulette: return sampler->udim + 1;
+        case TechniqueKind::Splitting: return 1 + split;
+        case TechniqueKind::Mis: {
+            int d = 0;
+            for (auto &s : mis) d += s->udim;
+            return d;
+        }
+        case TechniqueKind::SelfNormalized: return batch * sampler->udim;
+    }
+    return 0;
+}
+
+int Technique::evaluations() const {
+    switch (kind) {
+        case TechniqueKind::Splitting: return split;
+        case TechniqueKind::Mis: return int(mis.size());
+        case TechniqueKind::SelfNormalized: return batch;
+        default: return 1;
+    }
+}
+
+void check_technique(const Integrand &f, const Technique &t) {
+    auto fail = [&](const std::string &why) {
+        throw std::invalid_argument("technique '" + t.name + "' cannot estimate integrand '" + f.name + "': " + why);
+    };
+    for (const SamplerPtr &s : t.kind == TechniqueKind::Mis ? t.mis : std::vector<SamplerPtr>{t.sampler})
+        if (s->domain.dim != f.domain.dim)
+            fail("it draws " + std::to_string(s->domain.dim) + "-dimensional points, the integrand is " +
+                 std::to_string(f.domain.dim) + "-dimensional");
+    if (t.points != PointSetKind::Random && t.sampler->method == SamplingMethod::Rejection)
+        fail("a rejection sampler consumes a variable number of uniforms; only random points can feed it");
+    if (t.kind == TechniqueKind::Splitting && (f.domain.kind != DomainKind::Box || f.domain.dim != 2))
+        fail("splitting needs a 2-dimensional box");
+    if (t.kind == TechniqueKind::SelfNormalized && !std::isfinite(f.domain.measure()))
+        fail("self-normalised IS against 1 needs a domain of finite measure");
+    if ((t.kind == TechniqueKind::HitOrMiss || t.kind == TechniqueKind::RussianRoulette) &&
+        t.sampler->method == SamplingMethod::Rejection)
+        fail("needs an inversion sampler");
 }
 
 const std::vector<CatalogueEntry> &catalogue() {

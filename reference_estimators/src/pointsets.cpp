@@ -1,0 +1,10 @@
+#include "pointsets.h"
+
+namespace re {
+
+SobolDirections &sobol_directions() {
+    static SobolDirections d;
+    return d;
+}
+
+}  // namespace re
