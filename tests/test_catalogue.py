@@ -129,15 +129,17 @@ def test_eval_is_zero_outside_the_domain():
 
 
 # --- recovering the references ---------------------------------------------------------------
-PAIRS = [(f.name, t.name, t.finite_variance) for f in rest.catalogue() for t in rest.techniques(f).values()]
-FINITE = [(f, t) for f, t, fv in PAIRS if fv]
-INFINITE = [(f, t) for f, t, fv in PAIRS if fv is False]
+TECHS = [(f.name, t) for f in rest.catalogue() for t in rest.techniques(f).values()]
+FINITE = [(f, t.name) for f, t in TECHS if t.finite_variance and t.iid and not t.biased]
+INFINITE = [(f, t.name) for f, t in TECHS if t.finite_variance is False]
+NON_IID = [(f, t.name) for f, t in TECHS if not t.iid and not t.biased]
+BIASED = [(f, t.name) for f, t in TECHS if t.biased]
 FAMILY_ALPHA = 1e-3
 Z_CRIT = stats.norm.isf(FAMILY_ALPHA / (2 * len(FINITE)))
 # Skewed cases need more samples for the sample mean to be close to normal: a hit rate of
 # ~1e-6 (peak) or ~1e-4 (the alpha = 0.01 lobe) leaves too few hits at the default budget.
 BUDGET = {("peak", "uniform"): 100_000_000, ("ggx_lobe", "uniform"): 20_000_000,
-          ("ggx_lobe", "importance:cosine_hemisphere"): 20_000_000}
+          ("ggx_lobe", "importance:cosine_hemisphere"): 20_000_000, ("ggx_lobe", "mis_balance:cosine_hemisphere+ggx"): 20_000_000}
 
 
 @pytest.mark.parametrize("integrand, technique", FINITE)
@@ -151,6 +153,44 @@ def test_finite_variance_estimators_recover_the_reference(integrand, technique):
     assert est.n == n
     z = est.z_score()
     assert abs(z) <= Z_CRIT, f"{integrand}/{technique}: {est} vs exact {est.reference!r}, z = {z:.2f} > {Z_CRIT:.2f}"
+
+
+def test_the_catalogue_has_every_kind_of_technique():
+    kinds = {t.kind for _, t in TECHS}
+    assert kinds == {"uniform", "importance", "rejection", "russian_roulette", "splitting", "mis", "self_normalized"}
+    assert {t.points for _, t in TECHS} == {"random", "stratified", "sobol"}
+    assert len(BIASED) >= 3 and len(NON_IID) >= 8
+
+
+@pytest.mark.parametrize("integrand, technique", NON_IID)
+def test_stratified_and_sobol_estimates_recover_the_reference_over_replicas(integrand, technique):
+    """Randomised point sets: one estimate carries no error bar (stderr NaN), 32 independent
+    replicas do.  |t| <= t_crit with Bonferroni over these pairs, family-wise alpha = 1e-3,
+    seed 0."""
+    one = rest.integrate(integrand, technique, 4096, seed=0)
+    assert math.isnan(one.stderr) and math.isnan(one.z_score()) and not one.iid
+    ests = np.array([rest.integrate(integrand, technique, 4096, seed=0, replica=r).mean for r in range(32)])
+    ref = rest.integrand(integrand).reference
+    t = (ests.mean() - ref) / (ests.std(ddof=1) / math.sqrt(ests.size))
+    crit = stats.t.isf(FAMILY_ALPHA / (2 * len(NON_IID)), ests.size - 1)
+    assert abs(t) <= crit, f"{integrand}/{technique}: mean {ests.mean()!r} vs {ref!r}, t = {t:.2f}"
+
+
+@pytest.mark.parametrize("integrand, technique", BIASED)
+def test_deliberately_biased_estimators_are_off_by_their_known_bias(integrand, technique):
+    """clamped(0.9): bias -(integral of (exp(-x^2) - 0.9)+); roulette without reweighting:
+    E[Y] = q I; self-normalised IS over 4 samples: a bias of order 1/4 of the relative
+    variance.  Each is measured with 4e6 samples and must be far outside the noise."""
+    est = rest.integrate(integrand, technique, 4_000_000, seed=0)
+    ref = est.reference
+    expected = {
+        "clamped:uniform(0.9)": -integrate.quad(lambda x: max(math.exp(-x * x) - 0.9, 0.0), 0, 1,
+                                                points=[math.sqrt(-math.log(0.9))])[0],
+        "roulette_biased:uniform(q=0.9)": -0.1 * ref,
+    }.get(technique)
+    assert abs(est.z_score()) > 20, est
+    if expected is not None:
+        assert est.mean - ref == pytest.approx(expected, abs=5 * est.stderr), (est, expected)
 
 
 @pytest.mark.parametrize("integrand, technique", INFINITE)
@@ -246,7 +286,8 @@ def test_bad_seed_and_threads_are_rejected():
 
 def test_mismatched_technique_and_integrand_dimensions_are_rejected():
     t = rest.importance(rest.sampler("ggx", alpha=0.1))
-    with pytest.raises(ValueError, match=r"technique 'importance:ggx' draws 3-dimensional points but integrand 'gaussian' is 1-dimensional"):
+    with pytest.raises(ValueError, match=r"technique 'importance:ggx' cannot estimate integrand 'gaussian': it draws "
+                                         r"3-dimensional points, the integrand is 1-dimensional"):
         rest.integrate("gaussian", t, 10)
 
 

@@ -19,28 +19,46 @@ def run(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
 
 def test_main_job_prints_every_case_of_the_default_suite(root):
     r = run("run", "suites/default.toml", cwd=root)
-    assert r.returncode == 0, r.stderr
+    assert r.returncode == 0, r.stdout + r.stderr
     suite = load_suite(root / "suites" / "default.toml")
     lines = r.stdout.splitlines()
-    header = next(l for l in lines if l.lstrip().startswith("integrand"))
-    for col in ("technique", "n", "estimate ± stderr", "exact", "z", "time [s]", "1/(V·T)"):
+    header = next(l for l in lines if l.startswith("integrand"))
+    for col in ("technique", "n", "estimate ± stderr", "exact", "t", "p", "bias (Holm, α=0.01)", "RMSE slope [95% CI]",
+                "1/(V·T) vs baseline [95% CI]", "notes"):
         assert col in header, col
+    rows = {}
     for case in suite.cases:
-        assert any(case.integrand in l and case.technique in l for l in lines), case
-    assert f"{len(suite.cases)} estimates in" in r.stdout
+        match = [l for l in lines if l.split()[:2] == [case.integrand, case.technique]]
+        assert match, case
+        rows[(case.integrand, case.technique)] = match[0]
+    assert f"{len(suite.cases)} cases in" in r.stdout
     every = {(f.name, t) for f in rest.catalogue() for t in rest.techniques(f)}
-    assert every <= {(c.integrand, c.technique) for c in suite.cases}
+    assert every <= set(rows)
+    # the deliberately biased techniques are found, the others are not
+    for (f, t), line in rows.items():
+        planted = rest.technique(f, t).biased
+        assert ("biased (expected)" in line) == planted, line
+        assert " biased " not in line.replace("biased (expected)", "") and "bias missed" not in line, line
 
 
-def test_csv_output(root, tmp_path):
+def test_csv_output(tmp_path):
+    suite = tmp_path / "small.toml"
+    suite.write_text('[suite]\nsamples = 65536\nreplicas = 8\n\n[[case]]\nintegrand = "gaussian"\n'
+                     'techniques = ["uniform", "uniform/stratified", "clamped:uniform(0.9)"]\n')
     out = tmp_path / "table.csv"
-    r = run("run", "suites/default.toml", "--csv", str(out), "--threads", "1", cwd=root)
-    assert r.returncode == 0, r.stderr
+    r = run("run", str(suite), "--csv", str(out), "--threads", "1")
+    assert r.returncode == 0, r.stdout + r.stderr
     import pandas as pd
 
     df = pd.read_csv(out)
-    assert {"integrand", "technique", "n", "estimate", "stderr", "exact", "z", "seconds", "log10_efficiency"} <= set(df)
-    assert len(df) == len(load_suite(root / "suites" / "default.toml").cases)
+    assert {"integrand", "technique", "n", "estimate", "stderr", "exact", "z", "pvalue", "verdict", "slope", "slope_lo",
+            "slope_hi", "log10_efficiency", "efficiency_ratio", "ratio_lo", "ratio_hi", "notes"} <= set(df)
+    assert list(df["technique"]) == ["uniform", "uniform/stratified", "clamped:uniform(0.9)"]
+    assert list(df["verdict"]) == ["unbiased", "unbiased", "biased (expected)"]
+    assert df["n"].tolist() == [65536] * 3
+    strat = df[df["technique"] == "uniform/stratified"].iloc[0]
+    assert strat["slope_hi"] < -1.2, strat  # n^-1.5 on a smooth integrand
+    assert df.iloc[0]["efficiency_ratio"] == 1.0
 
 
 def test_list_shows_catalogue_and_samplers():
