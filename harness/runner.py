@@ -70,7 +70,7 @@ def judge(results: list[CaseResult], alpha: float) -> list[str]:
     for r, rej in zip(results, rejected):
         if r.bias.verdict == "invalid":
             out.append("invalid")
-        elif rej and r.bias.flags:
+        elif rej and r.bias.heavy_tail:
             out.append("inconclusive")
         elif rej:
             out.append("biased (expected)" if r.technique.biased else "biased")

@@ -505,7 +505,7 @@ Technique make_self_normalized_technique(SamplerPtr sampler, int batch) {
     t.kind = TechniqueKind::SelfNormalized;
     t.sampler = std::move(sampler);
     t.batch = batch;
-    t.biased = batch > 0;  // O(1/b) bias: a ratio of means is not the mean of ratios
+    t.biased = true;  // O(1/b) bias: a ratio of means is not the mean of ratios
     return t;
 }
 

@@ -1,0 +1,231 @@
+"""harness.stats: the unbiasedness test (false alarms and power measured on the calibration
+zoo), Holm, convergence rates, efficiency and error against time."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+import reference_estimators as rest
+from harness import calibration, stats as hs
+
+GAUSS = rest.integrand("gaussian").reference
+
+
+# --- false alarms and power, over many seeds ---------------------------------------------------
+@pytest.fixture(scope="module")
+def zoo_table():
+    """check_unbiased on every zoo estimator for seeds 0..199, n = 1e5, alpha = 0.01."""
+    return calibration.measure(calibration.zoo(), seeds=range(200), sample_count=100_000, alpha=0.01)
+
+
+@pytest.mark.slow
+def test_false_alarm_rate_holds_on_correct_estimators(zoo_table):
+    """Correct estimators, light- and heavy-tailed (tail index 2, 3/2, ~1): "biased" at most
+    as often as alpha allows.  Per estimator the count must stay below the Binomial(200, 0.01)
+    quantile at 1e-3 / (number of estimators); pooled, below the Binomial(runs, 0.01) quantile
+    at 1e-3.  Heavy-tailed ones may say "inconclusive" instead."""
+    correct = zoo_table[zoo_table["fault"] == "-"]
+    per = stats.binom.isf(1e-3 / len(correct), 200, 0.01)
+    bad = correct[correct["biased"] > per]
+    assert bad.empty, f"false alarms above {per:.0f} of 200:\n{bad.to_string()}"
+    pooled = stats.binom.isf(1e-3, int(correct["runs"].sum()), 0.01)
+    assert correct["biased"].sum() <= pooled, correct.to_string()
+    light = correct[~correct["heavy"]]
+    assert (light["inconclusive"] <= 10).all(), light.to_string()  # the flags rarely fire on light tails
+    assert (correct["invalid"] == 0).all()
+
+
+@pytest.mark.slow
+def test_power_on_wrong_estimators(zoo_table):
+    """Faults of 1 % or more in light-tailed estimators are caught every time at n = 1e5;
+    the heavy-tailed one (1/(2 sqrt x) off by 1 %) may only be "inconclusive", never
+    wrongly "consistent" more than it must."""
+    wrong = zoo_table[(zoo_table["fault"] != "-") & ~zoo_table["heavy"]].set_index("estimator")
+    clear = ["importance:linear, pdf 1% too large", "importance:linear, pdf 0.1% too large",
+             "roulette(q=0.99) without 1/q", "stratified(64), a stratum twice", "mis_balance, weights sum to 1.02",
+             "hit_or_miss(c=0.95), bound violated", "snis(b=16)"]
+    for name in clear:
+        assert wrong.loc[name, "rate"] >= 0.95, wrong.loc[name]
+
+
+@pytest.mark.slow
+def test_power_matches_the_documented_detection_size():
+    """The docstring's claim: a bias of 3.5 sigma / sqrt(n) is caught ~80 % of the time.
+    roulette(q=0.999) without 1/q has bias 0.00075 (3.7 sigma / sqrt(1e6)); clamping at 0.99
+    has bias 0.00067 (3.4 sigma / sqrt(1e6)).  Over 100 seeds both must be caught at least
+    60 % of the time (the 80 % expectation minus 4 binomial standard deviations)."""
+    sub = [e for e in calibration.zoo() if e.name in ("roulette(q=0.999) without 1/q", "uniform clamped at 0.99")]
+    table = calibration.measure(sub, seeds=range(100), sample_count=1_000_000)
+    assert (table["rate"] >= 0.6).all(), table.to_string()
+
+
+# --- check_unbiased's contract -----------------------------------------------------------------
+def test_result_carries_estimate_interval_and_n():
+    r = hs.check_unbiased(lambda u: np.exp(-u[:, 0] ** 2), 1, GAUSS, sample_count=200_000, seed=3)
+    assert r.verdict == "consistent" and not r.rejected and r.n == 200_000
+    t, p = r
+    assert (t, p) == (r.statistic, r.pvalue) and r.df == 63
+    lo, hi = r.confidence_interval(0.99)
+    assert lo < r.estimate < hi and hi - lo == pytest.approx(2 * stats.t.ppf(0.995, 63) * r.stderr)
+    assert r.stderr == pytest.approx(math.sqrt(r.variance / r.n), rel=0.3)
+    assert "consistent" in str(r) and "n = 200000" in str(r)
+
+
+def test_same_seed_same_verdict_other_seed_other_numbers():
+    f = lambda u: u[:, 0] * 2  # noqa: E731
+    a = hs.check_unbiased(f, 1, 1.0, sample_count=10_000, seed=1)
+    b = hs.check_unbiased(f, 1, 1.0, sample_count=10_000, seed=1)
+    c = hs.check_unbiased(f, 1, 1.0, sample_count=10_000, seed=2)
+    assert a == b and a.estimate != c.estimate
+
+
+def test_zero_variance_estimators_are_judged_exactly():
+    ok = hs.check_unbiased(lambda u: np.full(u.shape[0], 0.25), 2, 0.25, sample_count=4096)
+    off = hs.check_unbiased(lambda u: np.full(u.shape[0], 0.25 + 1e-12), 2, 0.25, sample_count=4096)
+    assert ok.verdict == "consistent" and off.verdict == "biased" and off.pvalue == 0.0
+
+
+def test_nan_contributions_make_the_test_invalid_with_examples():
+    def y(u):
+        v = u[:, 0].copy()
+        v[u[:, 0] < 0.001] = np.nan
+        return v
+    r = hs.check_unbiased(y, 1, 0.5, sample_count=100_000)
+    assert r.verdict == "invalid" and not r.rejected
+    assert 50 < r.counts["nan"] < 200 and r.examples and r.examples[0]["issue"] == "nan"
+
+
+def test_heavy_tails_are_flagged_not_judged():
+    r = hs.check_unbiased(lambda u: u[:, 0] ** (-2 / 3) / 3, 1, 1.0, sample_count=100_000, seed=0)
+    assert r.heavy_tail and r.variance_unreliable and r.tail_index < 3 and r.verdict != "biased"
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"sample_count": 0}, r"'sample_count' must be a positive whole number, got 0"),
+    ({"sample_count": 1000, "alpha": 1.5}, r"'alpha' must be in \(0, 1\), got 1.5"),
+    ({"sample_count": 1000, "batches": 4}, r"'batches' must be an integer in \[8, sample_count\], got 4"),
+])
+def test_bad_arguments_are_named(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        hs.check_unbiased(lambda u: u[:, 0], 1, 0.5, **kwargs)
+
+
+def test_wrong_output_shape_is_named():
+    with pytest.raises(ValueError, match=r"'contributions' must return shape \(1000,\) for uniforms of shape "
+                                         r"\(1000, 2\), returned \(1000, 2\)"):
+        hs.check_unbiased(lambda u: u, 2, 0.5, sample_count=64_000)
+    with pytest.raises(ValueError, match=r"'dim' must be a positive integer"):
+        hs.check_unbiased(lambda u: u[:, 0], 0, 0.5, sample_count=1000)
+
+
+def test_check_technique_handles_point_sets_and_planted_bias():
+    ok = hs.check_technique("gaussian", "uniform/sobol", 262_144, seed=1)
+    assert ok.verdict == "consistent" and ok.stderr < 1e-5
+    bad = hs.check_technique("gaussian", "snis:linear(b=4)", 262_144, seed=1)
+    assert bad.verdict == "biased" and bad.estimate > GAUSS
+
+
+# --- Holm ----------------------------------------------------------------------------------------
+def test_holm_on_a_worked_example():
+    reject, adjusted = hs.holm([0.01, 0.04, 0.03, 0.005], alpha=0.05)
+    assert reject.tolist() == [True, False, False, True]
+    np.testing.assert_allclose(adjusted, [0.03, 0.06, 0.06, 0.02])
+
+
+def test_holm_holds_the_family_wise_rate():
+    """10 true null hypotheses with uniform p-values, 4000 families: the rate of any false
+    rejection must be <= alpha = 0.05 (upper 1e-3 binomial bound)."""
+    rng = np.random.default_rng(0)
+    hits = sum(hs.holm(rng.random(10), 0.05)[0].any() for _ in range(4000))
+    assert hits <= stats.binom.isf(1e-3, 4000, 0.05), hits
+
+
+def test_holm_rejects_bad_input():
+    with pytest.raises(ValueError, match="'pvalues' must be a 1-D sequence of values in \\[0, 1\\]"):
+        hs.holm([0.1, 1.5], 0.05)
+
+
+# --- convergence ---------------------------------------------------------------------------------
+BUDGETS = [256, 1024, 4096, 16384, 65536]
+
+
+def test_monte_carlo_converges_at_minus_one_half():
+    c = hs.convergence_rate("gaussian", "uniform", BUDGETS, 32, seed=0)
+    lo, hi = c.slope_interval
+    assert lo <= -0.5 <= hi and not c.worse_than_expected, c
+    assert list(c.table["n"]) == BUDGETS and (c.table["rmse_lo"] < c.table["rmse"]).all()
+    assert (c.table["rmse"] < c.table["rmse_hi"]).all() and c.table["rmse"].is_monotonic_decreasing
+
+
+@pytest.mark.parametrize("integrand, technique, rate", [
+    ("gaussian", "uniform/stratified", -1.5),  # smooth, 1-D: n^-3/2
+    ("step", "uniform/stratified", -1.0),      # one stratum holds the jump: n^-1
+    ("gaussian2d", "uniform/stratified", -1.0),  # smooth, 2-D jittered: n^-1/2 - 1/d = n^-1
+])
+def test_stratified_rates(integrand, technique, rate):
+    c = hs.convergence_rate(integrand, technique, BUDGETS, 32, seed=0, expected=rate)
+    lo, hi = c.slope_interval
+    assert lo - 0.05 <= rate <= hi + 0.05, c
+
+
+def test_owen_sobol_beats_monte_carlo_on_smooth_integrands():
+    for integrand in ("gaussian", "gaussian2d", "gaussian16"):
+        c = hs.convergence_rate(integrand, "uniform/sobol", BUDGETS, 32, seed=0)
+        assert c.slope_interval[1] < -0.75, c
+
+
+def test_a_biased_estimator_stops_converging_and_is_reported():
+    c = hs.convergence_rate("gaussian", "clamped:uniform(0.9)", BUDGETS, 16, seed=0)
+    assert c.worse_than_expected and abs(c.slope) < 0.1 and "WORSE THAN EXPECTED" in str(c)
+
+
+def test_convergence_is_reproducible():
+    a = hs.convergence_rate("step", "uniform", BUDGETS[:3], 8, seed=4)
+    b = hs.convergence_rate("step", "uniform", BUDGETS[:3], 8, seed=4)
+    assert a.slope == b.slope and a.slope_interval == b.slope_interval
+
+
+def test_convergence_needs_three_budgets():
+    with pytest.raises(ValueError, match="'budgets' needs at least 3 distinct sizes"):
+        hs.convergence_rate("gaussian", "uniform", [100, 100, 200], 8)
+
+
+# --- efficiency and error against time ---------------------------------------------------
+def test_efficiency_ratio_of_importance_sampling_over_uniform():
+    """linear IS cuts the variance ~40x at ~5x the time per sample: its efficiency ratio
+    against uniform MC is well above 1, with an interval that says so."""
+    a = hs.efficiency(hs.replicate("gaussian", "importance:linear", 200_000, 16, seed=0))
+    b = hs.efficiency(hs.replicate("gaussian", "uniform", 200_000, 16, seed=0))
+    ratio, (lo, hi) = hs.efficiency_ratio(a, b)
+    assert 1 < lo < ratio < hi
+    v_ratio = 10 ** (b.log10_variance - a.log10_variance)
+    assert 20 < v_ratio < 80, v_ratio  # sigma^2 0.040 vs 0.0009: measured from samples
+    lo_e, hi_e = a.confidence_interval()
+    assert lo_e < a.value < hi_e and a.n == 200_000 and a.replicas == 16
+
+
+def test_efficiency_survives_huge_integrands():
+    e = hs.efficiency(hs.replicate("huge", "uniform", 50_000, 8, seed=0))
+    assert e.value == 0.0 and -600 < e.log10_value < -580  # 1/(V T) ~ 1e-590 is no double
+
+
+def test_replicates_measure_bias_and_rmse():
+    r = hs.replicate("gaussian", "roulette_biased:uniform(q=0.9)", 100_000, 16, seed=0)
+    bias, se = r.bias
+    assert bias == pytest.approx(-0.1 * GAUSS, abs=5 * se)
+    assert r.rmse == pytest.approx(abs(bias), rel=0.05)
+    lo, hi = r.rmse_interval()
+    assert lo < r.rmse < hi
+
+
+def test_error_against_time_table():
+    df = hs.error_vs_time("gaussian", ["uniform", "uniform/stratified", "importance:linear"], [1024, 16384], 8, seed=0)
+    assert list(df.columns) == ["technique", "n", "rmse", "rmse_lo", "rmse_hi", "seconds", "seconds_se", "replicas"]
+    assert len(df) == 6 and (df["replicas"] == 8).all() and (df["seconds"] > 0).all()
+    for t, g in df.groupby("technique"):
+        assert g["rmse"].iloc[1] < g["rmse"].iloc[0], t
+    strat = df[df["technique"] == "uniform/stratified"]["rmse"].iloc[-1]
+    assert strat < df[df["technique"] == "uniform"]["rmse"].iloc[-1] / 50
