@@ -153,8 +153,8 @@ def check_unbiased(contributions: Callable[[np.ndarray], np.ndarray], dim: int, 
             tails.add(finite)
             max_abs = max(max_abs, float(np.max(np.abs(finite))))
             sums.append((est.n, est.mean, est.stderr))
-        # merge the pieces of this batch (Chan): few pieces, so plain Python; M2 from the
-        # standard error, which stays finite for contributions near 1e+-300 (see _decide)
+        # the batch's pieces as (n, mean, stderr): _decide merges them (Chan) in scaled units,
+        # where the standard error stays finite for contributions near 1e+-300
         parts.append(sums)
     if counts:
         return UnbiasedResult("invalid", math.nan, math.nan, batches - 1, math.nan, math.nan, reference, n, alpha,
@@ -223,7 +223,9 @@ def _decide(parts: list[list[tuple[int, float, float]]], tails: _TailSample, max
             s2 += vi * (ni - 1) + delta * delta * nk * ni / tot
             mk += delta * ni / tot
             nk = tot
-        means.append(mk), sizes.append(nk), m2.append(s2)
+        means.append(mk)
+        sizes.append(nk)
+        m2.append(s2)
     means_a, sizes_a = np.array(means), np.array(sizes)
     batches = means_a.size
     total = int(sizes_a.sum())
