@@ -1,4 +1,4 @@
-"""Command line: ``harness run SUITE`` and ``harness list``."""
+"""Command line: ``harness run SUITE``, ``harness show --db PATH`` and ``harness list``."""
 from __future__ import annotations
 
 import argparse
@@ -8,7 +8,10 @@ import time
 
 import reference_estimators as rest
 
+from tqdm import tqdm
+
 from .runner import bad_verdicts, format_table, results_table, run_suite
+from .store import load
 from .suite import SuiteError, load_suite
 
 
@@ -19,11 +22,18 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("suite", help="suite file (TOML), e.g. suites/default.toml")
     run.add_argument("--threads", type=int, default=None, help="threads (default: the suite's, else all cores)")
     run.add_argument("--csv", metavar="PATH", help="also write the table as CSV")
+    run.add_argument("--db", metavar="PATH", help="results database (default: results/<suite name>.sqlite)")
+    run.add_argument("--dask", metavar="ADDRESS", help="run on a Dask scheduler at ADDRESS, or 'local' for a LocalCluster")
+    show = sub.add_parser("show", help="print the measurements stored in a results database")
+    show.add_argument("--db", metavar="PATH", required=True)
+    show.add_argument("--suite", help="only this suite")
     sub.add_parser("list", help="list the catalogue's integrands, techniques and samplers")
     args = parser.parse_args(argv)
 
     if args.command == "list":
         return _list()
+    if args.command == "show":
+        return _show(args.db, args.suite)
     try:
         suite = load_suite(args.suite)
     except SuiteError as e:
@@ -32,36 +42,51 @@ def main(argv: list[str] | None = None) -> int:
     if args.threads is not None and args.threads < 1:
         print("harness: --threads must be >= 1", file=sys.stderr)
         return 2
-    return _run(suite, args.threads, args.csv)
+    db = args.db or f"results/{suite.name}.sqlite"
+    return _run(suite, db, args.threads, args.csv, args.dask)
 
 
-def _run(suite, threads: int | None, csv: str | None) -> int:
-    start = time.perf_counter()
-    tty = sys.stderr.isatty()
+def _run(suite, db: str, threads: int | None, csv: str | None, dask: str | None) -> int:
+    bar = tqdm(total=0, unit="unit", desc=f"{suite.name}", disable=not sys.stderr.isatty(), leave=False)
 
-    def progress(done: int, total: int, case) -> None:
-        if tty:
-            bar = "#" * (30 * done // total)
-            print(f"\r[{bar:<30}] {done}/{total} {case.integrand}/{case.technique:<30}", end="", file=sys.stderr)
+    def progress(done: int, total: int) -> None:
+        bar.total = total
+        bar.n = done
+        bar.refresh()
 
-    results = list(run_suite(suite, threads=threads, progress=progress))
-    if tty:
-        print(file=sys.stderr)
-    df = results_table(results, suite.alpha)
-    print(f"suite {suite.name!r} ({suite.path}): {len(results)} cases, seed {suite.seed}, "
+    summary = run_suite(suite, db, threads=threads, dask=dask, progress=progress)
+    bar.close()
+    df = results_table(summary.results, suite.alpha)
+    print(f"suite {suite.name!r} ({suite.path}): {len(summary.results)} cases, seed {suite.seed}, "
           f"family-wise alpha {suite.alpha:g} (Holm), {suite.batches} batches per bias test, "
           f"{suite.replicas} replicas per budget")
     print(format_table(df, suite.alpha))
-    print(f"\n{len(results)} cases in {time.perf_counter() - start:.1f} s.  t: Student t of {suite.batches} batch means "
+    print(f"\n{len(summary.results)} cases in {summary.seconds:.1f} s: {summary.units_run} of {summary.units_planned} "
+          f"work units computed, the rest read from {summary.db}.  t: Student t of {suite.batches} batch means "
           f"against the exact value; RMSE slope: log-log fit over budgets (expected -0.5 for Monte Carlo); "
-          f"1/(V·T): efficiency (background eq. 5) as a ratio against uniform MC on the same integrand.")
+          f"1/(V·T): efficiency (background eq. 5) against uniform MC on the same integrand.")
     bad = bad_verdicts(df)
     for _, row in bad.iterrows():
         print(f"  FAILED {row['integrand']}/{row['technique']}: {row['verdict']} (p = {row['pvalue']:.3g}) {row['notes']}")
+    print(f"summary: {len(df) - len(bad)} passed, {len(bad)} failed")
     if csv:
         df.to_csv(csv, index=False)
         print(f"table written to {csv}")
     return 1 if len(bad) else 0
+
+
+def _show(db: str, suite: str | None) -> int:
+    try:
+        df = load(db, suite)
+    except FileNotFoundError as e:
+        print(f"harness: {e}", file=sys.stderr)
+        return 2
+    if df.empty:
+        print(f"no measurements in {db}")
+        return 0
+    cols = ["suite", "integrand", "technique", "measurement", "value", "lo", "hi", "n", "pvalue", "alpha", "verdict"]
+    print(df[cols].to_string(index=False, float_format=lambda v: f"{v:.6g}"))
+    return 0
 
 
 def _list() -> int:

@@ -1,74 +1,210 @@
-"""Runs a suite's cases on the reference core and tabulates the measurements.
+"""Runs a suite: plan the work units, execute the missing ones, measure from what is stored.
 
-Per case: a bias verdict (check_technique: batch means of independent replicas, Holm-
-corrected across the suite at its family-wise alpha), a convergence slope of the RMSE over
-geometric budgets with a bootstrap interval, and the efficiency 1/(V T) as a ratio against
-uniform Monte Carlo on the same integrand, with an interval.  Results live in memory for
-now; storage grows around this without changing what a case is.
+Per case, as its measurements ask: a bias verdict (check_technique's test on independent
+batches, Holm-corrected across the suite at its family-wise alpha) and the per-sample
+variance from the same batches; a convergence slope of the RMSE over geometric budgets with
+a bootstrap interval; the efficiency 1/(V T) as a ratio against uniform Monte Carlo on the
+same integrand; and RMSE against wall time.  Units are stored as they finish (SQLite), so a
+killed run resumes where it stopped, and a finished suite re-runs without computing anything.
 """
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
 import reference_estimators as rest
+from reference_estimators import _core
 
 from . import stats
+from .execute import UnitJob, execute
+from .plan import BIAS_STREAM, Unit, bias_budget, case_key, convergence_budgets, plan
+from .store import Store
 from .suite import Case, Suite
 
-__all__ = ["CaseResult", "run_suite", "results_table", "format_table", "judge", "bad_verdicts"]
+__all__ = ["CaseResult", "RunSummary", "run_suite", "results_table", "format_table", "judge", "bad_verdicts"]
+
+_COMMIT_EVERY = 0.1  # seconds between commits: a kill loses at most this much finished work
 
 
 @dataclass(frozen=True)
 class CaseResult:
     case: Case
-    bias: stats.UnbiasedResult
-    convergence: stats.ConvergenceResult | None  # None for zero-variance estimators
-    efficiency: stats.Efficiency | None
     technique: rest.Technique
+    key: str
+    bias: stats.UnbiasedResult | None
+    convergence: stats.ConvergenceResult | None  # None if not asked for or zero variance
+    efficiency: stats.Efficiency | None
+    variance: tuple[float, float, int] | None    # per-contribution variance, its std. error, n
+    error_vs_time: pd.DataFrame | None
 
 
-def run_suite(suite: Suite, *, threads: int | None = None,
-              progress: Callable[[int, int, Case], None] | None = None) -> Iterator[CaseResult]:
-    """Yields one CaseResult per case, in suite order; ``progress(done, total, case)`` after each."""
-    threads = threads if threads is not None else suite.threads
-    for i, case in enumerate(suite.cases):
-        t = rest.technique(case.integrand, case.technique)
-        bias = stats.check_technique(case.integrand, t, case.samples, seed=suite.seed, case_id=case.case_id,
-                                     alpha=suite.alpha, batches=suite.batches, threads=threads)
-        conv = eff = None
-        if bias.verdict != "invalid" and bias.stderr > 0:
-            budgets = _budgets(case.samples, suite.budgets)
-            conv = stats.convergence_rate(case.integrand, t, budgets, suite.replicas, seed=suite.seed,
-                                          case_id=(case.case_id + 1) << 20, threads=threads)
-            top = stats.replicate(case.integrand, t, budgets[-1], suite.replicas, seed=suite.seed,
-                                  case_id=((case.case_id + 1) << 20) + 7919 * (len(budgets) - 1), threads=threads)
+@dataclass(frozen=True)
+class RunSummary:
+    results: list[CaseResult]
+    units_planned: int
+    units_run: int
+    seconds: float
+    db: Path
+
+
+def run_suite(suite: Suite, db: str | Path, *, threads: int | None = None, dask: str | None = None,
+              progress: Callable[[int, int], None] | None = None) -> RunSummary:
+    """Runs what is missing from ``db`` for ``suite`` and measures every case from the store.
+    ``progress(done, total)`` is called as units finish."""
+    start = time.perf_counter()
+    threads = threads or suite.threads or rest._core.hardware_threads()
+    store = Store(db)
+    try:
+        units = plan(suite)
+        case_of = {case_key(suite, c): c for c in suite.cases}
+        for key, c in case_of.items():
+            store.add_case(key, suite.name, c.integrand, c.technique,
+                           {"seed": suite.seed, "case_id": c.case_id, "samples": c.samples})
+        stored = store.stored_keys(units)
+        missing = [u for us in units.values() for u in us if u.key not in stored]
+        total = sum(len(us) for us in units.values())
+
+        def job(u: Unit) -> UnitJob:
+            c = case_of[u.case_key]
+            return (u.key, c.integrand, c.technique, suite.seed, _core_case(c, u.stream))
+
+        done, last = total - len(missing), time.perf_counter()
+
+        def sink(key: tuple, payload: dict[str, Any], seconds: float) -> None:
+            nonlocal done, last
+            store.put(key, payload, seconds)
+            done += 1
+            if time.perf_counter() - last > _COMMIT_EVERY:
+                store.commit()
+                last = time.perf_counter()
+            if progress:
+                progress(done, total)
+
+        ran = execute(missing, job, sink, threads=threads, dask=dask) if missing else 0
+        store.commit()
+        results = [_measure(suite, c, store.payloads(k)) for k, c in case_of.items()]
+        store.put_measurements(_measurement_rows(suite, results))
+        return RunSummary(results, total, ran, time.perf_counter() - start, Path(db))
+    finally:
+        store.close()
+
+
+def _core_case(case: Case, stream: int) -> int:
+    """The core's case_id field of a stream: case position and purpose, disjoint for all."""
+    return (case.case_id << 8) | stream
+
+
+def _states_by_estimate(payloads: dict[tuple, dict]) -> dict[tuple[int, int, int], list[dict]]:
+    """State payloads grouped by (stream, budget, replica), in chunk order."""
+    groups: dict[tuple[int, int, int], list[tuple[int, dict]]] = {}
+    for k, p in payloads.items():
+        if k[6] == "state":
+            groups.setdefault((k[1], k[2], k[3]), []).append((k[4], p))
+    return {g: [p for _, p in sorted(v, key=lambda x: x[0])] for g, v in groups.items()}
+
+
+def _measure(suite: Suite, case: Case, payloads: dict[tuple, dict]) -> CaseResult:
+    f = rest.integrand(case.integrand)
+    t = rest.technique(f, case.technique)
+    key = case_key(suite, case)
+    wanted = set(case.measurements)
+    states = _states_by_estimate(payloads)
+
+    def estimate(stream: int, budget: int, replica: int) -> rest.Estimate:
+        raw = _core.estimate_from_state(_core.merge_states(states[(stream, budget, replica)]))
+        return rest.Estimate.from_core(raw, integrand=f.name, technique=t.name, reference=f.reference,
+                                       nonnegative=f.nonnegative, iid=t.iid)
+
+    bias = variance = conv = eff = evt = None
+    if wanted & {"bias", "variance"}:
+        b = bias_budget(suite, case)
+        batches = [estimate(BIAS_STREAM, b, k) for k in range(suite.batches)]
+        faults = {k: v for e in batches for k, v in e.issues.items()}
+        if "bias" in wanted:
+            tail = next(p for k, p in payloads.items() if k[6] == "tail")
+            tails = stats._TailSample.from_tops(tail["upper"], tail["lower"])
+            bias = (stats.judge_batches(batches, tails, f.reference, suite.alpha, iid=t.iid) if not faults else
+                    stats.UnbiasedResult("invalid", math.nan, math.nan, suite.batches - 1, math.nan, math.nan,
+                                         f.reference, b * suite.batches, suite.alpha, suite.batches, math.nan,
+                                         math.nan, math.nan, flags=("contributions with faults",), counts=faults,
+                                         examples=next(e for e in batches if e.issues).examples))
+        if "variance" in wanted and not faults and t.iid:
+            reps = stats.Replicates.from_estimates(f, t, b, batches)
+            rel = math.sqrt(max(reps.sample_kurtosis - 1, 0.0) / (reps.replicas * b))
+            variance = (reps.sample_variance, reps.sample_variance * rel, reps.replicas * b)
+    budgets = convergence_budgets(suite, case)
+    reps_by_budget = {}
+    for i, b in enumerate(budgets):
+        if (1 + i, b, 0) in states:
+            reps_by_budget[b] = stats.Replicates.from_estimates(
+                f, t, b, [estimate(1 + i, b, r) for r in range(suite.replicas)])
+    if reps_by_budget:
+        top = reps_by_budget[max(reps_by_budget)]
+        if top.rmse > 0 and "efficiency" in wanted:
             eff = stats.efficiency(top)
-        if progress:
-            progress(i + 1, len(suite.cases), case)
-        yield CaseResult(case, bias, conv, eff, t)
+        if "convergence" in wanted and len(reps_by_budget) >= 3 and top.rmse > 0:
+            conv = stats.fit_convergence(list(reps_by_budget.values()), seed=suite.seed)
+        if "error_vs_time" in wanted:
+            evt = pd.DataFrame([{"n": r.n, "rmse": r.rmse, "rmse_lo": r.rmse_interval()[0],
+                                 "rmse_hi": r.rmse_interval()[1], "seconds": r.time[0], "seconds_se": r.time[1],
+                                 "replicas": r.replicas} for r in reps_by_budget.values()])
+    return CaseResult(case, t, key, bias, conv, eff, variance, evt)
 
 
-def _budgets(samples: int, budgets: tuple[int, ...] | None) -> list[int]:
-    """The suite's budgets, or five geometric ones from samples/1024 to samples/16."""
-    if budgets:
-        return list(budgets)
-    top = max(samples // 16, 64)
-    return [max(top >> (2 * k), 16) for k in range(4, -1, -1)]
+def _measurement_rows(suite: Suite, results: list[CaseResult]) -> list[dict[str, Any]]:
+    """One row per case and measurement, for the store (and harness.load)."""
+    table = results_table(results, suite.alpha)
+    rows = []
+    for r, row in zip(results, table.to_dict("records")):
+        base = {"case_key": r.key, "suite": suite.name, "integrand": r.case.integrand, "technique": r.case.technique,
+                "alpha": suite.alpha}
+        if r.bias is not None:
+            lo, hi = r.bias.confidence_interval(0.95) if math.isfinite(r.bias.stderr) else (math.nan, math.nan)
+            rows.append({**base, "measurement": "bias", "value": r.bias.estimate - r.bias.reference, "lo": lo - r.bias.reference,
+                         "hi": hi - r.bias.reference, "n": r.bias.n, "pvalue": r.bias.pvalue, "verdict": row["verdict"],
+                         "detail": {"estimate": r.bias.estimate, "stderr": r.bias.stderr, "t": r.bias.statistic,
+                                    "flags": list(r.bias.flags), "counts": r.bias.counts}})
+        if r.variance is not None:
+            v, se, n = r.variance
+            rows.append({**base, "measurement": "variance", "value": v, "lo": v - 1.96 * se, "hi": v + 1.96 * se, "n": n})
+        if r.convergence is not None:
+            c = r.convergence
+            rows.append({**base, "measurement": "convergence_slope", "value": c.slope, "lo": c.slope_interval[0],
+                         "hi": c.slope_interval[1], "n": int(c.table["replicas"].sum()),
+                         "verdict": "worse than expected" if c.worse_than_expected else "as expected",
+                         "detail": {"expected": c.expected, "table": c.table.to_dict("list")}})
+        if r.efficiency is not None:
+            e = r.efficiency
+            z = 1.96 * e.log_se / math.log(10)
+            rows.append({**base, "measurement": "log10_efficiency", "value": e.log10_value, "lo": e.log10_value - z,
+                         "hi": e.log10_value + z, "n": e.n * e.replicas, "detail": {"seconds": e.seconds}})
+            rows.append({**base, "measurement": "efficiency_ratio", "value": row["efficiency_ratio"],
+                         "lo": row["ratio_lo"], "hi": row["ratio_hi"], "n": e.n * e.replicas,
+                         "detail": {"baseline": row["efficiency_baseline"]}})
+        if r.error_vs_time is not None:
+            top = r.error_vs_time.iloc[-1]
+            rows.append({**base, "measurement": "rmse", "value": top["rmse"], "lo": top["rmse_lo"], "hi": top["rmse_hi"],
+                         "n": int(top["n"]), "detail": {"error_vs_time": r.error_vs_time.to_dict("list")}})
+    return rows
 
 
 def judge(results: list[CaseResult], alpha: float) -> list[str]:
     """Verdict per case with Holm's correction over the suite's bias tests (family-wise
     alpha): 'unbiased', 'biased', 'biased (expected)', 'bias missed', 'inconclusive',
     'invalid'."""
-    p = [r.bias.pvalue if r.bias.verdict != "invalid" else 1.0 for r in results]
+    p = [r.bias.pvalue if r.bias is not None and r.bias.verdict != "invalid" else 1.0 for r in results]
     rejected, _ = stats.holm(p, alpha) if results else ([], [])
     out = []
     for r, rej in zip(results, rejected):
-        if r.bias.verdict == "invalid":
+        if r.bias is None:
+            out.append("not measured")
+        elif r.bias.verdict == "invalid":
             out.append("invalid")
         elif rej and r.bias.heavy_tail:
             out.append("inconclusive")
@@ -94,17 +230,19 @@ def results_table(results: list[CaseResult], alpha: float) -> pd.DataFrame:
         base = baseline.get(r.case.integrand)
         if e is not None and base is not None:
             ratio, (lo, hi) = stats.efficiency_ratio(e, base.efficiency)
+        nan = math.nan
         rows.append({
-            "integrand": r.case.integrand, "technique": r.case.technique, "n": b.n,
-            "estimate": b.estimate, "stderr": b.stderr, "exact": b.reference,
-            "z": b.statistic, "pvalue": b.pvalue, "verdict": verdict,
-            "slope": c.slope if c else math.nan,
-            "slope_lo": c.slope_interval[0] if c else math.nan, "slope_hi": c.slope_interval[1] if c else math.nan,
+            "integrand": r.case.integrand, "technique": r.case.technique, "n": b.n if b else r.case.samples,
+            "estimate": b.estimate if b else nan, "stderr": b.stderr if b else nan,
+            "exact": rest.integrand(r.case.integrand).reference,
+            "z": b.statistic if b else nan, "pvalue": b.pvalue if b else nan, "verdict": verdict,
+            "slope": c.slope if c else nan,
+            "slope_lo": c.slope_interval[0] if c else nan, "slope_hi": c.slope_interval[1] if c else nan,
             "slope_worse": bool(c and c.worse_than_expected),
-            "log10_efficiency": e.log10_value if e else math.nan,
+            "log10_efficiency": e.log10_value if e else nan,
             "efficiency_baseline": base.case.technique if base else "",
             "efficiency_ratio": ratio, "ratio_lo": lo, "ratio_hi": hi,
-            "seconds_per_estimate": e.seconds if e else math.nan,
+            "seconds_per_estimate": e.seconds if e else nan,
             "notes": _notes(r) + ("" if base is None or base.case.technique == "uniform" else
                                   f"{'; ' if _notes(r) else ''}baseline {base.case.technique}"),
         })
@@ -112,12 +250,12 @@ def results_table(results: list[CaseResult], alpha: float) -> pd.DataFrame:
 
 
 def _notes(r: CaseResult) -> str:
-    notes = list(r.bias.flags)
-    if r.bias.counts:
+    notes = list(r.bias.flags) if r.bias else []
+    if r.bias and r.bias.counts:
         notes.append(f"faults: {r.bias.counts}")
     if r.technique.finite_variance is False:
         notes.append("infinite variance (analytic)")
-    if r.convergence is None and r.bias.verdict != "invalid":
+    if r.bias and r.bias.stderr == 0:
         notes.append("zero variance")
     elif r.convergence and r.convergence.worse_than_expected:
         notes.append(f"converges slower than n^{r.convergence.expected:+.1f}")

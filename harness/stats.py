@@ -18,8 +18,8 @@ from scipy import stats
 import reference_estimators as rest
 
 __all__ = [
-    "UnbiasedResult", "check_unbiased", "check_technique", "holm",
-    "Replicates", "replicate", "ConvergenceResult", "convergence_rate",
+    "UnbiasedResult", "check_unbiased", "check_technique", "judge_batches", "holm",
+    "Replicates", "replicate", "ConvergenceResult", "convergence_rate", "fit_convergence",
     "Efficiency", "efficiency", "efficiency_ratio", "error_vs_time",
 ]
 
@@ -184,6 +184,13 @@ class _TailSample:
         m = min(self.keep + 1, d.size)
         return np.partition(d, d.size - m)[d.size - m:] if m else d
 
+    @classmethod
+    def from_tops(cls, upper: Sequence[float], lower: Sequence[float]) -> "_TailSample":
+        """A tail sample from stored largest deviations (see harness.execute)."""
+        t = cls(max(len(upper), len(lower)))
+        t.upper, t.lower = np.asarray(upper, dtype=float), np.asarray(lower, dtype=float)
+        return t
+
     def tail_index(self) -> float:
         """The smaller tail index of the two sides (inf for bounded or light tails)."""
         return min(_tail_index(np.sort(self.upper)[::-1]), _tail_index(np.sort(self.lower)[::-1]))
@@ -284,8 +291,15 @@ def check_technique(integrand: str | rest.Integrand, technique: str | rest.Techn
                               counts=counts, examples=first.examples)
     tails = _TailSample(min(max(int(math.sqrt(size)), 50), 20_000))
     tails.add(rest.contributions(f, t, size, seed=seed, case_id=case_id, replica=0, threads=threads))
-    max_abs = max(max(abs(e.min), abs(e.max)) for e in ests)
-    return _decide([[(e.n, e.mean, e.stderr if t.iid else 0.0)] for e in ests], tails, max_abs, f.reference, alpha)
+    return judge_batches(ests, tails, f.reference, alpha, iid=t.iid)
+
+
+def judge_batches(estimates: Sequence[rest.Estimate], tails: "_TailSample", reference: float, alpha: float, *,
+                  iid: bool) -> UnbiasedResult:
+    """The verdict of check_technique from independent batch estimates (replicas) and the
+    tail sample of their contributions; for non-iid point sets only the batch means count."""
+    max_abs = max(max(abs(e.min), abs(e.max)) for e in estimates)
+    return _decide([[(e.n, e.mean, e.stderr if iid else 0.0)] for e in estimates], tails, max_abs, reference, alpha)
 
 
 # --- multiple testing ----------------------------------------------------------------------
@@ -327,6 +341,26 @@ class Replicates:
     sample_kurtosis: float
     iid: bool
     evaluations: int          # f evaluations per contribution
+
+    @classmethod
+    def from_estimates(cls, f: rest.Integrand, t: rest.Technique, n: int,
+                       ests: Sequence[rest.Estimate]) -> "Replicates":
+        """Replicates from independent estimates of one case at budget n."""
+        bad = {k: v for e in ests for k, v in e.issues.items()}
+        if bad:
+            raise ValueError(f"{f.name}/{t.name}: contributions with faults {bad}; first: {ests[0].examples[:3]}")
+        # pooled per-sample variance over all replicas (Chan's merge); kurtosis as the replicas' mean
+        tot, mean, m2 = 0, 0.0, 0.0
+        for e in ests:
+            delta = e.mean - mean
+            new = tot + e.n
+            m2 += e.variance * (e.n - 1) + delta * delta * tot * e.n / new
+            mean += delta * e.n / new
+            tot = new
+        var = m2 / (tot - 1)
+        kurt = float(np.mean([e.kurtosis for e in ests]))
+        return cls(f.name, t.name, int(n), f.reference, np.array([e.mean for e in ests]),
+                   np.array([e.seconds for e in ests]), var if t.iid else math.nan, kurt, t.iid, t.evaluations)
 
     @property
     def replicas(self) -> int:
@@ -386,8 +420,12 @@ class Replicates:
 
     @property
     def time(self) -> tuple[float, float]:
-        """Mean wall time of one estimate and its standard error over replicas (s)."""
-        return float(np.mean(self.seconds)), float(np.std(self.seconds, ddof=1) / math.sqrt(self.replicas))
+        """Wall time of one estimate (s): the median over replicas and its standard error
+        (1.2533 x 1.4826 MAD / sqrt(R)).  The median, because a replica that shared its core
+        with something else is an outlier of the machine, not of the technique."""
+        med = float(np.median(self.seconds))
+        mad = float(np.median(np.abs(self.seconds - med)))
+        return med, 1.2533 * 1.4826 * mad / math.sqrt(self.replicas)
 
 
 def replicate(integrand: str | rest.Integrand, technique: str | rest.Technique, n: int, replicas: int, *,
@@ -400,21 +438,7 @@ def replicate(integrand: str | rest.Integrand, technique: str | rest.Technique, 
     if r < 2:
         raise ValueError(f"'replicas' must be >= 2 to measure a spread, got {replicas}")
     ests = [rest.integrate(f, t, n, seed=seed, case_id=case_id, replica=k, threads=threads) for k in range(r)]
-    bad = {k: v for e in ests for k, v in e.issues.items()}
-    if bad:
-        raise ValueError(f"{f.name}/{t.name}: contributions with faults {bad}; first: {ests[0].examples[:3]}")
-    # pooled per-sample variance over all replicas (Chan's merge); kurtosis as the replicas' mean
-    tot, mean, m2 = 0, 0.0, 0.0
-    for e in ests:
-        delta = e.mean - mean
-        new = tot + e.n
-        m2 += e.variance * (e.n - 1) + delta * delta * tot * e.n / new
-        mean += delta * e.n / new
-        tot = new
-    var = m2 / (tot - 1)
-    kurt = float(np.mean([e.kurtosis for e in ests]))
-    return Replicates(f.name, t.name, int(n), f.reference, np.array([e.mean for e in ests]),
-                      np.array([e.seconds for e in ests]), var if t.iid else math.nan, kurt, t.iid, t.evaluations)
+    return Replicates.from_estimates(f, t, n, ests)
 
 
 # --- convergence rate ------------------------------------------------------------------------
@@ -462,17 +486,28 @@ def convergence_rate(integrand: str | rest.Integrand, technique: str | rest.Tech
         raise ValueError(f"'budgets' needs at least 3 distinct sizes, got {list(budgets)!r}")
     reps = [replicate(integrand, technique, n, replicas, seed=seed, case_id=case_id + 7919 * i, threads=threads)
             for i, n in enumerate(b)]
+    return fit_convergence(reps, expected=expected, tolerance=tolerance, confidence_level=confidence_level,
+                           bootstrap=bootstrap, seed=seed)
+
+
+def fit_convergence(reps: Sequence[Replicates], *, expected: float = -0.5, tolerance: float = 0.05,
+                    confidence_level: float = 0.95, bootstrap: int = 400, seed: int = 0) -> ConvergenceResult:
+    """The slope fit of convergence_rate, from replicates at increasing budgets."""
     errors = [r.scaled_errors for r in reps]  # scaled: the fitted slope does not change
-    logn = np.log(b)
+    x = np.log([r.n for r in reps])
+    x = x - x.mean()
     floor = np.finfo(float).tiny
 
-    def fit(errs: list[np.ndarray]) -> float:
-        y = np.log([max(math.sqrt(np.mean(e * e)), floor) for e in errs])
-        return float(np.polyfit(logn, y, 1)[0])
+    def slopes(sq: np.ndarray) -> np.ndarray:
+        """Least-squares slopes of log RMSE on log n, one per row of mean squared errors."""
+        y = 0.5 * np.log(np.maximum(sq, floor * floor))
+        return (y - y.mean(axis=-1, keepdims=True)) @ x / (x @ x)
 
-    slope = fit(errors)
+    slope = float(slopes(np.array([np.mean(e * e) for e in errors])))
     rng = np.random.default_rng(seed)
-    boot = [fit([e[rng.integers(0, e.size, e.size)] for e in errors]) for _ in range(bootstrap)]
+    # all bootstrap resamples at once: (bootstrap, budgets) mean squared errors
+    boot_sq = np.stack([np.mean(e[rng.integers(0, e.size, (bootstrap, e.size))] ** 2, axis=1) for e in errors], axis=1)
+    boot = slopes(boot_sq)
     a = 1 - confidence_level
     interval = (float(np.quantile(boot, a / 2)), float(np.quantile(boot, 1 - a / 2)))
     rows = []
@@ -489,7 +524,7 @@ def convergence_rate(integrand: str | rest.Integrand, technique: str | rest.Tech
 class Efficiency:
     """1 / (V[F] T[F]) (background eq. 5) of one estimate F, with a confidence interval.
 
-    V from :attr:`Replicates.log10_estimator_variance`, T the mean wall time of one estimate;
+    V from :attr:`Replicates.log10_estimator_variance`, T the median wall time of one estimate;
     their relative errors are combined on the log scale (independent, delta method).  Kept
     as log10, since 1/(V T) of an integrand near 1e300 is about 1e-590.  For techniques
     converging faster than n^-1/2 the efficiency grows with n: it belongs to budget ``n``.
@@ -537,8 +572,8 @@ def error_vs_time(integrand: str | rest.Integrand, techniques: Sequence[str | re
                   threads: int | None = None, confidence_level: float = 0.95) -> pd.DataFrame:
     """RMSE against the exact reference and mean wall time, per technique and budget.
 
-    Columns: technique, n, rmse, rmse_lo, rmse_hi (chi-square interval), seconds,
-    seconds_se, replicas.  Plot rmse against seconds on log-log axes to see which technique
+    Columns: technique, n, rmse, rmse_lo, rmse_hi (chi-square interval), seconds (median per
+    estimate), seconds_se, replicas.  Plot rmse against seconds on log-log axes to see which technique
     reaches a given error first.
     """
     rows = []

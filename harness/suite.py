@@ -10,6 +10,9 @@ At this stage a suite lists cases as integrand x techniques from the reference c
     batches = 64              # independent replicas the bias test compares
     replicas = 32             # replicas per budget for convergence and efficiency
     budgets = [1024, 4096]    # optional: convergence budgets (default: samples/1024 .. samples/16)
+    measurements = ["bias", "variance", "convergence", "efficiency", "error_vs_time"]  # the default
+
+    [[case]]                  # a case may override samples and measurements
 
     [[case]]
     integrand = "all"         # or a catalogue name
@@ -34,12 +37,16 @@ class SuiteError(ValueError):
     """A suite file that cannot be run; the message names file, line and key."""
 
 
+MEASUREMENTS = ("bias", "variance", "convergence", "efficiency", "error_vs_time")
+
+
 @dataclass(frozen=True)
 class Case:
     integrand: str
     technique: str
     samples: int
     case_id: int  # position in the suite: keys the case's random streams
+    measurements: tuple[str, ...] = MEASUREMENTS
 
 
 @dataclass(frozen=True)
@@ -57,8 +64,8 @@ class Suite:
 
 
 _SUITE_KEYS = {"name": str, "seed": int, "samples": int, "threads": int, "alpha": float, "batches": int,
-               "replicas": int, "budgets": list}
-_CASE_KEYS = {"integrand": str, "techniques": (str, list), "samples": int}
+               "replicas": int, "budgets": list, "measurements": list}
+_CASE_KEYS = {"integrand": str, "techniques": (str, list), "samples": int, "measurements": list}
 
 
 def load_suite(path: str | Path) -> Suite:
@@ -104,6 +111,8 @@ def load_suite(path: str | Path) -> Suite:
             raise SuiteError(where.at("suite", "budgets", f"expected at least 3 positive integer budgets, got {budgets}"))
         budgets = tuple(sorted(set(budgets)))
 
+    measurements = _measurements(head.get("measurements", list(MEASUREMENTS)), where, "suite")
+
     raw_cases = data.get("case", [])
     if not isinstance(raw_cases, list) or not raw_cases:
         raise SuiteError(where.at(None, "case", "expected at least one [[case]] table"))
@@ -114,6 +123,7 @@ def load_suite(path: str | Path) -> Suite:
         if "integrand" not in c:
             raise SuiteError(where.at(table, None, "missing key 'integrand' (a catalogue name or \"all\")"))
         names = [f.name for f in rest.catalogue()] if c["integrand"] == "all" else [c["integrand"]]
+        case_measurements = _measurements(c["measurements"], where, table) if "measurements" in c else measurements
         case_samples = c.get("samples", samples)
         _positive(case_samples, where, table, "samples")
         if case_samples < batches:
@@ -134,7 +144,7 @@ def load_suite(path: str | Path) -> Suite:
                     raise SuiteError(where.at(table, "techniques",
                                               f"unknown technique {t!r} for integrand {name!r}; "
                                               f"expected one of: {', '.join(known)}"))
-                cases.append(Case(name, t, case_samples, len(cases)))
+                cases.append(Case(name, t, case_samples, len(cases), case_measurements))
     return Suite(head.get("name", path.stem), path, seed, samples, threads or None, tuple(cases), float(alpha),
                  batches, replicas, budgets)
 
@@ -147,6 +157,16 @@ def _check_keys(table: dict[str, Any], spec: dict[str, Any], where: "_Locator", 
         if isinstance(value, bool) or not isinstance(value, want):
             kinds = " or ".join(t.__name__ for t in (want if isinstance(want, tuple) else (want,)))
             raise SuiteError(where.at(name, key, f"expected {kinds}, got {type(value).__name__} {value!r}"))
+
+
+def _measurements(names: list[Any], where: "_Locator", table: Any) -> tuple[str, ...]:
+    for m in names:
+        if m not in MEASUREMENTS:
+            raise SuiteError(where.at(table, "measurements", f"unknown measurement {m!r}; expected some of: "
+                                      f"{', '.join(MEASUREMENTS)}"))
+    if not names:
+        raise SuiteError(where.at(table, "measurements", "expected at least one measurement"))
+    return tuple(dict.fromkeys(names))
 
 
 def _positive(v: int, where: "_Locator", table: Any, key: str) -> None:

@@ -15,4 +15,7 @@ from .api import __all__ as _api_all  # noqa: E402
 from .estimate import ERROR_ISSUES, Estimate  # noqa: E402
 
 CHUNK_SIZE: int = _core.CHUNK_SIZE
+from importlib.metadata import version as _version  # noqa: E402
+
+__version__: str = _version("mc-harness")
 __all__ = [*_api_all, "Estimate", "ERROR_ISSUES", "CHUNK_SIZE"]

@@ -97,6 +97,52 @@ nb::dict estimate_dict(const Estimate &e) {
     return r;
 }
 
+// The whole accumulator state, for storage: every field, so a state read back merges to
+// exactly the bits a fresh computation gives.
+nb::dict state_dict(const Estimate &e) {
+    const Moments &m = e.moments;
+    nb::dict d;
+    d["n"] = m.n; d["mean"] = m.mean; d["m2"] = m.m2; d["m3"] = m.m3; d["m4"] = m.m4;
+    d["sum"] = m.total.sum; d["comp"] = m.total.comp; d["min"] = m.min; d["max"] = m.max;
+    d["scale_exp"] = m.scale_exp; d["scale_set"] = m.scale_set;
+    nb::list counts;
+    for (int k = 0; k < kIssueKinds; ++k) counts.append(e.diagnostics.counts[k]);
+    d["counts"] = counts;
+    nb::list ex;
+    for (auto &x : e.diagnostics.examples)
+        ex.append(nb::make_tuple(x.kind, x.index, x.point[0], x.point[1], x.point[2], x.dim, x.value));
+    d["examples"] = ex;
+    d["drawn"] = e.diagnostics.drawn; d["candidates"] = e.diagnostics.candidates;
+    d["seconds"] = e.seconds; d["chunks"] = e.chunks; d["threads"] = e.threads;
+    return d;
+}
+
+Estimate state_from(const nb::dict &d) {
+    Estimate e;
+    Moments &m = e.moments;
+    m.n = nb::cast<double>(d["n"]); m.mean = nb::cast<double>(d["mean"]);
+    m.m2 = nb::cast<double>(d["m2"]); m.m3 = nb::cast<double>(d["m3"]); m.m4 = nb::cast<double>(d["m4"]);
+    m.total.sum = nb::cast<double>(d["sum"]); m.total.comp = nb::cast<double>(d["comp"]);
+    m.min = nb::cast<double>(d["min"]); m.max = nb::cast<double>(d["max"]);
+    m.scale_exp = nb::cast<int>(d["scale_exp"]); m.scale_set = nb::cast<bool>(d["scale_set"]);
+    std::vector<uint64_t> counts = nb::cast<std::vector<uint64_t>>(d["counts"]);
+    if (counts.size() != size_t(kIssueKinds)) throw nb::value_error("state: 'counts' has the wrong length");
+    for (int k = 0; k < kIssueKinds; ++k) e.diagnostics.counts[k] = counts[k];
+    for (nb::handle h : nb::iter(d["examples"])) {  // tuples, or lists after a JSON round trip
+        nb::object t = nb::borrow(h);
+        Example x;
+        x.kind = nb::cast<int>(t[0]); x.index = nb::cast<uint64_t>(t[1]);
+        x.point[0] = nb::cast<double>(t[2]); x.point[1] = nb::cast<double>(t[3]); x.point[2] = nb::cast<double>(t[4]);
+        x.dim = nb::cast<int>(t[5]); x.value = nb::cast<double>(t[6]);
+        e.diagnostics.examples.push_back(x);
+    }
+    e.diagnostics.drawn = nb::cast<uint64_t>(d["drawn"]);
+    e.diagnostics.candidates = nb::cast<uint64_t>(d["candidates"]);
+    e.seconds = nb::cast<double>(d["seconds"]); e.chunks = nb::cast<uint64_t>(d["chunks"]);
+    e.threads = nb::cast<int>(d["threads"]);
+    return e;
+}
+
 RunOptions options(uint64_t seed, uint64_t case_id, uint64_t replica, int threads, bool higher = true) {
     if (threads < 0) throw nb::value_error("'threads' must be >= 1 (or None for all cores)");
     RunOptions o;
@@ -322,6 +368,28 @@ NB_MODULE(_core, m) {
         return estimate_dict(e);
     }, "integrand"_a, "technique"_a, "n"_a, "seed"_a = 0, "case_id"_a = 0, "replica"_a = 0, "threads"_a = 0,
        "higher_moments"_a = true);
+    m.def("integrate_chunks", [check_pair](const Integrand &f, const Technique &t, int64_t n, uint64_t seed,
+                                           uint64_t case_id, uint64_t replica, uint64_t chunk_begin, uint64_t chunk_end,
+                                           int threads) {
+        check_n(n);
+        check_pair(f, t);
+        RunOptions o = options(seed, case_id, replica, threads);
+        o.chunk_begin = chunk_begin;
+        o.chunk_end = chunk_end;
+        Estimate e;
+        {
+            nb::gil_scoped_release g;
+            e = integrate(f, t, uint64_t(n), o);
+        }
+        return state_dict(e);
+    }, "integrand"_a, "technique"_a, "n"_a, "seed"_a, "case_id"_a, "replica"_a, "chunk_begin"_a, "chunk_end"_a,
+       "threads"_a = 0, "The accumulator state of chunks [chunk_begin, chunk_end) of an estimate of n samples.");
+    m.def("merge_states", [](const std::vector<nb::dict> &states) {
+        std::vector<Estimate> parts;
+        for (auto &d : states) parts.push_back(state_from(d));
+        return state_dict(merge_estimates(parts));
+    }, "states"_a, "Merge states in the order given.");
+    m.def("estimate_from_state", [](const nb::dict &state) { return estimate_dict(state_from(state)); }, "state"_a);
     m.def("contributions", [check_pair](const Integrand &f, const Technique &t, int64_t n, uint64_t seed,
                                         uint64_t case_id, uint64_t replica, int threads) {
         check_n(n);

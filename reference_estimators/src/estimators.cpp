@@ -279,18 +279,20 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
 template <class ChunkFn>
 Estimate run_chunks(uint64_t n, const RunOptions &opt, ChunkFn chunk_fn) {
     auto t0 = std::chrono::steady_clock::now();
-    const uint64_t nc = chunk_count(n);
+    const uint64_t total = chunk_count(n);
+    const uint64_t c0 = std::min(opt.chunk_begin, total), c1 = std::min(opt.chunk_end, total);
+    const uint64_t nc = c1 > c0 ? c1 - c0 : 0;
     std::vector<Moments> moments(nc);
     std::vector<Diagnostics> diags(nc);
     const int threads = resolve_threads(opt.threads);
-    ThreadPool::instance().run(nc, threads, [&](size_t c) {
-        uint64_t first = c * kChunkSize, count = std::min(kChunkSize, n - first);
-        chunk_fn(c, first, count, moments[c], diags[c]);
+    ThreadPool::instance().run(nc, threads, [&](size_t i) {
+        uint64_t c = c0 + i, first = c * kChunkSize, count = std::min(kChunkSize, n - first);
+        chunk_fn(c, first, count, moments[i], diags[i]);
     });
     Estimate e;
-    for (uint64_t c = 0; c < nc; ++c) {
-        e.moments.merge(moments[c]);
-        e.diagnostics.merge(diags[c]);
+    for (uint64_t i = 0; i < nc; ++i) {
+        e.moments.merge(moments[i]);
+        e.diagnostics.merge(diags[i]);
     }
     e.chunks = nc;
     e.threads = threads;
@@ -395,6 +397,18 @@ Diagnostics draw_samples(const Sampler &smp, uint64_t n, const RunOptions &opt, 
     Diagnostics all;
     for (auto &d : diags) all.merge(d);
     return all;
+}
+
+Estimate merge_estimates(const std::vector<Estimate> &parts) {
+    Estimate e;
+    for (const Estimate &p : parts) {
+        e.moments.merge(p.moments);
+        e.diagnostics.merge(p.diagnostics);
+        e.seconds += p.seconds;
+        e.chunks += p.chunks;
+        e.threads = std::max(e.threads, p.threads);
+    }
+    return e;
 }
 
 }  // namespace re

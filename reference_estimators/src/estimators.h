@@ -3,6 +3,7 @@
 // thread pool and merges their accumulator states in chunk order.
 #pragma once
 #include <cstdint>
+#include <vector>
 
 #include "accumulator.h"
 #include "integrands.h"
@@ -24,7 +25,14 @@ struct RunOptions {
     StreamKey key;            // chunk field ignored: set per chunk
     int threads = 0;          // 0: all hardware threads
     bool higher_moments = true;
+    // Only chunks [chunk_begin, chunk_end) of the estimate (clamped to its chunk count): a
+    // storage unit of the suite runner.  Merging the ranges' states in order rebuilds the
+    // estimate (bitwise, for the same ranges).
+    uint64_t chunk_begin = 0, chunk_end = UINT64_MAX;
 };
+
+// Merges states in the order given (Chan/Pebay; the same order gives the same bits).
+Estimate merge_estimates(const std::vector<Estimate> &parts);
 
 // Runs the technique's estimator on the integrand with n samples.
 Estimate integrate(const Integrand &f, const Technique &t, uint64_t n, const RunOptions &opt);

@@ -1,0 +1,88 @@
+"""Executes work units locally on threads or on a Dask cluster; the caller's process is the
+only writer to the store, so a result is stored exactly once, whoever computed it.
+
+A unit is computed from plain values (names and numbers), so Dask workers need nothing but
+the installed package, and a unit's result is the same bits wherever it runs.
+"""
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
+
+import numpy as np
+
+import reference_estimators as rest
+from reference_estimators import _core
+
+from .plan import Unit
+
+__all__ = ["UnitJob", "compute", "run_local", "run_dask"]
+
+TAIL_KEEP_MAX = 20_000
+
+# (unit key, integrand, technique, seed, core case id): everything compute() needs
+UnitJob = tuple[tuple, str, str, int, int]
+
+
+def compute(job: UnitJob) -> tuple[tuple, dict[str, Any], float]:
+    """The unit's payload and its wall time (s).  'state' units hold the accumulator state of
+    their chunk range; 'tail' units the largest deviations above and below the median of the
+    estimate's contributions (for the tail-index test)."""
+    key, integrand, technique, seed, core_case = job
+    _, _, budget, replica, c0, c1, kind = key
+    f = rest.integrand(integrand)
+    t = rest.technique(f, technique)
+    start = time.perf_counter()
+    if kind == "state":
+        payload = _core.integrate_chunks(f, t, budget, seed, core_case, replica, c0, c1, 1)
+    else:
+        y = rest.contributions(f, t, budget, seed=seed, case_id=core_case, replica=replica, threads=1)
+        keep = min(max(int(math.sqrt(budget)), 50), TAIL_KEEP_MAX, y.size - 1)
+        center = float(np.median(y))
+        payload = {"center": center, "upper": _top(y - center, keep), "lower": _top(center - y, keep)}
+    return key, payload, time.perf_counter() - start
+
+
+def _top(d: np.ndarray, keep: int) -> list[float]:
+    d = d[d > 0]
+    m = min(keep + 1, d.size)
+    return np.partition(d, d.size - m)[d.size - m:].tolist() if m else []
+
+
+def run_local(jobs: list[UnitJob], threads: int) -> Iterator[tuple[tuple, dict[str, Any], float]]:
+    """Units on a thread pool (the core releases the GIL), results as they finish."""
+    with ThreadPoolExecutor(max_workers=max(threads, 1)) as pool:
+        yield from pool.map(compute, jobs)
+
+
+def run_dask(jobs: list[UnitJob], address: str, threads: int) -> Iterator[tuple[tuple, dict[str, Any], float]]:
+    """Units on a Dask cluster: ``address`` of a scheduler, or "local" for a LocalCluster of
+    ``threads`` single-threaded worker processes."""
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    cluster = LocalCluster(n_workers=max(threads, 1), threads_per_worker=1, processes=True,
+                           dashboard_address=None) if address == "local" else None
+    client = Client(cluster if cluster is not None else address)
+    try:
+        futures = client.map(compute, jobs, pure=False)
+        for fut in as_completed(futures):
+            yield fut.result()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def execute(units: Iterable[Unit], job_of: Callable[[Unit], UnitJob], sink: Callable[[tuple, dict, float], None],
+            *, threads: int, dask: str | None = None) -> int:
+    """Computes the units and hands each result to ``sink``; returns how many ran."""
+    jobs = [job_of(u) for u in units]
+    results = run_dask(jobs, dask, threads) if dask else run_local(jobs, threads)
+    n = 0
+    for key, payload, seconds in results:
+        sink(key, payload, seconds)
+        n += 1
+    return n

@@ -1,0 +1,139 @@
+"""Results storage: SQLite in WAL mode, one row per finished work unit.
+
+A unit's row holds its complete accumulator state (JSON; Python's float repr round-trips
+every double exactly) and is written inside a transaction under a UNIQUE key, so a run killed
+at any point leaves only whole rows, and a rerun skips exactly the units already stored.
+Measurements computed from the units go to their own table, replaced per case on each run.
+"""
+from __future__ import annotations
+
+import json
+import sqlite3
+import time
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+__all__ = ["Store", "load"]
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS cases (
+    case_key   TEXT PRIMARY KEY,   -- fingerprint of everything that defines the case's numbers
+    suite      TEXT NOT NULL,
+    integrand  TEXT NOT NULL,
+    technique  TEXT NOT NULL,
+    definition TEXT NOT NULL       -- JSON
+);
+CREATE TABLE IF NOT EXISTS units (
+    case_key    TEXT NOT NULL,
+    stream      INTEGER NOT NULL,
+    budget      INTEGER NOT NULL,
+    replica     INTEGER NOT NULL,
+    chunk_begin INTEGER NOT NULL,
+    chunk_end   INTEGER NOT NULL,
+    kind        TEXT NOT NULL,     -- 'state' (accumulator state) or 'tail' (largest deviations)
+    payload     TEXT NOT NULL,     -- JSON
+    seconds     REAL NOT NULL,
+    finished    REAL NOT NULL,
+    UNIQUE (case_key, stream, budget, replica, chunk_begin, chunk_end, kind)
+);
+CREATE TABLE IF NOT EXISTS measurements (
+    case_key    TEXT NOT NULL,
+    suite       TEXT NOT NULL,
+    integrand   TEXT NOT NULL,
+    technique   TEXT NOT NULL,
+    measurement TEXT NOT NULL,
+    value       REAL,
+    lo          REAL,
+    hi          REAL,
+    n           INTEGER,
+    pvalue      REAL,
+    alpha       REAL,
+    verdict     TEXT,
+    detail      TEXT,
+    UNIQUE (case_key, measurement)
+);
+"""
+
+UnitKey = tuple[str, int, int, int, int, int, str]
+
+
+class Store:
+    """One SQLite database file; safe to reopen after a crash."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.db = sqlite3.connect(self.path, isolation_level=None, timeout=60)
+        self.db.execute("PRAGMA journal_mode=WAL")
+        self.db.execute("PRAGMA synchronous=NORMAL")  # WAL: a crash loses at most the last commits, never corrupts
+        self.db.executescript(_SCHEMA)
+        self._open = False
+
+    def close(self) -> None:
+        self.commit()
+        self.db.close()
+
+    # --- cases and units -------------------------------------------------------------------
+    def add_case(self, case_key: str, suite: str, integrand: str, technique: str, definition: dict[str, Any]) -> None:
+        self.db.execute("INSERT OR IGNORE INTO cases VALUES (?, ?, ?, ?, ?)",
+                        (case_key, suite, integrand, technique, json.dumps(definition, sort_keys=True)))
+
+    def stored_keys(self, case_keys: Iterable[str]) -> set[UnitKey]:
+        keys: set[UnitKey] = set()
+        for ck in set(case_keys):
+            rows = self.db.execute("SELECT case_key, stream, budget, replica, chunk_begin, chunk_end, kind FROM units "
+                                   "WHERE case_key = ?", (ck,))
+            keys.update(tuple(r) for r in rows)
+        return keys
+
+    def put(self, key: UnitKey, payload: dict[str, Any], seconds: float) -> None:
+        """Adds a unit's row to the open transaction (``commit`` makes it durable)."""
+        if not self._open:
+            self.db.execute("BEGIN")
+            self._open = True
+        self.db.execute("INSERT OR IGNORE INTO units VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                        (*key, json.dumps(payload), seconds, time.time()))
+
+    def commit(self) -> None:
+        if self._open:
+            self.db.execute("COMMIT")
+            self._open = False
+
+    def payloads(self, case_key: str) -> dict[UnitKey, dict[str, Any]]:
+        rows = self.db.execute("SELECT case_key, stream, budget, replica, chunk_begin, chunk_end, kind, payload "
+                               "FROM units WHERE case_key = ?", (case_key,))
+        return {tuple(r[:7]): json.loads(r[7]) for r in rows}
+
+    def unit_count(self) -> int:
+        return self.db.execute("SELECT COUNT(*) FROM units").fetchone()[0]
+
+    # --- measurements ------------------------------------------------------------------------
+    def put_measurements(self, rows: list[dict[str, Any]]) -> None:
+        self.commit()
+        self.db.execute("BEGIN")
+        for r in rows:
+            self.db.execute("INSERT OR REPLACE INTO measurements VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                            (r["case_key"], r["suite"], r["integrand"], r["technique"], r["measurement"], r.get("value"),
+                             r.get("lo"), r.get("hi"), r.get("n"), r.get("pvalue"), r.get("alpha"), r.get("verdict"),
+                             json.dumps(r.get("detail", {}), sort_keys=True, default=str)))
+        self.db.execute("COMMIT")
+
+    def measurements(self, suite: str | None = None) -> pd.DataFrame:
+        query = "SELECT * FROM measurements" + (" WHERE suite = ?" if suite else "") + " ORDER BY rowid"
+        return pd.read_sql_query(query, self.db, params=(suite,) if suite else ())
+
+
+def load(db: str | Path, suite: str | None = None) -> pd.DataFrame:
+    """The stored measurements as a DataFrame: one row per case and measurement with its
+    value, interval (lo, hi), sample count n, p-value, alpha and verdict."""
+    path = Path(db)
+    if not path.exists():
+        raise FileNotFoundError(f"no results database at {path}")
+    store = Store(path)
+    try:
+        return store.measurements(suite)
+    finally:
+        store.close()
