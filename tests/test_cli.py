@@ -17,8 +17,8 @@ def run(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
     return subprocess.run([HARNESS, *args], capture_output=True, text=True, cwd=cwd, timeout=300)
 
 
-def test_main_job_prints_every_case_of_the_default_suite(root):
-    r = run("run", "suites/default.toml", cwd=root)
+def test_main_job_prints_every_case_of_the_default_suite(root, tmp_path):
+    r = run("run", "suites/default.toml", "--db", str(tmp_path / "default.sqlite"), cwd=root)
     assert r.returncode == 0, r.stdout + r.stderr
     suite = load_suite(root / "suites" / "default.toml")
     lines = r.stdout.splitlines()
@@ -31,7 +31,7 @@ def test_main_job_prints_every_case_of_the_default_suite(root):
         match = [l for l in lines if l.split()[:2] == [case.integrand, case.technique]]
         assert match, case
         rows[(case.integrand, case.technique)] = match[0]
-    assert f"{len(suite.cases)} cases in" in r.stdout
+    assert f"{len(suite.cases)} cases in" in r.stdout and f"summary: {len(suite.cases)} passed, 0 failed" in r.stdout
     every = {(f.name, t) for f in rest.catalogue() for t in rest.techniques(f)}
     assert every <= set(rows)
     # the deliberately biased techniques are found, the others are not
@@ -46,7 +46,7 @@ def test_csv_output(tmp_path):
     suite.write_text('[suite]\nsamples = 65536\nreplicas = 8\n\n[[case]]\nintegrand = "gaussian"\n'
                      'techniques = ["uniform", "uniform/stratified", "clamped:uniform(0.9)"]\n')
     out = tmp_path / "table.csv"
-    r = run("run", str(suite), "--csv", str(out), "--threads", "1")
+    r = run("run", str(suite), "--csv", str(out), "--threads", "1", "--db", str(tmp_path / "small.sqlite"))
     assert r.returncode == 0, r.stdout + r.stderr
     import pandas as pd
 
@@ -92,6 +92,16 @@ BAD_SUITES = [
     ('[suites]\nname = "x"\n', 1, "suites", "unknown table 'suites'"),
     (GOOD_HEAD, None, "case", "expected at least one [[case]] table"),
     (GOOD_HEAD + '[[case]]\ntechniques = "all"\n', 5, None, "missing key 'integrand'"),
+    ('[suite]\nsamples = 1000\nmeasurements = ["bias", "chi_square"]\n[[case]]\nintegrand = "gaussian"\n', 3,
+     "measurements", "unknown measurement 'chi_square'; expected some of: bias, variance, convergence"),
+    (GOOD_HEAD + '[[case]]\nintegrand = "gaussian"\nmeasurements = []\n', 7, "measurements", "expected at least one"),
+    ('[suite]\nsamples = 1000\nalpha = 1.5\n[[case]]\nintegrand = "gaussian"\n', 3, "alpha",
+     "expected a false-alarm rate in (0, 1), got 1.5"),
+    ('[suite]\nsamples = 1000\nbudgets = [100, 0, 10]\n[[case]]\nintegrand = "gaussian"\n', 3, "budgets",
+     "expected at least 3 positive integer budgets"),
+    ('[suite]\nsamples = 1000\nbatches = 4\n[[case]]\nintegrand = "gaussian"\n', 3, "batches",
+     "expected an integer in [8, samples = 1000], got 4"),
+    (GOOD_HEAD + '[[case]]\nintegrand = "gaussian"\nsamples = 10\n', 7, "samples", "expected at least batches = 64 samples"),
 ]
 
 

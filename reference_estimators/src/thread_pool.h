@@ -28,11 +28,11 @@ class ThreadPool {
     void run(size_t count, int threads, const std::function<void(size_t)> &fn) {
         if (threads < 1) threads = 1;
         if (size_t(threads) > count) threads = int(count > 0 ? count : 1);
-        std::lock_guard<std::mutex> one_job_at_a_time(run_mutex_);
-        if (threads == 1) {
+        if (threads == 1) {  // the caller's thread alone: no pool, no lock, so callers run concurrently
             for (size_t i = 0; i < count; ++i) fn(i);
             return;
         }
+        std::lock_guard<std::mutex> one_job_at_a_time(run_mutex_);
         grow(threads - 1);
         {
             std::lock_guard<std::mutex> lk(m_);

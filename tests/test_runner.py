@@ -1,0 +1,167 @@
+"""The suite runner and its storage, run for real: subprocesses killed with SIGKILL, a real
+SQLite file, a real Dask LocalCluster."""
+from __future__ import annotations
+
+import json
+import os
+import random
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+import harness
+from harness.plan import plan
+from harness.runner import run_suite
+from harness.suite import load_suite
+
+HARNESS = str(Path(sys.executable).with_name("harness"))
+
+# A suite of several seconds: long enough for kills to land mid-run, short enough for CI.
+SUITE = """
+[suite]
+name = "killme"
+seed = 3
+samples = 33_554_432
+batches = 16
+replicas = 8
+budgets = [262144, 1048576, 4194304]
+
+[[case]]
+integrand = "gaussian16"
+techniques = ["uniform", "uniform/sobol"]
+
+[[case]]
+integrand = "peak"
+techniques = ["importance:trimmed_logistic"]
+
+[[case]]
+integrand = "ggx_lobe"
+techniques = ["mis_balance:cosine_hemisphere+ggx"]
+"""
+
+
+def units_table(db: Path) -> list[tuple]:
+    con = sqlite3.connect(db)
+    try:
+        return sorted(con.execute("SELECT case_key, stream, budget, replica, chunk_begin, chunk_end, kind, payload "
+                                  "FROM units").fetchall())
+    finally:
+        con.close()
+
+
+def without_timing(rows: list[tuple]) -> list[tuple]:
+    """Unit rows with the payloads' wall times removed (each run measures its own)."""
+    return [(*r[:7], {k: v for k, v in json.loads(r[7]).items() if k not in ("seconds", "threads")}) for r in rows]
+
+
+def measurements(db: Path):
+    df = harness.load(db)
+    return df.drop(columns=["detail"]).sort_values(["case_key", "measurement"]).reset_index(drop=True)
+
+
+@pytest.fixture(scope="module")
+def suite_file(tmp_path_factory) -> Path:
+    p = tmp_path_factory.mktemp("suite") / "killme.toml"
+    p.write_text(SUITE)
+    return p
+
+
+@pytest.fixture(scope="module")
+def reference_db(suite_file, tmp_path_factory) -> Path:
+    db = tmp_path_factory.mktemp("ref") / "ref.sqlite"
+    r = subprocess.run([HARNESS, "run", str(suite_file), "--db", str(db), "--threads", "2"], capture_output=True,
+                       text=True, timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    return db
+
+
+def test_plan_has_only_what_the_measurements_need(tmp_path):
+    p = tmp_path / "s.toml"
+    p.write_text('[suite]\nsamples = 1048576\nbatches = 16\nreplicas = 4\nbudgets = [1024, 4096, 16384]\n'
+                 'measurements = ["bias"]\n\n[[case]]\nintegrand = "gaussian"\ntechniques = ["uniform"]\n\n'
+                 '[[case]]\nintegrand = "step"\ntechniques = ["uniform"]\nmeasurements = ["efficiency"]\n\n'
+                 '[[case]]\nintegrand = "step"\ntechniques = ["rejection"]\nmeasurements = ["convergence", "efficiency"]\n')
+    units = list(plan(load_suite(p)).values())
+    bias_only, eff_only, conv = units
+    assert {u.kind for u in bias_only} == {"state", "tail"} and {u.stream for u in bias_only} == {0}
+    assert len([u for u in bias_only if u.kind == "state"]) == 16  # 16 batches of 65536: one unit each
+    assert {(u.stream, u.budget) for u in eff_only} == {(3, 16384)} and len(eff_only) == 4  # top budget only
+    assert {(u.stream, u.budget) for u in conv} == {(1, 1024), (2, 4096), (3, 16384)}  # efficiency shares these
+    keys = [u.key for us in units for u in us]
+    assert len(keys) == len(set(keys))
+
+
+def test_a_finished_suite_reruns_without_computing(suite_file, reference_db, tmp_path):
+    db = tmp_path / "copy.sqlite"
+    db.write_bytes(reference_db.read_bytes())
+    before = units_table(db)
+    summary = run_suite(load_suite(suite_file), db, threads=2)
+    assert summary.units_run == 0 and summary.units_planned == len(before)
+    assert units_table(db) == before
+
+
+@pytest.mark.slow
+def test_kill_minus_nine_at_random_points_then_resume(suite_file, reference_db, tmp_path):
+    """20 runs killed with SIGKILL at random moments (seeded), each resuming the last; the
+    final state must equal an uninterrupted run's bit for bit: no duplicate, lost or torn
+    unit rows, the same measurements."""
+    db = tmp_path / "killed.sqlite"
+    rng = random.Random(20261123)
+    full = len(units_table(reference_db))
+    kills = 0
+    while kills < 20:
+        proc = subprocess.Popen([HARNESS, "run", str(suite_file), "--db", str(db), "--threads", "2"],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        time.sleep(rng.uniform(0.8, 1.8))  # start-up (imports) takes ~0.8 s; the suite ~16 s of work
+        if proc.poll() is not None:
+            break  # finished before the kill: nothing left to interrupt
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+        kills += 1
+        rows = units_table(db) if db.exists() else []
+        keys = [r[:7] for r in rows]
+        assert len(keys) == len(set(keys)), "duplicate unit rows"
+        assert all(json.loads(r[7]) for r in rows), "a torn payload"
+        assert len(rows) <= full
+    assert kills == 20, f"only {kills} runs were interrupted: the suite finished too fast to test resumption"
+    r = subprocess.run([HARNESS, "run", str(suite_file), "--db", str(db), "--threads", "2"], capture_output=True,
+                       text=True, timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert without_timing(units_table(db)) == without_timing(units_table(reference_db))
+    a, b = measurements(db), measurements(reference_db)
+    cols = ["case_key", "measurement", "value", "lo", "hi", "n", "pvalue", "verdict"]
+    stat = ~a["measurement"].isin(["log10_efficiency", "efficiency_ratio"])  # timing-based: equal only by chance
+    assert a.loc[stat, cols].equals(b.loc[stat, cols])
+
+
+@pytest.mark.slow
+def test_dask_local_cluster_gives_bitwise_the_same_units(suite_file, reference_db, tmp_path):
+    db = tmp_path / "dask.sqlite"
+    r = subprocess.run([HARNESS, "run", str(suite_file), "--db", str(db), "--dask", "local", "--threads", "2"],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert without_timing(units_table(db)) == without_timing(units_table(reference_db))
+
+
+def test_load_gives_each_measurement_with_uncertainty_and_n(reference_db):
+    df = harness.load(reference_db)
+    assert {"integrand", "technique", "measurement", "value", "lo", "hi", "n", "pvalue", "alpha", "verdict"} <= set(df)
+    assert set(df["measurement"]) == {"bias", "variance", "convergence_slope", "log10_efficiency", "efficiency_ratio",
+                                      "rmse"}
+    bias = df[df["measurement"] == "bias"]
+    assert len(bias) == 4 and (bias["n"] == 33_554_432).all() and (bias["lo"] < bias["hi"]).all()
+    assert set(bias["verdict"]) == {"unbiased"}
+    slope = df[(df["measurement"] == "convergence_slope") & (df["technique"] == "uniform")].iloc[0]
+    assert slope["lo"] < -0.5 < slope["hi"]
+
+
+def test_show_prints_the_stored_measurements(reference_db):
+    r = subprocess.run([HARNESS, "show", "--db", str(reference_db)], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0 and "convergence_slope" in r.stdout and "mis_balance:cosine_hemisphere+ggx" in r.stdout
+    r = subprocess.run([HARNESS, "show", "--db", "/nonexistent/x.sqlite"], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "no results database" in r.stderr
