@@ -42,7 +42,7 @@ def case_key(suite: Suite, case: Case) -> str:
     """Fingerprint of what fixes a case's random numbers and contributions."""
     definition = {"integrand": case.integrand, "technique": case.technique, "seed": suite.seed,
                   "case_id": case.case_id, "unit_chunks": UNIT_CHUNKS, "format": _FORMAT,
-                  "core": rest.__version__}
+                  "core": rest.__version__, "build": rest.core_fingerprint()}
     return hashlib.sha256(json.dumps(definition, sort_keys=True).encode()).hexdigest()[:24]
 
 

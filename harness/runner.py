@@ -27,7 +27,8 @@ from .plan import BIAS_STREAM, Unit, bias_budget, case_key, convergence_budgets,
 from .store import Store
 from .suite import Case, Suite
 
-__all__ = ["CaseResult", "RunSummary", "run_suite", "results_table", "format_table", "judge", "bad_verdicts"]
+__all__ = ["CaseResult", "RunSummary", "run_suite", "results_table", "format_table", "judge", "judge_convergence",
+           "bad_verdicts"]
 
 _COMMIT_EVERY = 0.1  # seconds between commits: a kill loses at most this much finished work
 
@@ -176,8 +177,8 @@ def _measurement_rows(suite: Suite, results: list[CaseResult]) -> list[dict[str,
         if r.convergence is not None:
             c = r.convergence
             rows.append({**base, "measurement": "convergence_slope", "value": c.slope, "lo": c.slope_interval[0],
-                         "hi": c.slope_interval[1], "n": int(c.table["replicas"].sum()),
-                         "verdict": "worse than expected" if c.worse_than_expected else "as expected",
+                         "hi": c.slope_interval[1], "n": int(c.table["replicas"].sum()), "pvalue": c.pvalue,
+                         "verdict": row["convergence"],
                          "detail": {"expected": c.expected, "table": c.table.to_dict("list")}})
         if r.efficiency is not None:
             e = r.efficiency
@@ -192,6 +193,30 @@ def _measurement_rows(suite: Suite, results: list[CaseResult]) -> list[dict[str,
             rows.append({**base, "measurement": "rmse", "value": top["rmse"], "lo": top["rmse_lo"], "hi": top["rmse_hi"],
                          "n": int(top["n"]), "detail": {"error_vs_time": r.error_vs_time.to_dict("list")}})
     return rows
+
+
+def judge_convergence(results: list[CaseResult], alpha: float) -> list[str]:
+    """Convergence verdict per case, Holm over the suite's judged cases at family-wise
+    alpha: 'as expected', 'slower than expected', or 'not judged' where no rate is promised
+    (infinite variance, heavy tails or skewed batches seen by the bias test: pre-asymptotic)
+    or the technique is biased on purpose (its error stops falling at the bias)."""
+    judged = []
+    for r in results:
+        c, b = r.convergence, r.bias
+        ok = (c is not None and not r.technique.biased and r.technique.finite_variance is not False
+              and not (b is not None and b.flags))
+        judged.append(ok)
+    p = [r.convergence.pvalue if ok else 1.0 for r, ok in zip(results, judged)]
+    rejected, _ = stats.holm(p, alpha) if results else ([], [])
+    out = []
+    for r, ok, rej in zip(results, judged, rejected):
+        if r.convergence is None:
+            out.append("not measured")
+        elif not ok:
+            out.append("not judged")
+        else:
+            out.append("slower than expected" if rej else "as expected")
+    return out
 
 
 def judge(results: list[CaseResult], alpha: float) -> list[str]:
@@ -224,7 +249,7 @@ def results_table(results: list[CaseResult], alpha: float) -> pd.DataFrame:
         if r.efficiency and (current is None or (r.case.technique == "uniform" != current.case.technique)):
             baseline[r.case.integrand] = r
     rows = []
-    for r, verdict in zip(results, judge(results, alpha)):
+    for r, verdict, cverdict in zip(results, judge(results, alpha), judge_convergence(results, alpha)):
         b, c, e = r.bias, r.convergence, r.efficiency
         ratio, (lo, hi) = (math.nan, (math.nan, math.nan))
         base = baseline.get(r.case.integrand)
@@ -238,7 +263,7 @@ def results_table(results: list[CaseResult], alpha: float) -> pd.DataFrame:
             "z": b.statistic if b else nan, "pvalue": b.pvalue if b else nan, "verdict": verdict,
             "slope": c.slope if c else nan,
             "slope_lo": c.slope_interval[0] if c else nan, "slope_hi": c.slope_interval[1] if c else nan,
-            "slope_worse": bool(c and c.worse_than_expected),
+            "convergence": cverdict, "slope_pvalue": c.pvalue if c else nan,
             "log10_efficiency": e.log10_value if e else nan,
             "efficiency_baseline": base.case.technique if base else "",
             "efficiency_ratio": ratio, "ratio_lo": lo, "ratio_hi": hi,
@@ -257,8 +282,7 @@ def _notes(r: CaseResult) -> str:
         notes.append("infinite variance (analytic)")
     if r.bias and r.bias.stderr == 0:
         notes.append("zero variance")
-    elif r.convergence and r.convergence.worse_than_expected:
-        notes.append(f"converges slower than n^{r.convergence.expected:+.1f}")
+
     return "; ".join(notes)
 
 
@@ -276,7 +300,8 @@ def format_table(df: pd.DataFrame, alpha: float) -> str:
         "t": (df["z"].map(lambda z: f"{z:+.2f}" if math.isfinite(z) else str(z)), ">"),
         "p": (df["pvalue"].map(lambda p: f"{p:.2g}"), ">"),
         f"bias (Holm, α={alpha:g})": (df["verdict"], "<"),
-        "RMSE slope [95% CI]": ([interval(v, lo, hi, "+.2f") for v, lo, hi in zip(df["slope"], df["slope_lo"], df["slope_hi"])], "<"),
+        "RMSE slope [95% CI]": ([interval(v, lo, hi, "+.2f") + (" slower!" if cv == "slower than expected" else "")
+                                 for v, lo, hi, cv in zip(df["slope"], df["slope_lo"], df["slope_hi"], df["convergence"])], "<"),
         "1/(V·T) vs baseline [95% CI]": ([interval(v, lo, hi, ".3g") for v, lo, hi in
                                          zip(df["efficiency_ratio"], df["ratio_lo"], df["ratio_hi"])], "<"),
         "notes": (df["notes"], "<"),
@@ -291,6 +316,6 @@ def format_table(df: pd.DataFrame, alpha: float) -> str:
 
 def bad_verdicts(df: pd.DataFrame) -> pd.DataFrame:
     """Rows a CI run must fail on: unbiased techniques found biased, planted bias missed,
-    faults in the contributions."""
-    return df[df["verdict"].isin(["biased", "bias missed", "invalid"])]
+    faults in the contributions, convergence measurably slower than n^-1/2."""
+    return df[df["verdict"].isin(["biased", "bias missed", "invalid"]) | (df["convergence"] == "slower than expected")]
 

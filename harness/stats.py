@@ -458,10 +458,20 @@ class ConvergenceResult:
     confidence_level: float
     expected: float
     tolerance: float
+    slope_se: float = math.nan  # standard deviation of the bootstrap slopes
 
     @property
     def worse_than_expected(self) -> bool:
         return self.slope_interval[0] > self.expected + self.tolerance
+
+    @property
+    def pvalue(self) -> float:
+        """One-sided p-value of H0 "slope <= expected + tolerance" (normal approximation with
+        the bootstrap standard error): small when the error falls measurably too slowly.  For
+        many cases at once, correct these with holm()."""
+        if not self.slope_se > 0:
+            return 1.0 if self.slope <= self.expected + self.tolerance else 0.0
+        return float(stats.norm.sf((self.slope - self.expected - self.tolerance) / self.slope_se))
 
     def __str__(self) -> str:
         lo, hi = self.slope_interval
@@ -516,7 +526,7 @@ def fit_convergence(reps: Sequence[Replicates], *, expected: float = -0.5, toler
         rows.append({"n": r.n, "rmse": r.rmse, "rmse_lo": lo, "rmse_hi": hi, "seconds": r.time[0],
                      "replicas": r.replicas})
     return ConvergenceResult(reps[0].integrand, reps[0].technique, pd.DataFrame(rows), slope, interval,
-                             confidence_level, expected, tolerance)
+                             confidence_level, expected, tolerance, float(np.std(boot, ddof=1)))
 
 
 # --- efficiency ----------------------------------------------------------------------------

@@ -18,4 +18,18 @@ CHUNK_SIZE: int = _core.CHUNK_SIZE
 from importlib.metadata import version as _version  # noqa: E402
 
 __version__: str = _version("mc-harness")
-__all__ = [*_api_all, "Estimate", "ERROR_ISSUES", "CHUNK_SIZE"]
+
+
+def core_fingerprint() -> str:
+    """SHA-256 of the compiled core: stored results are only reused by the same build."""
+    global _FINGERPRINT
+    if _FINGERPRINT is None:
+        import hashlib
+
+        with open(_core.__file__, "rb") as f:
+            _FINGERPRINT = hashlib.sha256(f.read()).hexdigest()[:16]
+    return _FINGERPRINT
+
+
+_FINGERPRINT: str | None = None
+__all__ = [*_api_all, "Estimate", "ERROR_ISSUES", "CHUNK_SIZE", "core_fingerprint"]

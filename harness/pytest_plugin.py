@@ -1,0 +1,102 @@
+"""pytest plugin: ``pytest suites/ci.toml`` collects each case of a suite file as a test item.
+
+The suite runs once per session (stored in the pytest cache, so a rerun only computes what
+changed); each item then checks its case: no faults, the bias verdict expected for its
+technique (Holm-corrected over the suite at the suite's alpha), and a convergence slope not
+measurably worse than n^-1/2.  A failure shows the measurement, its interval, n, alpha and
+what was expected.
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from .runner import RunSummary, judge, judge_convergence, run_suite
+from .suite import Suite, SuiteError, load_suite
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    group = parser.getgroup("harness")
+    group.addoption("--harness-db", default=None, help="results database for suite files (default: in the pytest cache)")
+    group.addoption("--harness-threads", type=int, default=None, help="threads for suite files")
+
+
+def pytest_collect_file(file_path: Path, parent: pytest.Collector):
+    if file_path.suffix == ".toml" and _is_suite(file_path):
+        return SuiteFile.from_parent(parent, path=file_path)
+    return None
+
+
+def _is_suite(path: Path) -> bool:
+    try:
+        return "suite" in tomllib.loads(path.read_text(encoding="utf-8")) or "case" in tomllib.loads(
+            path.read_text(encoding="utf-8"))
+    except (OSError, tomllib.TOMLDecodeError):
+        return False
+
+
+class SuiteFile(pytest.File):
+    def collect(self):
+        try:
+            suite = load_suite(self.path)
+        except SuiteError as e:
+            raise self.CollectError(str(e)) from None
+        self.suite = suite
+        self.summary: RunSummary | None = None
+        for i, case in enumerate(suite.cases):
+            yield CaseItem.from_parent(self, name=f"{case.integrand}/{case.technique}#{case.case_id}", index=i)
+
+    def run(self) -> RunSummary:
+        if self.summary is None:
+            opt = self.config.getoption
+            db = opt("--harness-db") or (self.config.cache.mkdir("harness") / f"{self.suite.name}.sqlite"
+                                         if self.config.cache else Path(f"results/{self.suite.name}.sqlite"))
+            self.summary = run_suite(self.suite, db, threads=opt("--harness-threads"))
+        return self.summary
+
+
+class CaseFailure(Exception):
+    pass
+
+
+class CaseItem(pytest.Item):
+    def __init__(self, *, index: int, **kwargs):
+        super().__init__(**kwargs)
+        self.index = index
+
+    def runtest(self) -> None:
+        summary = self.parent.run()
+        suite: Suite = self.parent.suite
+        r = summary.results[self.index]
+        verdict = judge(summary.results, suite.alpha)[self.index]
+        problems = []
+        b = r.bias
+        if b is not None:
+            head = (f"bias: estimate {b.estimate:.10g} ± {b.stderr:.3g} (n = {b.n}), exact {b.reference:.10g}, "
+                    f"t = {b.statistic:+.2f}, p = {b.pvalue:.3g}, family-wise alpha = {suite.alpha} "
+                    f"(Holm over {len(summary.results)} cases)")
+            if math.isfinite(b.stderr):
+                lo, hi = b.confidence_interval(1 - suite.alpha)
+                head += f", {100 * (1 - suite.alpha):g} % CI [{lo:.10g}, {hi:.10g}]"
+            expected = "biased (deliberately)" if r.technique.biased else "unbiased"
+            if verdict in ("biased", "bias missed", "invalid"):
+                problems.append(f"{head}\n  verdict: {verdict}; expected: {expected}"
+                                + (f"\n  faults: {b.counts}, first: {b.examples[:3]}" if b.counts else "")
+                                + (f"\n  flags: {'; '.join(b.flags)}" if b.flags else ""))
+        c = r.convergence
+        if judge_convergence(summary.results, suite.alpha)[self.index] == "slower than expected":
+            problems.append(f"convergence: {c}; one-sided p = {c.pvalue:.3g}, family-wise alpha = {suite.alpha} "
+                            f"(Holm)\n{c.table.to_string(index=False)}")
+        if problems:
+            raise CaseFailure("\n".join(problems))
+
+    def repr_failure(self, excinfo, style=None):
+        if isinstance(excinfo.value, CaseFailure):
+            return f"{self.name}: {excinfo.value}"
+        return super().repr_failure(excinfo, style)
+
+    def reportinfo(self):
+        return self.path, None, f"suite case {self.name}"
