@@ -1,0 +1,94 @@
+"""Runner overhead: a 1e8-sample suite through `harness run` (plan, threads, SQLite, analysis)
+against the same core calls made directly, side by side in one run; and the time to resume
+a finished suite (in process, and as a fresh `harness run` command).
+
+    .venv/bin/python benchmarks/runner_overhead.py [--repeat 3]
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+import reference_estimators as rest
+from harness.plan import BIAS_STREAM, bias_budget
+from harness.runner import _core_case, run_suite
+from harness.suite import load_suite
+
+SUITE = """
+[suite]
+name = "overhead"
+samples = 25_000_000
+batches = 64
+measurements = ["bias"]
+
+[[case]]
+integrand = "gaussian"
+techniques = ["uniform", "importance:linear", "roulette:uniform(q=0.5)", "mis_balance:uniform+linear"]
+"""
+
+
+def direct(suite, threads: int) -> float:
+    """The work the suite's bias measurements need, as plain core calls."""
+    start = time.perf_counter()
+    for case in suite.cases:
+        b = bias_budget(suite, case)
+        core_case = _core_case(case, BIAS_STREAM)
+        ests = [rest.integrate(case.integrand, case.technique, b, seed=suite.seed, case_id=core_case, replica=k,
+                               threads=threads) for k in range(suite.batches)]
+        y = rest.contributions(case.integrand, case.technique, b, seed=suite.seed, case_id=core_case, threads=threads)
+        keep = int(math.sqrt(b))
+        c = np.median(y)
+        np.partition(y - c, y.size - keep - 1), np.partition(c - y, y.size - keep - 1)
+        assert all(e.ok for e in ests)
+    return time.perf_counter() - start
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--threads", type=int, default=2)
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "overhead.toml"
+        path.write_text(SUITE)
+        suite = load_suite(path)
+        total = sum(c.samples for c in suite.cases)
+        direct(suite, args.threads)  # warm-up
+        rows = []
+        for r in range(args.repeat):
+            t_direct = direct(suite, args.threads)
+            db = Path(tmp) / f"run{r}.sqlite"
+            t0 = time.perf_counter()
+            summary = run_suite(suite, db, threads=args.threads)
+            t_runner = time.perf_counter() - t0
+            rows.append((t_direct, t_runner))
+            assert summary.units_run == summary.units_planned
+        t0 = time.perf_counter()
+        again = run_suite(suite, db, threads=args.threads)
+        t_resume = time.perf_counter() - t0
+        assert again.units_run == 0
+        t0 = time.perf_counter()
+        subprocess.run([str(Path(sys.executable).with_name("harness")), "run", str(path), "--db", str(db)],
+                       check=True, capture_output=True)
+        t_command = time.perf_counter() - t0
+
+    print(f"suite: {len(suite.cases)} cases, {total:.1e} samples, bias measurement ({suite.batches} batches), "
+          f"{args.threads} threads\n")
+    print(f"{'run':>4} {'direct core calls [s]':>22} {'harness runner [s]':>19} {'overhead':>9}")
+    for i, (d, r) in enumerate(rows):
+        print(f"{i:>4} {d:22.3f} {r:19.3f} {100 * (r / d - 1):8.1f}%")
+    d, r = min(x[0] for x in rows), min(x[1] for x in rows)
+    print(f"best {d:22.3f} {r:19.3f} {100 * (r / d - 1):8.1f}%\n")
+    print(f"resume of the finished suite: {t_resume:.3f} s in process, {t_command:.3f} s as a fresh "
+          f"`harness run` command (interpreter start-up and imports included)")
+
+
+if __name__ == "__main__":
+    main()
