@@ -16,10 +16,12 @@ import reference_estimators as rest
 
 from .suite import MEASUREMENTS, Case, Suite
 
-__all__ = ["UNIT_CHUNKS", "MEASUREMENTS", "Unit", "case_key", "bias_budget", "convergence_budgets", "plan"]
+__all__ = ["UNIT_CHUNKS", "MEASUREMENTS", "Unit", "case_key", "bias_budget", "bias_stream", "convergence_budgets",
+           "plan"]
 
 UNIT_CHUNKS = 32                     # core chunks (of 65 536 samples) per stored unit
-BIAS_STREAM = 0                      # stream 0: the bias test's batches; 1 + i: convergence budget i
+BIAS_STREAM = 0                      # stream 0: the bias test's batches; 1 + i: convergence budget i;
+TARGET_STREAM = 200                  # 200 + s: the bias test's batches at look s >= 1 of a target
 _FORMAT = 1                          # bump when a unit's meaning changes: old rows stop matching
 
 
@@ -46,8 +48,13 @@ def case_key(suite: Suite, case: Case) -> str:
     return hashlib.sha256(json.dumps(definition, sort_keys=True).encode()).hexdigest()[:24]
 
 
-def bias_budget(suite: Suite, case: Case) -> int:
-    return case.samples // suite.batches
+def bias_budget(suite: Suite, case: Case, look: int = 0) -> int:
+    """Contributions per batch of the bias test (at look ``look`` of a precision target)."""
+    return (case.samples << look) // suite.batches
+
+
+def bias_stream(look: int) -> int:
+    return BIAS_STREAM if look == 0 else TARGET_STREAM + look
 
 
 def convergence_budgets(suite: Suite, case: Case) -> list[int]:
@@ -64,19 +71,21 @@ def _estimate_units(key: str, stream: int, budget: int, replica: int) -> list[Un
             for c in range(0, chunks, UNIT_CHUNKS)]
 
 
-def plan(suite: Suite) -> dict[str, list[Unit]]:
-    """Units per case key, in a fixed order."""
+def plan(suite: Suite, looks: dict[str, int] | None = None) -> dict[str, list[Unit]]:
+    """Units per case key, in a fixed order; ``looks`` gives the current look of cases with a
+    precision target (0 when absent)."""
     out: dict[str, list[Unit]] = {}
     for case in suite.cases:
         key = case_key(suite, case)
         wanted = set(case.measurements)
         units: list[Unit] = []
         if wanted & {"bias", "variance"}:
-            b = bias_budget(suite, case)
+            look = (looks or {}).get(key, 0)
+            b, stream = bias_budget(suite, case, look), bias_stream(look)
             for k in range(suite.batches):
-                units += _estimate_units(key, BIAS_STREAM, b, k)
+                units += _estimate_units(key, stream, b, k)
             if "bias" in wanted:
-                units.append(Unit(key, BIAS_STREAM, b, 0, 0, 0, "tail"))
+                units.append(Unit(key, stream, b, 0, 0, 0, "tail"))
         budgets = convergence_budgets(suite, case)
         if wanted & {"convergence", "error_vs_time"}:
             chosen = list(enumerate(budgets))

@@ -23,7 +23,11 @@ from reference_estimators import _core
 
 from . import stats
 from .execute import UnitJob, execute
-from .plan import BIAS_STREAM, Unit, bias_budget, case_key, convergence_budgets, plan
+import dataclasses
+
+from scipy import stats as sps
+
+from .plan import Unit, bias_budget, bias_stream, case_key, convergence_budgets, plan
 from .store import Store
 from .suite import Case, Suite
 
@@ -43,6 +47,15 @@ class CaseResult:
     efficiency: stats.Efficiency | None
     variance: tuple[float, float, int] | None    # per-contribution variance, its std. error, n
     error_vs_time: pd.DataFrame | None
+    look: int = 0                                # precision targets: the look the bias test stopped at
+
+    @property
+    def target_half_width(self) -> float:
+        """Half-width of the bias test's interval at level 1 - alpha / looks (targets only)."""
+        b = self.bias
+        if b is None or not math.isfinite(b.stderr):
+            return math.nan
+        return float(sps.t.ppf(1 - b.alpha / (2 * self.case.looks), b.df) * b.stderr)
 
 
 @dataclass(frozen=True)
@@ -62,20 +75,18 @@ def run_suite(suite: Suite, db: str | Path, *, threads: int | None = None, dask:
     threads = threads or suite.threads or rest._core.hardware_threads()
     store = Store(db)
     try:
-        units = plan(suite)
         case_of = {case_key(suite, c): c for c in suite.cases}
         for key, c in case_of.items():
             store.add_case(key, suite.name, c.integrand, c.technique,
                            {"seed": suite.seed, "case_id": c.case_id, "samples": c.samples})
-        stored = store.stored_keys(units)
-        missing = [u for us in units.values() for u in us if u.key not in stored]
-        total = sum(len(us) for us in units.values())
+        looks = {k: 0 for k, c in case_of.items() if c.target is not None}
 
         def job(u: Unit) -> UnitJob:
             c = case_of[u.case_key]
             return (u.key, c.integrand, c.technique, suite.seed, _core_case(c, u.stream))
 
-        done, last = total - len(missing), time.perf_counter()
+        done, last, ran, total = 0, time.perf_counter(), 0, 0
+        planned: set[tuple] = set()
 
         def sink(key: tuple, payload: dict[str, Any], seconds: float) -> None:
             nonlocal done, last
@@ -87,9 +98,24 @@ def run_suite(suite: Suite, db: str | Path, *, threads: int | None = None, dask:
             if progress:
                 progress(done, total)
 
-        ran = execute(missing, job, sink, threads=threads, dask=dask) if missing else 0
-        store.commit()
-        results = [_measure(suite, c, store.payloads(k)) for k, c in case_of.items()]
+        while True:  # one pass, plus one per further look of cases with a precision target
+            units = plan(suite, looks)
+            planned |= {u.key for us in units.values() for u in us}
+            stored = store.stored_keys(units)
+            missing = [u for us in units.values() for u in us if u.key not in stored]
+            total, done = len(planned), len(planned) - len(missing)
+            ran += execute(missing, job, sink, threads=threads, dask=dask) if missing else 0
+            store.commit()
+            grown = False
+            for key, look in looks.items():
+                c = case_of[key]
+                r = _measure(suite, c, store.payloads(key), look)
+                if look + 1 < c.looks and (r.bias is None or not r.target_half_width <= c.target):
+                    looks[key] = look + 1
+                    grown = True
+            if not grown:
+                break
+        results = [_measure(suite, c, store.payloads(k), looks.get(k, 0)) for k, c in case_of.items()]
         store.put_measurements(_measurement_rows(suite, results))
         return RunSummary(results, total, ran, time.perf_counter() - start, Path(db))
     finally:
@@ -110,7 +136,7 @@ def _states_by_estimate(payloads: dict[tuple, dict]) -> dict[tuple[int, int, int
     return {g: [p for _, p in sorted(v, key=lambda x: x[0])] for g, v in groups.items()}
 
 
-def _measure(suite: Suite, case: Case, payloads: dict[tuple, dict]) -> CaseResult:
+def _measure(suite: Suite, case: Case, payloads: dict[tuple, dict], look: int = 0) -> CaseResult:
     f = rest.integrand(case.integrand)
     t = rest.technique(f, case.technique)
     key = case_key(suite, case)
@@ -124,17 +150,23 @@ def _measure(suite: Suite, case: Case, payloads: dict[tuple, dict]) -> CaseResul
 
     bias = variance = conv = eff = evt = None
     if wanted & {"bias", "variance"}:
-        b = bias_budget(suite, case)
-        batches = [estimate(BIAS_STREAM, b, k) for k in range(suite.batches)]
+        b, stream = bias_budget(suite, case, look), bias_stream(look)
+        batches = [estimate(stream, b, k) for k in range(suite.batches)]
         faults = {k: v for e in batches for k, v in e.issues.items()}
         if "bias" in wanted:
-            tail = next(p for k, p in payloads.items() if k[6] == "tail")
+            tail = next(p for k, p in payloads.items() if k[6] == "tail" and k[1] == stream)
             tails = stats._TailSample.from_tops(tail["upper"], tail["lower"])
             bias = (stats.judge_batches(batches, tails, f.reference, suite.alpha, iid=t.iid) if not faults else
                     stats.UnbiasedResult("invalid", math.nan, math.nan, suite.batches - 1, math.nan, math.nan,
                                          f.reference, b * suite.batches, suite.alpha, suite.batches, math.nan,
                                          math.nan, math.nan, flags=("contributions with faults",), counts=faults,
                                          examples=next(e for e in batches if e.issues).examples))
+            if case.looks > 1 and bias.verdict != "invalid":
+                # alpha spent over the looks a target may take (Bonferroni: any dependence, any
+                # stopping rule): the final look's p-value times the number of looks
+                p = min(1.0, bias.pvalue * case.looks)
+                verdict = "consistent" if p >= suite.alpha else ("inconclusive" if bias.heavy_tail else "biased")
+                bias = dataclasses.replace(bias, pvalue=p, verdict=verdict)
         if "variance" in wanted and not faults and t.iid:
             reps = stats.Replicates.from_estimates(f, t, b, batches)
             rel = math.sqrt(max(reps.sample_kurtosis - 1, 0.0) / (reps.replicas * b))
@@ -155,7 +187,7 @@ def _measure(suite: Suite, case: Case, payloads: dict[tuple, dict]) -> CaseResul
             evt = pd.DataFrame([{"n": r.n, "rmse": r.rmse, "rmse_lo": r.rmse_interval()[0],
                                  "rmse_hi": r.rmse_interval()[1], "seconds": r.time[0], "seconds_se": r.time[1],
                                  "replicas": r.replicas} for r in reps_by_budget.values()])
-    return CaseResult(case, t, key, bias, conv, eff, variance, evt)
+    return CaseResult(case, t, key, bias, conv, eff, variance, evt, look)
 
 
 def _measurement_rows(suite: Suite, results: list[CaseResult]) -> list[dict[str, Any]]:
@@ -171,6 +203,11 @@ def _measurement_rows(suite: Suite, results: list[CaseResult]) -> list[dict[str,
                          "hi": hi - r.bias.reference, "n": r.bias.n, "pvalue": r.bias.pvalue, "verdict": row["verdict"],
                          "detail": {"estimate": r.bias.estimate, "stderr": r.bias.stderr, "t": r.bias.statistic,
                                     "flags": list(r.bias.flags), "counts": r.bias.counts}})
+        if r.case.target is not None and r.bias is not None:
+            hw = r.target_half_width
+            rows.append({**base, "measurement": "target_half_width", "value": hw, "n": r.bias.n,
+                         "verdict": "reached" if hw <= r.case.target else "not reached",
+                         "detail": {"target": r.case.target, "look": r.look + 1, "looks": r.case.looks}})
         if r.variance is not None:
             v, se, n = r.variance
             rows.append({**base, "measurement": "variance", "value": v, "lo": v - 1.96 * se, "hi": v + 1.96 * se, "n": n})
@@ -282,6 +319,11 @@ def _notes(r: CaseResult) -> str:
         notes.append("infinite variance (analytic)")
     if r.bias and r.bias.stderr == 0:
         notes.append("zero variance")
+    if r.case.target is not None:
+        hw = r.target_half_width
+        reached = hw <= r.case.target
+        notes.append(f"target ±{r.case.target:g} {'reached' if reached else 'NOT reached'} at n = {r.bias.n if r.bias else 0} "
+                     f"(±{hw:.3g}, look {r.look + 1} of {r.case.looks}, alpha/{r.case.looks} per look)")
 
     return "; ".join(notes)
 

@@ -4,16 +4,22 @@ A unit's row holds its complete accumulator state (JSON; Python's float repr rou
 every double exactly) and is written inside a transaction under a UNIQUE key, so a run killed
 at any point leaves only whole rows, and a rerun skips exactly the units already stored.
 Measurements computed from the units go to their own table, replaced per case on each run.
+Images (renders, references) are EXR files (float32, via OpenImageIO) in a folder beside the
+database, each written to a temporary name and renamed before its row is committed, so a
+row always points at a complete file.
 """
 from __future__ import annotations
 
 import json
+import os
+import re
 import sqlite3
 import time
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
 __all__ = ["Store", "load"]
@@ -38,6 +44,14 @@ CREATE TABLE IF NOT EXISTS units (
     seconds     REAL NOT NULL,
     finished    REAL NOT NULL,
     UNIQUE (case_key, stream, budget, replica, chunk_begin, chunk_end, kind)
+);
+CREATE TABLE IF NOT EXISTS images (
+    name    TEXT PRIMARY KEY,      -- e.g. "<case key>/reference" or "<case key>/replica-3"
+    file    TEXT NOT NULL,         -- EXR beside the database, relative to its images folder
+    height  INTEGER NOT NULL,
+    width   INTEGER NOT NULL,
+    channels INTEGER NOT NULL,
+    finished REAL NOT NULL
 );
 CREATE TABLE IF NOT EXISTS measurements (
     case_key    TEXT NOT NULL,
@@ -109,6 +123,51 @@ class Store:
 
     def unit_count(self) -> int:
         return self.db.execute("SELECT COUNT(*) FROM units").fetchone()[0]
+
+    # --- images ----------------------------------------------------------------------------
+    @property
+    def image_dir(self) -> Path:
+        return self.path.with_name(self.path.name + ".images")
+
+    def put_image(self, name: str, image: np.ndarray) -> Path:
+        """Stores a float image (height, width[, channels]) as EXR and records it; returns the file."""
+        import OpenImageIO as oiio  # only runs that store images need it
+
+        a = np.asarray(image, dtype=np.float32)
+        if a.ndim == 2:
+            a = a[:, :, None]
+        if a.ndim != 3 or a.shape[2] < 1:
+            raise ValueError(f"'image' must have shape (height, width) or (height, width, channels), got {a.shape}")
+        self.image_dir.mkdir(parents=True, exist_ok=True)
+        file = re.sub(r"[^A-Za-z0-9._-]", "_", name) + ".exr"
+        final, tmp = self.image_dir / file, self.image_dir / (file + ".partial.exr")
+        out = oiio.ImageOutput.create(str(tmp))
+        if out is None or not out.open(str(tmp), oiio.ImageSpec(a.shape[1], a.shape[0], a.shape[2], "float")):
+            raise OSError(f"cannot write {tmp}: {oiio.geterror()}")
+        ok = out.write_image(np.ascontiguousarray(a))
+        out.close()
+        if not ok:
+            raise OSError(f"cannot write {tmp}: {oiio.geterror()}")
+        os.replace(tmp, final)
+        self.commit()
+        self.db.execute("INSERT OR REPLACE INTO images VALUES (?, ?, ?, ?, ?, ?)",
+                        (name, file, a.shape[0], a.shape[1], a.shape[2], time.time()))
+        return final
+
+    def image(self, name: str) -> np.ndarray | None:
+        """The stored image (height, width, channels) as float32, or None."""
+        import OpenImageIO as oiio
+
+        row = self.db.execute("SELECT file FROM images WHERE name = ?", (name,)).fetchone()
+        if row is None:
+            return None
+        inp = oiio.ImageInput.open(str(self.image_dir / row[0]))
+        if inp is None:
+            raise OSError(f"cannot read {self.image_dir / row[0]}: {oiio.geterror()}")
+        try:
+            return inp.read_image("float")
+        finally:
+            inp.close()
 
     # --- measurements ------------------------------------------------------------------------
     def put_measurements(self, rows: list[dict[str, Any]]) -> None:

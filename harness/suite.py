@@ -13,6 +13,8 @@ At this stage a suite lists cases as integrand x techniques from the reference c
     measurements = ["bias", "variance", "convergence", "efficiency", "error_vs_time"]  # the default
 
     [[case]]                  # a case may override samples and measurements
+    target = 1e-4             # optional: double the bias test's samples until its CI half-width
+    max_samples = 64_000_000  #   is <= target, at most up to max_samples (alpha split over the looks)
 
     [[case]]
     integrand = "all"         # or a catalogue name
@@ -47,6 +49,18 @@ class Case:
     samples: int
     case_id: int  # position in the suite: keys the case's random streams
     measurements: tuple[str, ...] = MEASUREMENTS
+    target: float | None = None      # stop the bias test's sample doubling at this CI half-width
+    max_samples: int | None = None   # ... or at this many samples
+
+    @property
+    def looks(self) -> int:
+        """How many budgets a target may try: samples, 2 samples, ... <= max_samples."""
+        if self.target is None or self.max_samples is None:
+            return 1
+        k = 1
+        while self.samples << k <= self.max_samples:
+            k += 1
+        return k
 
 
 @dataclass(frozen=True)
@@ -65,7 +79,8 @@ class Suite:
 
 _SUITE_KEYS = {"name": str, "seed": int, "samples": int, "threads": int, "alpha": float, "batches": int,
                "replicas": int, "budgets": list, "measurements": list}
-_CASE_KEYS = {"integrand": str, "techniques": (str, list), "samples": int, "measurements": list}
+_CASE_KEYS = {"integrand": str, "techniques": (str, list), "samples": int, "measurements": list, "target": float,
+              "max_samples": int}
 
 
 def load_suite(path: str | Path) -> Suite:
@@ -144,7 +159,8 @@ def load_suite(path: str | Path) -> Suite:
                     raise SuiteError(where.at(table, "techniques",
                                               f"unknown technique {t!r} for integrand {name!r}; "
                                               f"expected one of: {', '.join(known)}"))
-                cases.append(Case(name, t, case_samples, len(cases), case_measurements))
+                target, max_samples = _target(c, case_samples, rest.integrand(name), where, table)
+                cases.append(Case(name, t, case_samples, len(cases), case_measurements, target, max_samples))
     return Suite(head.get("name", path.stem), path, seed, samples, threads or None, tuple(cases), float(alpha),
                  batches, replicas, budgets)
 
@@ -157,6 +173,25 @@ def _check_keys(table: dict[str, Any], spec: dict[str, Any], where: "_Locator", 
         if isinstance(value, bool) or not isinstance(value, want):
             kinds = " or ".join(t.__name__ for t in (want if isinstance(want, tuple) else (want,)))
             raise SuiteError(where.at(name, key, f"expected {kinds}, got {type(value).__name__} {value!r}"))
+
+
+def _target(c: dict[str, Any], samples: int, f: Any, where: "_Locator", table: Any) -> tuple[float | None, int | None]:
+    """A precision target: the half-width of the bias test's interval at which to stop doubling
+    the samples, and the most samples to try."""
+    if "target" not in c:
+        if "max_samples" in c:
+            raise SuiteError(where.at(table, "max_samples", "max_samples only applies with a target"))
+        return None, None
+    target = float(c["target"])
+    floor = 16 * 2.0**-52 * abs(f.reference)
+    if not target > floor:
+        raise SuiteError(where.at(table, "target", f"no budget can reach a half-width of {target:g}: it must be > 0 "
+                                  f"and above the rounding floor {floor:.3g} of integrand {f.name!r}"))
+    if "max_samples" not in c:
+        raise SuiteError(where.at(table, "target", "a target needs max_samples, the most samples to try"))
+    if c["max_samples"] < samples:
+        raise SuiteError(where.at(table, "max_samples", f"expected at least samples = {samples}, got {c['max_samples']}"))
+    return target, c["max_samples"]
 
 
 def _measurements(names: list[Any], where: "_Locator", table: Any) -> tuple[str, ...]:

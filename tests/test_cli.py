@@ -102,6 +102,15 @@ BAD_SUITES = [
     ('[suite]\nsamples = 1000\nbatches = 4\n[[case]]\nintegrand = "gaussian"\n', 3, "batches",
      "expected an integer in [8, samples = 1000], got 4"),
     (GOOD_HEAD + '[[case]]\nintegrand = "gaussian"\nsamples = 10\n', 7, "samples", "expected at least batches = 64 samples"),
+    (GOOD_HEAD + '[[case]]\nintegrand = "offset"\ntarget = 1e-10\nmax_samples = 5000\n', 7, "target",
+     "no budget can reach a half-width of 1e-10: it must be > 0 and above the rounding floor 3.55e-07"),
+    (GOOD_HEAD + '[[case]]\nintegrand = "gaussian"\ntarget = 0.0\nmax_samples = 5000\n', 7, "target",
+     "no budget can reach a half-width of 0"),
+    (GOOD_HEAD + '[[case]]\nintegrand = "gaussian"\ntarget = 1e-3\n', 7, "target", "a target needs max_samples"),
+    (GOOD_HEAD + '[[case]]\nintegrand = "gaussian"\ntarget = 1e-3\nmax_samples = 10\n', 8, "max_samples",
+     "expected at least samples = 1000, got 10"),
+    (GOOD_HEAD + '[[case]]\nintegrand = "gaussian"\nmax_samples = 10000\n', 7, "max_samples",
+     "max_samples only applies with a target"),
 ]
 
 

@@ -12,7 +12,9 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
+from scipy import stats
 
 import harness
 from harness.plan import plan
@@ -165,3 +167,44 @@ def test_show_prints_the_stored_measurements(reference_db):
     assert r.returncode == 0 and "convergence_slope" in r.stdout and "mis_balance:cosine_hemisphere+ggx" in r.stdout
     r = subprocess.run([HARNESS, "show", "--db", "/nonexistent/x.sqlite"], capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "no results database" in r.stderr
+
+
+def test_images_are_stored_as_exr_beside_the_database(tmp_path):
+    from harness.store import Store
+
+    store = Store(tmp_path / "img.sqlite")
+    a = np.random.default_rng(0).random((8, 16, 3)).astype(np.float32)
+    a[0, 0] = [np.inf, np.nan, -1.0]  # stored as they are: a renderer's faults must stay visible
+    path = store.put_image("case/replica 3", a)
+    store.close()
+    assert path.exists() and path.suffix == ".exr" and not list(path.parent.glob("*.partial.exr"))
+    again = Store(tmp_path / "img.sqlite")
+    b = again.image("case/replica 3")
+    assert b.shape == (8, 16, 3) and np.array_equal(a, b, equal_nan=True)
+    assert again.image("missing") is None
+    gray = again.put_image("gray", np.ones((4, 4)))
+    assert again.image("gray").shape == (4, 4, 1) and gray.exists()
+    with pytest.raises(ValueError, match=r"'image' must have shape"):
+        again.put_image("bad", np.ones(5))
+    again.close()
+
+
+def test_a_precision_target_doubles_samples_until_reached_and_spends_alpha(tmp_path):
+    """gaussian/uniform has sigma ~0.2: a half-width of 1e-3 at alpha/looks needs ~1e6
+    samples, reached at an intermediate look; the p-value is multiplied by the looks."""
+    p = tmp_path / "t.toml"
+    p.write_text('[suite]\nname = "t"\nsamples = 16384\nbatches = 32\nmeasurements = ["bias"]\n\n'
+                 '[[case]]\nintegrand = "gaussian"\ntechniques = ["uniform"]\ntarget = 1e-3\nmax_samples = 67108864\n')
+    suite = load_suite(p)
+    case = suite.cases[0]
+    assert case.looks == 13  # 16384 * 2^k <= 2^26 for k = 0..12
+    summary = run_suite(suite, tmp_path / "t.sqlite", threads=2)
+    r = summary.results[0]
+    assert 0 < r.look < case.looks - 1 and r.target_half_width <= 1e-3
+    assert r.bias.n == 16384 << r.look
+    raw = 2 * stats.t.sf(abs(r.bias.statistic), r.bias.df)
+    assert r.bias.pvalue == pytest.approx(min(1.0, case.looks * raw))  # alpha spent over the looks
+    again = run_suite(suite, tmp_path / "t.sqlite", threads=2)
+    assert again.units_run == 0 and again.results[0].look == r.look
+    row = harness.load(tmp_path / "t.sqlite").set_index("measurement").loc["target_half_width"]
+    assert row["verdict"] == "reached" and row["n"] == r.bias.n
