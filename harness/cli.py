@@ -28,12 +28,22 @@ def main(argv: list[str] | None = None) -> int:
     show.add_argument("--db", metavar="PATH", required=True)
     show.add_argument("--suite", help="only this suite")
     sub.add_parser("list", help="list the catalogue's integrands, techniques and samplers")
+    chk = sub.add_parser("check-sampler", help="test a sampler against its pdf (chi-square and friends)")
+    chk.add_argument("target", help="module:attribute, an object with sample(u) and pdf(x), or a function returning "
+                                    "one (or a (sample, pdf[, domain]) tuple)")
+    chk.add_argument("--domain", help="interval, square, disk, hemisphere, sphere (unless the target gives one)")
+    chk.add_argument("--samples", type=int, default=1_000_000)
+    chk.add_argument("--seed", type=int, default=0)
+    chk.add_argument("--alpha", type=float, default=0.01)
+    chk.add_argument("--mcmc", action="store_true", help="also run the emcee cross-check")
     args = parser.parse_args(argv)
 
     if args.command == "list":
         return _list()
     if args.command == "show":
         return _show(args.db, args.suite)
+    if args.command == "check-sampler":
+        return _check_sampler(args)
     try:
         suite = load_suite(args.suite)
     except SuiteError as e:
@@ -73,6 +83,52 @@ def _run(suite, db: str, threads: int | None, csv: str | None, dask: str | None)
         df.to_csv(csv, index=False)
         print(f"table written to {csv}")
     return 1 if len(bad) else 0
+
+
+def _check_sampler(args) -> int:
+    import importlib
+
+    from .sampler_check import check_sampler, mcmc_crosscheck
+
+    module, _, attr = args.target.partition(":")
+    if not attr:
+        print(f"harness: target must be module:attribute, got {args.target!r}", file=sys.stderr)
+        return 2
+    try:
+        obj = getattr(importlib.import_module(module), attr)
+    except (ImportError, AttributeError) as e:
+        print(f"harness: cannot load {args.target!r}: {e}", file=sys.stderr)
+        return 2
+    if not hasattr(obj, "sample") and callable(obj):
+        obj = obj()
+    domain = args.domain
+    if isinstance(obj, tuple):
+        sample, pdf = obj[0], obj[1]
+        domain = domain or (obj[2] if len(obj) > 2 else None)
+    else:
+        sample, pdf = getattr(obj, "sample", None), getattr(obj, "pdf", None)
+        domain = domain or getattr(obj, "domain", None)
+    if not (callable(sample) and callable(pdf)):
+        print(f"harness: {args.target!r} has no sample(u) and pdf(x)", file=sys.stderr)
+        return 2
+    if domain is None:
+        print("harness: say --domain (interval, square, disk, hemisphere, sphere)", file=sys.stderr)
+        return 2
+    try:
+        result = check_sampler(sample, pdf, domain, sample_count=args.samples, seed=args.seed, alpha=args.alpha)
+    except ValueError as e:
+        print(f"harness: {e}", file=sys.stderr)
+        return 2
+    print(f"{args.target} on the {domain}:")
+    print(result)
+    ok = result.passed
+    if args.mcmc:
+        m = mcmc_crosscheck(sample, pdf, domain, seed=args.seed, alpha=args.alpha)
+        print(f"\nMCMC cross-check (emcee): {'PASSED' if m.passed else 'FAILED'}, Holm-adjusted p = {m.pvalue:.3g}")
+        print(m.tests.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+        ok = ok and m.passed
+    print(f"summary: {int(ok)} passed, {int(not ok)} failed")
+    return 0 if ok else 1
 
 
 def _show(db: str, suite: str | None) -> int:

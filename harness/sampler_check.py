@@ -31,7 +31,7 @@ import reference_estimators as rest
 
 from .stats import holm
 
-__all__ = ["Domain", "SamplerCheck", "check_sampler", "mcmc_crosscheck", "DOMAINS"]
+__all__ = ["Domain", "SamplerCheck", "SamplerTest", "check_sampler", "mcmc_crosscheck", "DOMAINS"]
 
 DOMAINS = ("interval", "square", "disk", "hemisphere", "sphere")
 
@@ -233,6 +233,120 @@ class SamplerCheck:
 
 
 # --- the check -------------------------------------------------------------------------------
+class SamplerTest:
+    """The sample-independent part of check_sampler: cubature of the claimed pdf on the base
+    grid, done once and reused for any number of samplers or seeds (false-alarm runs)."""
+
+    def __init__(self, pdf: Callable[[np.ndarray], np.ndarray], domain: str | tuple | Domain, *,
+                 sample_count: int = 1_000_000, alpha: float = 0.01):
+        self.dom = dom = _domain(domain)
+        self.pdf = pdf
+        self.n = n = int(sample_count)
+        if n < 1000:
+            raise ValueError(f"'sample_count' must be at least 1000, got {sample_count!r}")
+        if not 0 < alpha < 1:
+            raise ValueError(f"'alpha' must be in (0, 1), got {alpha!r}")
+        self.alpha = alpha
+        self.base = base = (4096,) if dom.k == 1 else (128, 256)
+        pre_shape = (64,) if dom.k == 1 else (32, 64)
+        pre, _ = cell_integrals(lambda sp: np.column_stack([self.q(sp), self.q(sp) ** 2]), pre_shape, 1e-8,
+                                max_depth=12)
+        self.c = c = float(pre[:, 1].sum() / max(pre[:, 0].sum(), 1e-300))  # E_q[q], in units of q
+
+        def moments(sp: np.ndarray) -> np.ndarray:
+            v = self.q(sp)
+            h = v / (v + c) if c > 0 else np.zeros_like(v)
+            return np.column_stack([v, h * v, h * h * v])
+
+        # tolerance: 1 % of each base cell's Poisson noise, from the pre-pass's expected counts
+        per = [b // p for b, p in zip(base, pre_shape)]
+        expect = np.maximum(pre[:, 0], 0).reshape(pre_shape)
+        for axis, r in enumerate(per):
+            expect = np.repeat(expect, r, axis=axis)
+        expect = n * expect / int(np.prod(per))
+        tol = 0.01 * np.sqrt(np.maximum(expect.reshape(-1), 1.0)) / n / (4 if dom.k == 2 else 2)
+        mass3, err3 = cell_integrals(moments, base, tol)
+        self.quadrature_faults = int((~np.all(np.isfinite(mass3), axis=1)).sum())
+        mass3, err3 = np.nan_to_num(mass3), np.nan_to_num(err3)
+        self.mass, self.err = mass3[:, 0].reshape(base), err3[:, 0].reshape(base)
+        self.h_moments = (float(mass3[:, 1].sum()), float(mass3[:, 2].sum()), float(err3[:, 1].sum()))
+        self.normalization = (float(self.mass.sum()), float(self.err.sum()))
+
+    def q(self, sp: np.ndarray) -> np.ndarray:
+        """The claimed density in parameter space: |D| pdf(x(s))."""
+        return np.asarray(self.pdf(self.dom.to_points(sp)), dtype=float).reshape(-1) * self.dom.measure
+
+    def check(self, sample: Callable[[np.ndarray], Any], *, seed: int = 0, udim: int | None = None) -> SamplerCheck:
+        dom, n, base = self.dom, self.n, self.base
+        u = rest.points(n, udim or dom.udim, seed=seed, case_id=0x5A3F)
+        out = sample(u)
+        x = np.asarray(out[0] if isinstance(out, tuple) else out, dtype=float)
+        want = (n,) if dom.point_dim == 1 else (n, dom.point_dim)
+        if x.size != n * dom.point_dim:
+            raise ValueError(f"'sample' must return points of shape {want} for a {dom.kind}, got {x.shape}")
+        x = x.reshape(want)
+        failures: list[dict[str, Any]] = []
+
+        def fail(check: str, mask: np.ndarray, detail: str, values: np.ndarray | None = None) -> None:
+            where = np.flatnonzero(mask)[:5]
+            ex = [{"index": int(i), "point": np.atleast_1d(x[i]).tolist(),
+                   **({"value": float(values[i])} if values is not None else {})} for i in where]
+            failures.append({"check": check, "count": int(mask.sum()), "detail": detail, "examples": ex})
+
+        s, inside = dom.to_params(x)
+        if not inside.all():
+            fail("outside_domain", ~inside, f"points outside the {dom.kind}")
+        p = np.asarray(self.pdf(x), dtype=float).reshape(-1)
+        if p.shape != (n,):
+            raise ValueError(f"'pdf' must return shape ({n},), got {p.shape}")
+        bad = ~np.isfinite(p) | (p < 0)
+        if bad.any():
+            fail("bad_pdf", bad, "pdf NaN, infinite or negative at sampled points", p)
+        zero = (p == 0) & inside
+        if zero.any():
+            fail("zero_pdf", zero, "sampled points where the pdf is 0", p)
+        if self.quadrature_faults:
+            failures.append({"check": "bad_pdf_quadrature", "count": self.quadrature_faults,
+                             "detail": "pdf NaN or infinite inside cells (cubature)", "examples": []})
+        total, total_err = self.normalization
+        if abs(total - 1) > max(1e-3, 10 * total_err):
+            failures.append({"check": "normalization", "count": 1,
+                             "detail": f"pdf integrates to {total:.6f} ± {total_err:.1e} over the {dom.kind}, not 1",
+                             "examples": []})
+
+        counts = _histogram(np.clip(s[inside], 0, np.nextafter(1, 0)), base)
+        grids = {"coarse": (16,) if dom.k == 1 else (16, 32), "fine": (512,) if dom.k == 1 else (64, 128)}
+        tests, residuals = [], {}
+        for name, shape in grids.items():
+            o, e, r = (_coarsen(a, shape) for a in (counts, self.mass, self.err))
+            stat, df, resid = _chi_square(o.reshape(-1), n * e.reshape(-1), n * r.reshape(-1))
+            residuals[name] = resid.reshape(shape)
+            tests.append((f"chi-square {'x'.join(map(str, shape))}", stat, df,
+                          stats.chi2.sf(stat, df) if df > 0 else 1.0,
+                          "large-scale misfit" if name == "coarse" else "narrow features: lobes, bands, steps"))
+        for axis in range(dom.k):
+            shape = tuple(base[a] if a == axis else 1 for a in range(dom.k))
+            o, e, r = (_coarsen(a, shape) for a in (counts, self.mass, self.err))
+            stat, df, _ = _chi_square(o.reshape(-1), n * e.reshape(-1), n * r.reshape(-1))
+            tests.append((f"marginal s{axis} ({base[axis]} bins)", stat, df,
+                          stats.chi2.sf(stat, df) if df > 0 else 1.0, "fine structure along one axis"))
+        # pdf moment: sample mean of h(p(X)) against its cubature value; the variance adds the
+        # cubature error and a rounding floor (a constant pdf makes h constant)
+        e1, e2, e1_err = self.h_moments
+        ps = p[inside & ~bad] * dom.measure
+        hs = ps / (ps + self.c) if self.c > 0 and ps.size else np.zeros(1)
+        denom = math.sqrt(max(e2 - e1 * e1, 0.0) / max(hs.size, 1) + e1_err**2 + 1e-24)
+        z = (float(hs.mean()) - e1) / denom
+        tests.append(("pdf moment", z * z, 1, float(stats.chi2.sf(z * z, 1)), "density wrong where it is high or low"))
+
+        table = pd.DataFrame(tests, columns=["test", "statistic", "df", "pvalue", "detects"])
+        rejected, adjusted = holm(np.nan_to_num(table["pvalue"].to_numpy(), nan=0.0), self.alpha)
+        table["adjusted"] = adjusted
+        passed = not failures and not rejected.any()
+        return SamplerCheck(passed, float(adjusted.min()), self.alpha, n, table, tuple(failures), self.normalization,
+                            residuals)
+
+
 def check_sampler(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.ndarray], np.ndarray],
                   domain: str | tuple | Domain, *, sample_count: int = 1_000_000, seed: int = 0,
                   alpha: float = 0.01, udim: int | None = None) -> SamplerCheck:
@@ -250,7 +364,7 @@ def check_sampler(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.ndarray
     integrating to 1 (adaptive cubature, |integral - 1| above 1e-3 and above 10 times the
     quadrature error: a pdf 0.5 % too large fails here, deterministically).
 
-    Then four statistical tests, combined by Holm at ``alpha`` (the false-alarm rate;
+    Then statistical tests, combined by Holm at ``alpha`` (the false-alarm rate;
     tests/test_sampler_check.py measures it over 200 seeds per correct sampler):
       chi-square, coarse grid   what a sampler gets wrong over large regions;
       chi-square, fine grid     narrow features: a wrong lobe width, a band 10 % too dense;
@@ -260,102 +374,8 @@ def check_sampler(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.ndarray
                                 cubature value: a density wrong where it is high or low.
     Expected counts below 5 are pooled; residual cubature error enters the variance.
     """
-    dom = _domain(domain)
-    n = int(sample_count)
-    if n < 1000:
-        raise ValueError(f"'sample_count' must be at least 1000, got {sample_count!r}")
-    if not 0 < alpha < 1:
-        raise ValueError(f"'alpha' must be in (0, 1), got {alpha!r}")
-    ud = udim or dom.udim
-    u = rest.points(n, ud, seed=seed, case_id=0x5A3F)
-    out = sample(u)
-    x = out[0] if isinstance(out, tuple) else out
-    x = np.asarray(x, dtype=float)
-    want = (n,) if dom.point_dim == 1 else (n, dom.point_dim)
-    if x.reshape(n, -1).shape != (n, dom.point_dim):
-        raise ValueError(f"'sample' must return points of shape {want} for a {dom.kind}, got {x.shape}")
-    x = x.reshape(want)
-    failures: list[dict[str, Any]] = []
-
-    def fail(check: str, mask: np.ndarray, detail: str, values: np.ndarray | None = None) -> None:
-        where = np.flatnonzero(mask)[:5]
-        ex = [{"index": int(i), "point": np.atleast_1d(x[i]).tolist(),
-               **({"value": float(values[i])} if values is not None else {})} for i in where]
-        failures.append({"check": check, "count": int(mask.sum()), "detail": detail, "examples": ex})
-
-    s, inside = dom.to_params(x)
-    if not inside.all():
-        fail("outside_domain", ~inside, f"points outside the {dom.kind}")
-    p = np.asarray(pdf(x), dtype=float).reshape(-1)
-    if p.shape != (n,):
-        raise ValueError(f"'pdf' must return shape ({n},), got {p.shape}")
-    bad = ~np.isfinite(p) | (p < 0)
-    if bad.any():
-        fail("bad_pdf", bad, "pdf NaN, infinite or negative at sampled points", p)
-    zero = (p == 0) & inside
-    if zero.any():
-        fail("zero_pdf", zero, "sampled points where the pdf is 0", p)
-
-    def q(sp: np.ndarray) -> np.ndarray:
-        v = np.asarray(pdf(dom.to_points(sp)), dtype=float).reshape(-1) * dom.measure
-        return v
-
-    # One fine base grid in parameter space, integrated once for [q, h q, h^2 q]; every
-    # test's expected counts and error bounds are sums over its cells.  h = p / (p + c) is
-    # the pdf-moment test's bounded function, c the mean of p under p from a first pass.
-    base = (4096,) if dom.k == 1 else (128, 256)
-    s_in = np.clip(s[inside], 0, np.nextafter(1, 0))
-    counts = _histogram(s_in, base)
-    pre, _ = cell_integrals(lambda sp: np.column_stack([q(sp), q(sp) ** 2]), (64,) if dom.k == 1 else (32, 64),
-                            1e-8, max_depth=8)
-    c = float(pre[:, 1].sum() / max(pre[:, 0].sum(), 1e-300))  # E_q[q], in units of q
-
-    def moments(sp: np.ndarray) -> np.ndarray:
-        v = q(sp)
-        h = v / (v + c) if c > 0 else np.zeros_like(v)
-        return np.column_stack([v, h * v, h * h * v])
-
-    tol = 0.01 * np.sqrt(np.maximum(counts.reshape(-1), 1.0)) / n / (4 if dom.k == 2 else 2)
-    mass3, err3 = cell_integrals(moments, base, tol)
-    if not np.all(np.isfinite(mass3)):
-        failures.append({"check": "bad_pdf_quadrature", "count": int((~np.isfinite(mass3[:, 0])).sum()),
-                         "detail": "pdf NaN or infinite inside cells (cubature)", "examples": []})
-        mass3, err3 = np.nan_to_num(mass3), np.nan_to_num(err3)
-    mass, err = mass3[:, 0].reshape(base), err3[:, 0].reshape(base)
-    normalization = (float(mass.sum()), float(err.sum()))
-    grids = {"coarse": (16,) if dom.k == 1 else (16, 32), "fine": (512,) if dom.k == 1 else (64, 128)}
-    tests, residuals = [], {}
-    for name, shape in grids.items():
-        o, e, r = (_coarsen(a, shape) for a in (counts, mass, err))
-        stat, df, resid = _chi_square(o.reshape(-1), n * e.reshape(-1), n * r.reshape(-1))
-        residuals[name] = resid.reshape(shape)
-        tests.append((f"chi-square {'x'.join(map(str, shape))}", stat, df, stats.chi2.sf(stat, df) if df > 0 else 1.0,
-                      "large-scale misfit" if name == "coarse" else "narrow features: lobes, bands, steps"))
-    for axis in range(dom.k):
-        shape = tuple(base[a] if a == axis else 1 for a in range(dom.k))
-        o, e, r = (_coarsen(a, shape) for a in (counts, mass, err))
-        stat, df, _ = _chi_square(o.reshape(-1), n * e.reshape(-1), n * r.reshape(-1))
-        tests.append((f"marginal s{axis} ({base[axis]} bins)", stat, df, stats.chi2.sf(stat, df) if df > 0 else 1.0,
-                      "fine structure along one axis"))
-    # pdf moment: sample mean of h(p(X)) against its cubature value; the variance adds the
-    # cubature error and a rounding floor (a constant pdf makes h constant)
-    e1, e2 = float(mass3[:, 1].sum()), float(mass3[:, 2].sum())
-    e1_err = float(err3[:, 1].sum())
-    hs = (p[inside & ~bad] * dom.measure) / (p[inside & ~bad] * dom.measure + c) if c > 0 else np.zeros(1)
-    denom = math.sqrt(max(e2 - e1 * e1, 0.0) / max(hs.size, 1) + e1_err**2 + (1e-12) ** 2)
-    z = (float(hs.mean()) - e1) / denom
-    tests.append(("pdf moment", z * z, 1, float(stats.chi2.sf(z * z, 1)), "density wrong where it is high or low"))
-
-    total, total_err = normalization
-    if abs(total - 1) > max(1e-3, 10 * total_err):
-        failures.append({"check": "normalization", "count": 1,
-                         "detail": f"pdf integrates to {total:.6f} ± {total_err:.1e} over the {dom.kind}, not 1",
-                         "examples": []})
-    table = pd.DataFrame(tests, columns=["test", "statistic", "df", "pvalue", "detects"])
-    rejected, adjusted = holm(np.nan_to_num(table["pvalue"].to_numpy(), nan=0.0), alpha)
-    table["adjusted"] = adjusted
-    passed = not failures and not rejected.any()
-    return SamplerCheck(passed, float(adjusted.min()), alpha, n, table, tuple(failures), normalization, residuals)
+    test = SamplerTest(pdf, domain, sample_count=sample_count, alpha=alpha)
+    return test.check(sample, seed=seed, udim=udim)
 
 
 def _histogram(s: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
@@ -421,7 +441,8 @@ def mcmc_crosscheck(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.ndarr
 
     walkers = 32
     start = rng.random((walkers, k))
-    sampler = emcee.EnsembleSampler(walkers, k, log_q, vectorize=True, seed=int(rng.integers(2**31)))
+    sampler = emcee.EnsembleSampler(walkers, k, log_q, vectorize=True)
+    sampler.random_state = np.random.RandomState(int(rng.integers(2**31))).get_state()  # reproducible chains
     steps = 2000
     state = sampler.run_mcmc(start, steps, progress=False)
     tau = float(np.max(sampler.get_autocorr_time(tol=0, quiet=True)))

@@ -1,0 +1,135 @@
+"""check_sampler and mcmc_crosscheck: false alarms and power on the sampler zoo, the
+deterministic checks, and the command line."""
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import stats
+
+import reference_estimators as rest
+from harness import sampler_zoo as zoo
+from harness.sampler_check import SamplerTest, check_sampler, mcmc_crosscheck
+
+CORRECT = zoo.correct()
+WRONG = zoo.wrong()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("s", CORRECT, ids=lambda s: s.name)
+def test_false_alarm_rate_over_200_seeds(s):
+    """alpha = 0.01, 1e5 samples, seeds 0..199: failures must stay below the Binomial(200,
+    0.01) quantile at 1e-3 / (number of correct samplers) (Bonferroni)."""
+    t = SamplerTest(s.pdf, s.domain, sample_count=100_000, alpha=0.01)
+    fails = [seed for seed in range(200) if not t.check(s.sample, seed=seed).passed]
+    bound = stats.binom.isf(1e-3 / len(CORRECT), 200, 0.01)
+    assert len(fails) <= bound, f"{s.name}: {len(fails)} false alarms of 200 (bound {bound:.0f}), seeds {fails[:10]}"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("s", WRONG, ids=lambda s: s.name)
+def test_every_mutant_is_caught_at_one_million_samples(s):
+    t = SamplerTest(s.pdf, s.domain, sample_count=1_000_000)
+    results = [t.check(s.sample, seed=seed) for seed in range(5)]
+    assert not any(r.passed for r in results), f"{s.name} ({s.fault}) passed: {[r.pvalue for r in results]}"
+
+
+def test_a_pdf_half_a_percent_too_large_fails_deterministically():
+    s = WRONG[0]
+    r = check_sampler(s.sample, s.pdf, s.domain, sample_count=10_000)
+    f = {x["check"]: x for x in r.failures}
+    assert not r.passed and "normalization" in f and "1.005000" in f["normalization"]["detail"]
+    assert r.normalization[0] == pytest.approx(1.005, abs=1e-9)
+
+
+def test_points_outside_the_domain_and_bad_pdfs_are_reported_with_examples():
+    def sample(u):
+        w = rest.sampler("cosine_hemisphere").sample(u)[0]
+        w[:10, 2] *= -1  # ten points below the horizon
+        return w
+
+    def pdf(w):
+        p = np.where(w[:, 2] > 0, w[:, 2] / math.pi, 0.0)
+        p[np.abs(w[:, 0] - 0.5) < 1e-4] = np.nan
+        return p
+
+    r = check_sampler(sample, pdf, "hemisphere", sample_count=20_000)
+    f = {x["check"]: x for x in r.failures}
+    assert not r.passed and f["outside_domain"]["count"] == 10
+    assert f["outside_domain"]["examples"][0]["index"] == 0 and f["outside_domain"]["examples"][0]["point"][2] < 0
+    assert f["bad_pdf"]["count"] > 0 and math.isnan(f["bad_pdf"]["examples"][0]["value"])
+    assert "outside_domain: 10" in str(r)
+
+
+def test_samples_where_the_pdf_is_zero_are_reported():
+    cone = rest.sampler("uniform_cone", cos_max=0.9)
+    narrower = rest.sampler("uniform_cone", cos_max=0.91)
+    r = check_sampler(lambda u: cone.sample(u)[0], narrower.pdf, "sphere", sample_count=20_000)
+    f = {x["check"]: x for x in r.failures}
+    assert not r.passed and f["zero_pdf"]["count"] > 1000 and f["zero_pdf"]["examples"]
+
+
+def test_result_is_a_table_not_a_bare_bool():
+    s = CORRECT[4]
+    r = check_sampler(s.sample, s.pdf, s.domain, sample_count=50_000, seed=1)
+    assert list(r.tests.columns) == ["test", "statistic", "df", "pvalue", "detects", "adjusted"]
+    assert list(r.tests["test"]) == ["chi-square 16x32", "chi-square 64x128", "marginal s0 (128 bins)",
+                                     "marginal s1 (256 bins)", "pdf moment"]
+    assert bool(r) == r.passed and r.residuals["fine"].shape == (64, 128) and "PASSED" in str(r)
+
+
+@pytest.mark.parametrize("kwargs, error, message", [
+    ({"domain": "cube"}, ValueError, r"'domain' must be one of \('interval', 'square', 'disk', 'hemisphere', 'sphere'\)"),
+    ({"domain": ("interval", 2, 1)}, ValueError, r"\('interval', a, b\) with a < b"),
+    ({"sample_count": 10}, ValueError, r"'sample_count' must be at least 1000, got 10"),
+    ({"alpha": 0.0}, ValueError, r"'alpha' must be in \(0, 1\)"),
+])
+def test_bad_arguments(kwargs, error, message):
+    s = CORRECT[0]
+    args = {"domain": s.domain, **kwargs}
+    with pytest.raises(error, match=message):
+        check_sampler(s.sample, s.pdf, **args)
+
+
+def test_wrong_point_shapes_are_named():
+    with pytest.raises(ValueError, match=r"'sample' must return points of shape \(5000, 3\) for a hemisphere"):
+        check_sampler(lambda u: u, lambda x: np.ones(len(x)), "hemisphere", sample_count=5000)
+
+
+@pytest.mark.slow
+def test_mcmc_crosscheck_holds_alpha_and_sees_a_wrong_sampler():
+    """emcee draws from the claimed pdf, thinned by 2 tau: 20 seeds of a correct sampler at
+    alpha = 0.01 may fail at most 3 times (Binomial(20, 0.01) upper 1e-3 quantile); a
+    cosine-weighted sampler claiming a uniform hemisphere fails."""
+    cos = rest.sampler("cosine_hemisphere")
+    fails = sum(not mcmc_crosscheck(lambda u: cos.sample(u)[0], cos.pdf, "hemisphere", sample_count=5000,
+                                    seed=seed).passed for seed in range(20))
+    assert fails <= stats.binom.isf(1e-3, 20, 0.01), fails
+    r = mcmc_crosscheck(lambda u: cos.sample(u)[0], lambda w: np.full(len(w), 0.5 / math.pi), "hemisphere",
+                        sample_count=5000)
+    assert not r.passed and r.tests.attrs["thin"] >= 1
+
+
+def test_cli_check_sampler(tmp_path):
+    mod = tmp_path / "my_sampler.py"
+    mod.write_text("import numpy as np, math\n"
+                   "import reference_estimators as rest\n"
+                   "_s = rest.sampler('ggx', alpha=0.1)\n"
+                   "def good():\n    return (lambda u: _s.sample(u)[0], _s.pdf, 'hemisphere')\n"
+                   "def bad():\n    return (lambda u: _s.sample(u)[0], lambda w: 1.01 * _s.pdf(w), 'hemisphere')\n")
+    harness = str(Path(sys.executable).with_name("harness"))
+    env = {"PYTHONPATH": str(tmp_path)}
+    import os
+    env = {**os.environ, **env}
+    r = subprocess.run([harness, "check-sampler", "my_sampler:good", "--samples", "200000"], capture_output=True,
+                       text=True, env=env, timeout=300)
+    assert r.returncode == 0 and "PASSED" in r.stdout and "summary: 1 passed, 0 failed" in r.stdout, r.stdout + r.stderr
+    r = subprocess.run([harness, "check-sampler", "my_sampler:bad", "--samples", "200000"], capture_output=True,
+                       text=True, env=env, timeout=300)
+    assert r.returncode == 1 and "normalization" in r.stdout and "1.010000" in r.stdout
+    r = subprocess.run([harness, "check-sampler", "my_sampler:nope"], capture_output=True, text=True, env=env)
+    assert r.returncode == 2 and "cannot load 'my_sampler:nope'" in r.stderr
