@@ -89,7 +89,7 @@ class Domain:
             r2 = x[:, 0] ** 2 + x[:, 1] ** 2
             return np.column_stack([r2, phi]), np.all(np.isfinite(x), axis=1) & (r2 <= 1 + 1e-12)
         norm = np.einsum("ij,ij->i", x, x)
-        ok = np.all(np.isfinite(x), axis=1) & (np.abs(norm - 1) <= 1e-6)
+        ok = np.all(np.isfinite(x), axis=1) & (np.abs(norm - 1) <= 1e-5)  # float32 unit vectors
         z = np.clip(x[:, 2], -1, 1)
         if self.kind == "hemisphere":
             return np.column_stack([z, phi]), ok & (x[:, 2] >= -1e-12)

@@ -42,7 +42,8 @@ struct Domain {
         return 0;
     }
 
-    // Closed membership; directions must be unit length to 1e-9 in |w|^2.
+    // Closed membership; directions must be unit length to 1e-5 in |w|^2 (float32 renderers
+    // hand over unit vectors with |w|^2 - 1 of order 1e-7).
     bool contains(const double *x) const {
         switch (kind) {
             case DomainKind::Box:
@@ -53,7 +54,7 @@ struct Domain {
             case DomainKind::Hemisphere:
             case DomainKind::Sphere: {
                 double r2 = x[0] * x[0] + x[1] * x[1] + x[2] * x[2];
-                if (!(std::fabs(r2 - 1.0) <= 1e-9)) return false;
+                if (!(std::fabs(r2 - 1.0) <= 1e-5)) return false;
                 return kind == DomainKind::Sphere || x[2] >= 0;
             }
         }
