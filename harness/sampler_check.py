@@ -4,12 +4,13 @@ Every domain is mapped onto the unit interval or square with a constant Jacobian
 cells there are cells of equal measure:
 
     interval [a, b]   s = (x - a) / (b - a)                  |D| = b - a
+    half_line [0,inf) s = x / (1 + x)                         dx/ds = 1 / (1 - s)^2 (not constant)
     square [0, 1]^2   s = (x, y)                              |D| = 1
     disk (unit)       s = (r^2, phi / 2 pi)                   |D| = pi
     hemisphere (z>0)  s = (cos theta, phi / 2 pi)             |D| = 2 pi   (solid angle)
     sphere            s = ((1 - cos theta) / 2, phi / 2 pi)   |D| = 4 pi
 
-and the claimed density there is q(s) = |D| pdf(x(s)).  Expected cell counts come from
+and the claimed density there is q(s) = |D| pdf(x(s)) (pdf(x(s)) dx/ds on the half line).  Expected cell counts come from
 adaptive tensor Gauss-Legendre cubature of q over each cell, refined where two rules disagree,
 until the error is far below the cell's Poisson noise; what error remains is added to the
 chi-square's variance, so a sharp lobe, a step inside a cell or an integrable singularity
@@ -33,7 +34,7 @@ from .stats import holm
 
 __all__ = ["Domain", "SamplerCheck", "SamplerTest", "check_sampler", "mcmc_crosscheck", "DOMAINS"]
 
-DOMAINS = ("interval", "square", "disk", "hemisphere", "sphere")
+DOMAINS = ("interval", "half_line", "square", "disk", "hemisphere", "sphere")
 
 
 # --- domains ---------------------------------------------------------------------------------
@@ -47,7 +48,7 @@ class Domain:
 
     @property
     def k(self) -> int:
-        return 1 if self.kind == "interval" else 2
+        return 1 if self.kind in ("interval", "half_line") else 2
 
     @property
     def udim(self) -> int:
@@ -55,16 +56,20 @@ class Domain:
 
     @property
     def point_dim(self) -> int:
-        return {"interval": 1, "square": 2, "disk": 2, "hemisphere": 3, "sphere": 3}[self.kind]
+        return {"interval": 1, "half_line": 1, "square": 2, "disk": 2, "hemisphere": 3, "sphere": 3}[self.kind]
 
-    @property
-    def measure(self) -> float:
+    def jacobian(self, s: np.ndarray) -> np.ndarray | float:
+        """Measure of the domain per unit of parameter space at s (|D| where constant)."""
+        if self.kind == "half_line":
+            return 1.0 / (1.0 - s[:, 0]) ** 2
         return {"interval": self.hi - self.lo, "square": 1.0, "disk": math.pi, "hemisphere": 2 * math.pi,
                 "sphere": 4 * math.pi}[self.kind]
 
     def to_points(self, s: np.ndarray) -> np.ndarray:
         if self.kind == "interval":
             return self.lo + (self.hi - self.lo) * s[:, 0]
+        if self.kind == "half_line":
+            return s[:, 0] / (1.0 - s[:, 0])
         if self.kind == "square":
             return s.copy()
         phi = 2 * math.pi * s[:, 1]
@@ -82,6 +87,9 @@ class Domain:
             x = x.reshape(-1)
             s = ((x - self.lo) / (self.hi - self.lo))[:, None]
             return s, np.isfinite(x) & (x >= self.lo) & (x <= self.hi)
+        if self.kind == "half_line":
+            x = x.reshape(-1)
+            return (x / (1.0 + x))[:, None], np.isfinite(x) & (x >= 0)
         if self.kind == "square":
             return x.copy(), np.all(np.isfinite(x), axis=1) & np.all((x >= 0) & (x <= 1), axis=1)
         phi = np.mod(np.arctan2(x[:, 1], x[:, 0]) / (2 * math.pi), 1.0)
@@ -274,7 +282,7 @@ class SamplerTest:
 
     def q(self, sp: np.ndarray) -> np.ndarray:
         """The claimed density in parameter space: |D| pdf(x(s))."""
-        return np.asarray(self.pdf(self.dom.to_points(sp)), dtype=float).reshape(-1) * self.dom.measure
+        return np.asarray(self.pdf(self.dom.to_points(sp)), dtype=float).reshape(-1) * self.dom.jacobian(sp)
 
     def check(self, sample: Callable[[np.ndarray], Any], *, seed: int = 0, udim: int | None = None) -> SamplerCheck:
         dom, n, base = self.dom, self.n, self.base
@@ -333,7 +341,8 @@ class SamplerTest:
         # pdf moment: sample mean of h(p(X)) against its cubature value; the variance adds the
         # cubature error and a rounding floor (a constant pdf makes h constant)
         e1, e2, e1_err = self.h_moments
-        ps = p[inside & ~bad] * dom.measure
+        jac = dom.jacobian(s)
+        ps = (p * jac)[inside & ~bad] if np.ndim(jac) else p[inside & ~bad] * jac
         hs = ps / (ps + self.c) if self.c > 0 and ps.size else np.zeros(1)
         denom = math.sqrt(max(e2 - e1 * e1, 0.0) / max(hs.size, 1) + e1_err**2 + 1e-24)
         z = (float(hs.mean()) - e1) / denom

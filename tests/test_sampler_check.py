@@ -83,7 +83,7 @@ def test_result_is_a_table_not_a_bare_bool():
 
 
 @pytest.mark.parametrize("kwargs, error, message", [
-    ({"domain": "cube"}, ValueError, r"'domain' must be one of \('interval', 'square', 'disk', 'hemisphere', 'sphere'\)"),
+    ({"domain": "cube"}, ValueError, r"'domain' must be one of \('interval', 'half_line', 'square', 'disk', 'hemisphere', 'sphere'\)"),
     ({"domain": ("interval", 2, 1)}, ValueError, r"\('interval', a, b\) with a < b"),
     ({"sample_count": 10}, ValueError, r"'sample_count' must be at least 1000, got 10"),
     ({"alpha": 0.0}, ValueError, r"'alpha' must be in \(0, 1\)"),
@@ -133,3 +133,41 @@ def test_cli_check_sampler(tmp_path):
     assert r.returncode == 1 and "normalization" in r.stdout and "1.010000" in r.stdout
     r = subprocess.run([harness, "check-sampler", "my_sampler:nope"], capture_output=True, text=True, env=env)
     assert r.returncode == 2 and "cannot load 'my_sampler:nope'" in r.stderr
+
+
+def _registry_cases():
+    out = []
+    for info in rest.samplers():
+        table = None
+        if info["name"] == "piecewise_constant_1d":
+            table = np.array([1.0, 0.0, 3.0, 0.5])
+        elif info["name"] == "piecewise_constant_2d":
+            table = np.random.default_rng(1).random((8, 16))
+        s = rest.sampler(info["name"], table=table) if table is not None else rest.sampler(info["name"])
+        out.append(pytest.param(s, info["domain"], id=info["name"]))
+    return out
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("s, domain", _registry_cases())
+def test_every_catalogue_sampler_passes_at_one_million_samples(s, domain):
+    """Registry defaults, seed 0, alpha = 0.01 each (the seed was fixed before the run)."""
+    r = check_sampler(lambda u: s.sample(u)[0], s.pdf, domain, sample_count=1_000_000, seed=0)
+    assert r.passed, str(r)
+
+
+def test_a_rejection_sampler_passes_and_its_broken_twin_fails():
+    lin = rest.sampler("linear", a=1.0, b=0.37)
+    good = rest.rejection_sampler("gaussian", lin, c=1.2)
+    r = check_sampler(lambda u: good.draw(len(u), seed=5)[0], good.pdf, "interval", sample_count=200_000)
+    assert r.passed, str(r)
+    broken = rest.rejection_sampler("gaussian", lin, c=0.5)  # bound violated: too few points where f > c p
+    r = check_sampler(lambda u: broken.draw(len(u), seed=5)[0], broken.pdf, "interval", sample_count=200_000)
+    assert not r.passed
+
+
+def test_half_line_domain_for_heavy_tails():
+    lomax, expo = rest.sampler("lomax", shape=1.0), rest.sampler("exponential", rate=1.0)
+    assert check_sampler(lambda u: lomax.sample(u)[0], lomax.pdf, "half_line", sample_count=200_000).passed
+    # exponential points claimed to be Lomax-distributed
+    assert not check_sampler(lambda u: expo.sample(u)[0], lomax.pdf, "half_line", sample_count=200_000).passed
