@@ -10,7 +10,7 @@ import reference_estimators as rest
 
 from tqdm import tqdm
 
-from .runner import bad_verdicts, format_table, results_table, run_suite
+from .runner import bad_verdicts, format_sampler_table, format_table, judge_samplers, results_table, run_suite
 from .store import load
 from .suite import SuiteError, load_suite
 
@@ -70,15 +70,23 @@ def _run(suite, db: str, threads: int | None, csv: str | None, dask: str | None)
     print(f"suite {suite.name!r} ({suite.path}): {len(summary.results)} cases, seed {suite.seed}, "
           f"family-wise alpha {suite.alpha:g} (Holm), {suite.batches} batches per bias test, "
           f"{suite.replicas} replicas per budget")
-    print(format_table(df, suite.alpha))
+    if len(df):
+        print(format_table(df, suite.alpha))
+    if summary.samplers:
+        print("\nsampler checks (chi-square and friends; MCMC cross-check):")
+        print(format_sampler_table(summary.samplers, suite.alpha))
     print(f"\n{len(summary.results)} cases in {summary.seconds:.1f} s: {summary.units_run} of {summary.units_planned} "
           f"work units computed, the rest read from {summary.db}.  t: Student t of {suite.batches} batch means "
           f"against the exact value; RMSE slope: log-log fit over budgets (expected -0.5 for Monte Carlo); "
           f"1/(V·T): efficiency (background eq. 5) against uniform MC on the same integrand.")
-    bad = bad_verdicts(df)
+    bad = bad_verdicts(df) if len(df) else df
     for _, row in bad.iterrows():
         print(f"  FAILED {row['integrand']}/{row['technique']}: {row['verdict']} (p = {row['pvalue']:.3g}) {row['notes']}")
-    print(f"summary: {len(df) - len(bad)} passed, {len(bad)} failed")
+    sampler_bad = [r for r, v in zip(summary.samplers, judge_samplers(summary.samplers, suite.alpha)) if "failed" in v.values()]
+    for r in sampler_bad:
+        print(f"  FAILED sampler {r.case.label} on the {r.case.domain}")
+    failed = len(bad) + len(sampler_bad)
+    print(f"summary: {len(df) + len(summary.samplers) - failed} passed, {failed} failed")
     if csv:
         df.to_csv(csv, index=False)
         print(f"table written to {csv}")

@@ -33,6 +33,8 @@ def compute(job: UnitJob) -> tuple[tuple, dict[str, Any], float]:
     estimate's contributions (for the tail-index test)."""
     key, integrand, technique, seed, core_case = job
     _, _, budget, replica, c0, c1, kind = key
+    if kind in ("chi_square", "mcmc"):
+        return key, *_sampler_check(kind, integrand, seed)
     f = rest.integrand(integrand)
     t = rest.technique(f, technique)
     start = time.perf_counter()
@@ -44,6 +46,26 @@ def compute(job: UnitJob) -> tuple[tuple, dict[str, Any], float]:
         center = float(np.median(y))
         payload = {"center": center, "upper": _top(y - center, keep), "lower": _top(center - y, keep)}
     return key, payload, time.perf_counter() - start
+
+
+def _sampler_check(kind: str, spec_json: str, seed: int) -> tuple[dict[str, Any], float]:
+    """A sampler-check unit: 'integrand' carries the sampler's JSON spec (plan.sampler_spec)."""
+    import json
+
+    from .sampler_check import check_sampler, mcmc_crosscheck
+
+    spec = json.loads(spec_json)
+    s = rest.sampler(spec["name"], **spec["params"])
+    start = time.perf_counter()
+    if kind == "chi_square":
+        r = check_sampler(lambda u: s.sample(u)[0], s.pdf, spec["domain"], sample_count=spec["samples"], seed=seed)
+    else:
+        r = mcmc_crosscheck(lambda u: s.sample(u)[0], s.pdf, spec["domain"], sample_count=min(spec["samples"], 20_000),
+                            seed=seed)
+    payload = {"passed": r.passed, "pvalue": r.pvalue, "tests": json.loads(r.tests.to_json(orient="records")),
+               "failures": json.loads(json.dumps(list(r.failures), default=float)),
+               "normalization": [float(v) for v in r.normalization]}
+    return payload, time.perf_counter() - start
 
 
 def _top(d: np.ndarray, keep: int) -> list[float]:

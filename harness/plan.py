@@ -14,10 +14,10 @@ from dataclasses import dataclass
 
 import reference_estimators as rest
 
-from .suite import MEASUREMENTS, Case, Suite
+from .suite import MEASUREMENTS, Case, SamplerCase, Suite
 
-__all__ = ["UNIT_CHUNKS", "MEASUREMENTS", "Unit", "case_key", "bias_budget", "bias_stream", "convergence_budgets",
-           "plan"]
+__all__ = ["UNIT_CHUNKS", "MEASUREMENTS", "Unit", "case_key", "sampler_key", "sampler_spec", "bias_budget",
+           "bias_stream", "convergence_budgets", "plan"]
 
 UNIT_CHUNKS = 32                     # core chunks (of 65 536 samples) per stored unit
 BIAS_STREAM = 0                      # stream 0: the bias test's batches; 1 + i: convergence budget i;
@@ -46,6 +46,19 @@ def case_key(suite: Suite, case: Case) -> str:
                   "case_id": case.case_id, "unit_chunks": UNIT_CHUNKS, "format": _FORMAT,
                   "core": rest.__version__, "build": rest.core_fingerprint()}
     return hashlib.sha256(json.dumps(definition, sort_keys=True).encode()).hexdigest()[:24]
+
+
+def sampler_key(suite: Suite, sc: SamplerCase) -> str:
+    """Fingerprint of a sampler check: the sampler, its parameters, domain, samples and seed."""
+    definition = {"sampler": sc.name, "params": list(sc.params), "domain": sc.domain, "samples": sc.samples,
+                  "seed": suite.seed, "case_id": sc.case_id, "format": _FORMAT, "core": rest.__version__,
+                  "build": rest.core_fingerprint()}
+    return hashlib.sha256(json.dumps(definition, sort_keys=True).encode()).hexdigest()[:24]
+
+
+def sampler_spec(sc: SamplerCase) -> str:
+    """What a worker needs to rebuild the sampler (JSON)."""
+    return json.dumps({"name": sc.name, "params": dict(sc.params), "domain": sc.domain, "samples": sc.samples})
 
 
 def bias_budget(suite: Suite, case: Case, look: int = 0) -> int:
@@ -97,4 +110,7 @@ def plan(suite: Suite, looks: dict[str, int] | None = None) -> dict[str, list[Un
             for r in range(suite.replicas):
                 units += _estimate_units(key, 1 + i, b, r)
         out[key] = units
+    for sc in suite.samplers:  # one unit per check: it is cheap, and stored so a rerun skips it
+        key = sampler_key(suite, sc)
+        out[key] = [Unit(key, 0, sc.samples, 0, 0, 0, m) for m in sc.measurements]
     return out

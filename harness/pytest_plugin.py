@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from .runner import RunSummary, judge, judge_convergence, run_suite
+from .runner import RunSummary, judge, judge_convergence, judge_samplers, run_suite
 from .suite import Suite, SuiteError, load_suite
 
 
@@ -48,6 +48,8 @@ class SuiteFile(pytest.File):
         self.summary: RunSummary | None = None
         for i, case in enumerate(suite.cases):
             yield CaseItem.from_parent(self, name=f"{case.integrand}/{case.technique}#{case.case_id}", index=i)
+        for i, sc in enumerate(suite.samplers):
+            yield SamplerItem.from_parent(self, name=f"sampler:{sc.label}@{sc.domain}#{sc.case_id}", index=i)
 
     def run(self) -> RunSummary:
         if self.summary is None:
@@ -100,3 +102,25 @@ class CaseItem(pytest.Item):
 
     def reportinfo(self):
         return self.path, None, f"suite case {self.name}"
+
+
+class SamplerItem(CaseItem):
+    """A [[sampler]] table: its chi-square (and MCMC) checks must pass, Holm over the suite."""
+
+    def runtest(self) -> None:
+        summary = self.parent.run()
+        suite: Suite = self.parent.suite
+        r = summary.samplers[self.index]
+        verdicts = judge_samplers(summary.samplers, suite.alpha)[self.index]
+        problems = []
+        for m, c in r.checks.items():
+            if verdicts[m] == "failed":
+                tests = "\n".join(f"    {t['test']}: statistic {t['statistic']:.4g}, p {t['pvalue']:.3g}, "
+                                   f"detects {t['detects']}" for t in c["tests"])
+                fails = "".join(f"\n  {f['check']}: {f['count']} ({f['detail']}), e.g. {f['examples'][:2]}"
+                                for f in c["failures"])
+                problems.append(f"{m}: p = {c['pvalue']:.3g} (Holm-adjusted over the suite: {verdicts[m + '_adjusted']}), "
+                                f"family-wise alpha = {suite.alpha}, {r.case.samples} samples; expected: the sampler "
+                                f"draws what its pdf claims{fails}\n{tests}")
+        if problems:
+            raise CaseFailure("\n".join(problems))

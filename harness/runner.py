@@ -27,12 +27,12 @@ import dataclasses
 
 from scipy import stats as sps
 
-from .plan import Unit, bias_budget, bias_stream, case_key, convergence_budgets, plan
+from .plan import Unit, bias_budget, bias_stream, case_key, convergence_budgets, plan, sampler_key, sampler_spec
 from .store import Store
-from .suite import Case, Suite
+from .suite import Case, SamplerCase, Suite
 
-__all__ = ["CaseResult", "RunSummary", "run_suite", "results_table", "format_table", "judge", "judge_convergence",
-           "bad_verdicts"]
+__all__ = ["CaseResult", "SamplerResult", "RunSummary", "run_suite", "results_table", "format_table", "judge",
+           "judge_convergence", "judge_samplers", "format_sampler_table", "bad_verdicts"]
 
 _COMMIT_EVERY = 0.1  # seconds between commits: a kill loses at most this much finished work
 
@@ -59,12 +59,20 @@ class CaseResult:
 
 
 @dataclass(frozen=True)
+class SamplerResult:
+    case: SamplerCase
+    key: str
+    checks: dict[str, dict[str, Any]]   # measurement -> stored payload (passed, pvalue, tests, failures)
+
+
+@dataclass(frozen=True)
 class RunSummary:
     results: list[CaseResult]
     units_planned: int
     units_run: int
     seconds: float
     db: Path
+    samplers: list[SamplerResult] = dataclasses.field(default_factory=list)
 
 
 def run_suite(suite: Suite, db: str | Path, *, threads: int | None = None, dask: str | None = None,
@@ -81,7 +89,13 @@ def run_suite(suite: Suite, db: str | Path, *, threads: int | None = None, dask:
                            {"seed": suite.seed, "case_id": c.case_id, "samples": c.samples})
         looks = {k: 0 for k, c in case_of.items() if c.target is not None}
 
+        sampler_of = {sampler_key(suite, sc): sc for sc in suite.samplers}
+        for key, sc in sampler_of.items():
+            store.add_case(key, suite.name, f"sampler:{sc.label}", sc.domain, {"seed": suite.seed, "samples": sc.samples})
+
         def job(u: Unit) -> UnitJob:
+            if u.case_key in sampler_of:
+                return (u.key, sampler_spec(sampler_of[u.case_key]), "", suite.seed, 0)
             c = case_of[u.case_key]
             return (u.key, c.integrand, c.technique, suite.seed, _core_case(c, u.stream))
 
@@ -116,8 +130,10 @@ def run_suite(suite: Suite, db: str | Path, *, threads: int | None = None, dask:
             if not grown:
                 break
         results = [_measure(suite, c, store.payloads(k), looks.get(k, 0)) for k, c in case_of.items()]
-        store.put_measurements(_measurement_rows(suite, results))
-        return RunSummary(results, total, ran, time.perf_counter() - start, Path(db))
+        samplers = [SamplerResult(sc, k, {key[6]: p for key, p in store.payloads(k).items()})
+                    for k, sc in sampler_of.items()]
+        store.put_measurements(_measurement_rows(suite, results) + _sampler_rows(suite, samplers))
+        return RunSummary(results, total, ran, time.perf_counter() - start, Path(db), samplers)
     finally:
         store.close()
 
@@ -230,6 +246,43 @@ def _measurement_rows(suite: Suite, results: list[CaseResult]) -> list[dict[str,
             rows.append({**base, "measurement": "rmse", "value": top["rmse"], "lo": top["rmse_lo"], "hi": top["rmse_hi"],
                          "n": int(top["n"]), "detail": {"error_vs_time": r.error_vs_time.to_dict("list")}})
     return rows
+
+
+def judge_samplers(samplers: list[SamplerResult], alpha: float) -> list[dict[str, str]]:
+    """Verdict per sampler check, Holm over all of the suite's checks at family-wise alpha:
+    'passed' or 'failed' (deterministic failures always fail)."""
+    flat = [(i, m, c) for i, r in enumerate(samplers) for m, c in r.checks.items()]
+    rejected, adjusted = stats.holm([c["pvalue"] for _, _, c in flat], alpha) if flat else ([], [])
+    out: list[dict[str, str]] = [{} for _ in samplers]
+    for (i, m, c), rej, adj in zip(flat, rejected, adjusted):
+        out[i][m] = "failed" if (rej or c["failures"]) else "passed"
+        out[i][m + "_adjusted"] = f"{adj:.3g}"
+    return out
+
+
+def _sampler_rows(suite: Suite, samplers: list[SamplerResult]) -> list[dict[str, Any]]:
+    rows = []
+    for r, v in zip(samplers, judge_samplers(samplers, suite.alpha)):
+        for m, c in r.checks.items():
+            rows.append({"case_key": r.key, "suite": suite.name, "integrand": f"sampler:{r.case.label}",
+                         "technique": r.case.domain, "measurement": m, "value": c["pvalue"], "n": r.case.samples,
+                         "pvalue": c["pvalue"], "alpha": suite.alpha, "verdict": v[m],
+                         "detail": {"tests": c["tests"], "failures": c["failures"], "normalization": c["normalization"]}})
+    return rows
+
+
+def format_sampler_table(samplers: list[SamplerResult], alpha: float) -> str:
+    """Sampler checks as aligned text: p-values (within-check Holm), suite verdicts (Holm)."""
+    lines = [f"{'sampler':34s} {'domain':10s} {'n':>7s}  {'chi-square p':>12s}  {'mcmc p':>8s}  verdict (Holm, α={alpha:g})"]
+    for r, v in zip(samplers, judge_samplers(samplers, alpha)):
+        cs, mc = r.checks.get("chi_square"), r.checks.get("mcmc")
+        verdict = "failed" if "failed" in v.values() else "passed"
+        notes = "; ".join(f"{f['check']}: {f['count']}" for c in r.checks.values() for f in c["failures"])
+        p_cs = f"{cs['pvalue']:.3g}" if cs else "—"
+        p_mc = f"{mc['pvalue']:.3g}" if mc else "—"
+        lines.append(f"{r.case.label[:34]:34s} {r.case.domain:10s} {r.case.samples:7.0e}  {p_cs:>12s}  {p_mc:>8s}  "
+                     f"{verdict}{'  ' + notes if notes else ''}")
+    return "\n".join(lines)
 
 
 def judge_convergence(results: list[CaseResult], alpha: float) -> list[str]:

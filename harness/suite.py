@@ -32,7 +32,7 @@ from typing import Any
 
 import reference_estimators as rest
 
-__all__ = ["Suite", "Case", "SuiteError", "load_suite"]
+__all__ = ["Suite", "Case", "SamplerCase", "SuiteError", "load_suite"]
 
 
 class SuiteError(ValueError):
@@ -40,6 +40,23 @@ class SuiteError(ValueError):
 
 
 MEASUREMENTS = ("bias", "variance", "convergence", "efficiency", "error_vs_time")
+SAMPLER_MEASUREMENTS = ("chi_square", "mcmc")
+
+
+@dataclass(frozen=True)
+class SamplerCase:
+    """A catalogue sampler checked against its pdf (harness.sampler_check)."""
+
+    name: str
+    params: tuple[tuple[str, float], ...]
+    domain: str
+    samples: int
+    case_id: int
+    measurements: tuple[str, ...] = ("chi_square",)
+
+    @property
+    def label(self) -> str:
+        return self.name + ("(" + ", ".join(f"{k}={v:g}" for k, v in self.params) + ")" if self.params else "")
 
 
 @dataclass(frozen=True)
@@ -75,10 +92,12 @@ class Suite:
     batches: int = 64
     replicas: int = 32
     budgets: tuple[int, ...] | None = None
+    samplers: tuple[SamplerCase, ...] = ()
 
 
 _SUITE_KEYS = {"name": str, "seed": int, "samples": int, "threads": int, "alpha": float, "batches": int,
                "replicas": int, "budgets": list, "measurements": list}
+_SAMPLER_KEYS = {"name": str, "params": dict, "domain": str, "samples": int, "measurements": list}
 _CASE_KEYS = {"integrand": str, "techniques": (str, list), "samples": int, "measurements": list, "target": float,
               "max_samples": int}
 
@@ -97,8 +116,8 @@ def load_suite(path: str | Path) -> Suite:
     where = _Locator(path, text)
 
     for key in data:
-        if key not in ("suite", "case"):
-            raise SuiteError(where.at(None, key, f"unknown table {key!r}; expected [suite] and [[case]] tables"))
+        if key not in ("suite", "case", "sampler"):
+            raise SuiteError(where.at(None, key, f"unknown table {key!r}; expected [suite], [[case]] and [[sampler]] tables"))
     head = data.get("suite", {})
     if not isinstance(head, dict):
         raise SuiteError(where.at(None, "suite", "expected a [suite] table"))
@@ -129,8 +148,8 @@ def load_suite(path: str | Path) -> Suite:
     measurements = _measurements(head.get("measurements", list(MEASUREMENTS)), where, "suite")
 
     raw_cases = data.get("case", [])
-    if not isinstance(raw_cases, list) or not raw_cases:
-        raise SuiteError(where.at(None, "case", "expected at least one [[case]] table"))
+    if not isinstance(raw_cases, list) or (not raw_cases and not data.get("sampler")):
+        raise SuiteError(where.at(None, "case", "expected at least one [[case]] (or [[sampler]]) table"))
     cases: list[Case] = []
     for i, c in enumerate(raw_cases):
         table = ("case", i)
@@ -161,8 +180,43 @@ def load_suite(path: str | Path) -> Suite:
                                               f"expected one of: {', '.join(known)}"))
                 target, max_samples = _target(c, case_samples, rest.integrand(name), where, table)
                 cases.append(Case(name, t, case_samples, len(cases), case_measurements, target, max_samples))
+    samplers = _samplers(data.get("sampler", []), samples, len(cases), where)
     return Suite(head.get("name", path.stem), path, seed, samples, threads or None, tuple(cases), float(alpha),
-                 batches, replicas, budgets)
+                 batches, replicas, budgets, samplers)
+
+
+def _samplers(raw: list[dict[str, Any]], samples: int, first_id: int, where: "_Locator") -> tuple[SamplerCase, ...]:
+    from .sampler_check import DOMAINS
+
+    out = []
+    registry = {s["name"]: s for s in rest.samplers()}
+    for i, c in enumerate(raw):
+        table = ("sampler", i)
+        _check_keys(c, _SAMPLER_KEYS, where, table)
+        name = c.get("name")
+        if name not in registry:
+            raise SuiteError(where.at(table, "name", f"unknown sampler {name!r}; expected one of: {', '.join(registry)}"))
+        if registry[name]["needs_table"]:
+            raise SuiteError(where.at(table, "name", f"sampler {name!r} needs a table of values: test it from Python"))
+        params = c.get("params", {})
+        try:
+            rest.sampler(name, **params)
+        except (ValueError, TypeError) as e:
+            raise SuiteError(where.at(table, "params", str(e))) from None
+        domain = c.get("domain", registry[name]["domain"])
+        if domain not in DOMAINS:
+            raise SuiteError(where.at(table, "domain", f"expected one of: {', '.join(DOMAINS)}, got {domain!r}"))
+        n = c.get("samples", samples)
+        if n < 1000:
+            raise SuiteError(where.at(table, "samples", f"expected at least 1000 samples, got {n}"))
+        ms = c.get("measurements", ["chi_square"])
+        for m in ms:
+            if m not in SAMPLER_MEASUREMENTS:
+                raise SuiteError(where.at(table, "measurements", f"unknown sampler measurement {m!r}; expected some of: "
+                                          f"{', '.join(SAMPLER_MEASUREMENTS)}"))
+        out.append(SamplerCase(name, tuple(sorted((k, float(v)) for k, v in params.items())), domain, n,
+                               first_id + i, tuple(dict.fromkeys(ms)) or ("chi_square",)))
+    return tuple(out)
 
 
 def _check_keys(table: dict[str, Any], spec: dict[str, Any], where: "_Locator", name: Any) -> None:
@@ -197,8 +251,9 @@ def _target(c: dict[str, Any], samples: int, f: Any, where: "_Locator", table: A
 def _measurements(names: list[Any], where: "_Locator", table: Any) -> tuple[str, ...]:
     for m in names:
         if m not in MEASUREMENTS:
+            hint = " (sampler checks go in [[sampler]] tables)" if m in SAMPLER_MEASUREMENTS else ""
             raise SuiteError(where.at(table, "measurements", f"unknown measurement {m!r}; expected some of: "
-                                      f"{', '.join(MEASUREMENTS)}"))
+                                      f"{', '.join(MEASUREMENTS)}{hint}"))
     if not names:
         raise SuiteError(where.at(table, "measurements", "expected at least one measurement"))
     return tuple(dict.fromkeys(names))

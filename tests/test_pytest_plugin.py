@@ -22,8 +22,12 @@ def pytest_run(*args: str, cwd=None) -> subprocess.CompletedProcess:
 def test_ci_suite_collects_every_case_and_passes(root, tmp_path):
     r = pytest_run("suites/ci.toml", "--harness-db", str(tmp_path / "ci.sqlite"), cwd=root)
     assert r.returncode == 0, r.stdout[-3000:]
+    from harness import load_suite
+
+    suite = load_suite(root / "suites" / "ci.toml")
     n = sum(len(rest.techniques(f)) for f in rest.catalogue())
-    assert f"{n} passed" in r.stdout
+    assert len(suite.cases) == n and len(suite.samplers) == 10
+    assert f"{n + len(suite.samplers)} passed" in r.stdout
 
 
 def test_a_failing_case_explains_itself(tmp_path):

@@ -208,3 +208,17 @@ def test_a_precision_target_doubles_samples_until_reached_and_spends_alpha(tmp_p
     assert again.units_run == 0 and again.results[0].look == r.look
     row = harness.load(tmp_path / "t.sqlite").set_index("measurement").loc["target_half_width"]
     assert row["verdict"] == "reached" and row["n"] == r.bias.n
+
+
+def test_sampler_checks_run_from_suites_and_resume(tmp_path):
+    p = tmp_path / "s.toml"
+    p.write_text('[suite]\nname = "s"\nsamples = 100000\n\n[[sampler]]\nname = "ggx"\nparams = { alpha = 0.05 }\n\n'
+                 '[[sampler]]\nname = "power"\nparams = { k = -0.75 }\n')
+    suite = load_suite(p)
+    first = run_suite(suite, tmp_path / "s.sqlite", threads=2)
+    assert first.units_run == 2 and [r.case.label for r in first.samplers] == ["ggx(alpha=0.05)", "power(k=-0.75)"]
+    assert all(c["passed"] for r in first.samplers for c in r.checks.values())
+    again = run_suite(suite, tmp_path / "s.sqlite", threads=2)
+    assert again.units_run == 0 and again.samplers[0].checks == first.samplers[0].checks
+    df = harness.load(tmp_path / "s.sqlite")
+    assert set(df["measurement"]) == {"chi_square"} and set(df["verdict"]) == {"passed"} and (df["n"] == 100000).all()
