@@ -31,7 +31,9 @@ def test_main_job_prints_every_case_of_the_default_suite(root, tmp_path):
         match = [l for l in lines if l.split()[:2] == [case.integrand, case.technique]]
         assert match, case
         rows[(case.integrand, case.technique)] = match[0]
-    assert f"{len(suite.cases)} cases in" in r.stdout and f"summary: {len(suite.cases)} passed, 0 failed" in r.stdout
+    total = len(suite.cases) + len(suite.samplers)
+    assert f"{len(suite.cases)} cases in" in r.stdout and f"summary: {total} passed, 0 failed" in r.stdout
+    assert "sampler checks" in r.stdout and all(sc.label in r.stdout for sc in suite.samplers)
     every = {(f.name, t) for f in rest.catalogue() for t in rest.techniques(f)}
     assert every <= set(rows)
     # the deliberately biased techniques are found, the others are not
