@@ -117,9 +117,17 @@ def test_kill_minus_nine_at_random_points_then_resume(suite_file, reference_db, 
     full = len(units_table(reference_db))
     kills = 0
     while kills < 20:
+        before = len(units_table(db)) if db.exists() else 0
         proc = subprocess.Popen([HARNESS, "run", str(suite_file), "--db", str(db), "--threads", "2"],
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        time.sleep(rng.uniform(0.8, 1.8))  # start-up (imports) takes ~0.8 s; the suite ~16 s of work
+        # kill at a random moment after this run's first commit (whatever start-up costs on this
+        # machine): each run then does at most ~0.5 s of the suite's ~16 s of work
+        deadline = time.monotonic() + 30
+        while proc.poll() is None and time.monotonic() < deadline:
+            if db.exists() and len(units_table(db)) > before:
+                break
+            time.sleep(0.02)
+        time.sleep(rng.uniform(0.0, 0.4))
         if proc.poll() is not None:
             break  # finished before the kill: nothing left to interrupt
         os.kill(proc.pid, signal.SIGKILL)
