@@ -6,22 +6,18 @@ the installed package, and a unit's result is the same bits wherever it runs.
 """
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
-import numpy as np
-
 import reference_estimators as rest
 from reference_estimators import _core
 
 from .plan import Unit
+from .stats import TailSample
 
 __all__ = ["UnitJob", "compute", "run_local", "run_dask"]
-
-TAIL_KEEP_MAX = 20_000
 
 # (unit key, integrand, technique, seed, core case id): everything compute() needs
 UnitJob = tuple[tuple, str, str, int, int]
@@ -41,10 +37,9 @@ def compute(job: UnitJob) -> tuple[tuple, dict[str, Any], float]:
     if kind == "state":
         payload = _core.integrate_chunks(f, t, budget, seed, core_case, replica, c0, c1, 1)
     else:
-        y = rest.contributions(f, t, budget, seed=seed, case_id=core_case, replica=replica, threads=1)
-        keep = min(max(int(math.sqrt(budget)), 50), TAIL_KEEP_MAX, y.size - 1)
-        center = float(np.median(y))
-        payload = {"center": center, "upper": _top(y - center, keep), "lower": _top(center - y, keep)}
+        tails = TailSample.for_count(budget)
+        tails.add(rest.contributions(f, t, budget, seed=seed, case_id=core_case, replica=replica, threads=1))
+        payload = {"center": tails.center, "upper": tails.upper.tolist(), "lower": tails.lower.tolist()}
     return key, payload, time.perf_counter() - start
 
 
@@ -66,12 +61,6 @@ def _sampler_check(kind: str, spec_json: str, seed: int) -> tuple[dict[str, Any]
                "failures": json.loads(json.dumps(list(r.failures), default=float)),
                "normalization": [float(v) for v in r.normalization]}
     return payload, time.perf_counter() - start
-
-
-def _top(d: np.ndarray, keep: int) -> list[float]:
-    d = d[d > 0]
-    m = min(keep + 1, d.size)
-    return np.partition(d, d.size - m)[d.size - m:].tolist() if m else []
 
 
 def run_local(jobs: list[UnitJob], threads: int) -> Iterator[tuple[tuple, dict[str, Any], float]]:

@@ -32,10 +32,10 @@ def pytest_collect_file(file_path: Path, parent: pytest.Collector):
 
 def _is_suite(path: Path) -> bool:
     try:
-        return "suite" in tomllib.loads(path.read_text(encoding="utf-8")) or "case" in tomllib.loads(
-            path.read_text(encoding="utf-8"))
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
     except (OSError, tomllib.TOMLDecodeError):
         return False
+    return "suite" in data or "case" in data
 
 
 class SuiteFile(pytest.File):

@@ -9,6 +9,7 @@ killed run resumes where it stopped, and a finished suite re-runs without comput
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable
@@ -17,16 +18,13 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
+from scipy import stats as sps
 
 import reference_estimators as rest
 from reference_estimators import _core
 
 from . import stats
 from .execute import UnitJob, execute
-import dataclasses
-
-from scipy import stats as sps
-
 from .plan import Unit, bias_budget, bias_stream, case_key, convergence_budgets, plan, sampler_key, sampler_spec
 from .store import Store
 from .suite import Case, SamplerCase, Suite
@@ -171,7 +169,7 @@ def _measure(suite: Suite, case: Case, payloads: dict[tuple, dict], look: int = 
         faults = {k: v for e in batches for k, v in e.issues.items()}
         if "bias" in wanted:
             tail = next(p for k, p in payloads.items() if k[6] == "tail" and k[1] == stream)
-            tails = stats._TailSample.from_tops(tail["upper"], tail["lower"])
+            tails = stats.TailSample.from_tops(tail["upper"], tail["lower"])
             bias = (stats.judge_batches(batches, tails, f.reference, suite.alpha, iid=t.iid) if not faults else
                     stats.UnbiasedResult("invalid", math.nan, math.nan, suite.batches - 1, math.nan, math.nan,
                                          f.reference, b * suite.batches, suite.alpha, suite.batches, math.nan,

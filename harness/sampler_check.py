@@ -402,8 +402,8 @@ def _coarsen(a: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
 
 
 def _chi_square(observed: np.ndarray, expected: np.ndarray, quad_err: np.ndarray) -> tuple[float, int, np.ndarray]:
-    """Pearson's statistic with cells of expectation < 5 pooled (in order of expectation) and
-    the cubature error added to each cell's variance; standardised residuals per cell."""
+    """Pearson's statistic with all cells of expectation < 5 pooled into one and the cubature
+    error added to each cell's variance; standardised residuals per cell."""
     var = expected + quad_err**2
     resid = np.where(var > 0, (observed - expected) / np.sqrt(np.maximum(var, 1e-300)), 0.0)
     big = expected >= 5

@@ -18,7 +18,7 @@ from scipy import stats
 import reference_estimators as rest
 
 __all__ = [
-    "UnbiasedResult", "check_unbiased", "check_technique", "judge_batches", "holm",
+    "UnbiasedResult", "check_unbiased", "check_technique", "judge_batches", "TailSample", "holm",
     "Replicates", "replicate", "ConvergenceResult", "convergence_rate", "fit_convergence",
     "Efficiency", "efficiency", "efficiency_ratio", "error_vs_time",
 ]
@@ -130,7 +130,7 @@ def check_unbiased(contributions: Callable[[np.ndarray], np.ndarray], dim: int, 
     parts: list[list[tuple[int, float, float]]] = []
     counts: dict[str, int] = {}
     examples: list[dict[str, Any]] = []
-    tails = _TailSample(min(max(int(math.sqrt(n)), 50), 20_000))
+    tails = TailSample.for_count(n)
     max_abs = 0.0
     for k, size in enumerate(sizes):
         sums = []
@@ -165,13 +165,18 @@ def check_unbiased(contributions: Callable[[np.ndarray], np.ndarray], dim: int, 
     return _decide(parts, tails, max_abs, reference, alpha)
 
 
-class _TailSample:
+class TailSample:
     """The largest deviations above and below a centre (the first values' median), kept
     across calls, for the tail estimates."""
 
     def __init__(self, keep: int):
         self.keep, self.center = keep, None
         self.upper, self.lower = np.empty(0), np.empty(0)
+
+    @classmethod
+    def for_count(cls, n: int) -> "TailSample":
+        """Keeps sqrt(n) order statistics per side (at least 50, at most 20 000)."""
+        return cls(min(max(int(math.sqrt(n)), 50), 20_000))
 
     def add(self, y: np.ndarray) -> None:
         if self.center is None:
@@ -185,7 +190,7 @@ class _TailSample:
         return np.partition(d, d.size - m)[d.size - m:] if m else d
 
     @classmethod
-    def from_tops(cls, upper: Sequence[float], lower: Sequence[float]) -> "_TailSample":
+    def from_tops(cls, upper: Sequence[float], lower: Sequence[float]) -> "TailSample":
         """A tail sample from stored largest deviations (see harness.execute)."""
         t = cls(max(len(upper), len(lower)))
         t.upper, t.lower = np.asarray(upper, dtype=float), np.asarray(lower, dtype=float)
@@ -212,7 +217,7 @@ def _tail_index(desc: np.ndarray) -> float:
     return 1 / gamma if gamma > 0 else math.inf
 
 
-def _decide(parts: list[list[tuple[int, float, float]]], tails: _TailSample, max_abs: float, reference: float,
+def _decide(parts: list[list[tuple[int, float, float]]], tails: TailSample, max_abs: float, reference: float,
             alpha: float) -> UnbiasedResult:
     """The verdict from batches, each a list of (n, mean, stderr) pieces, and the tails, as
     documented in check_unbiased.  Works in units of 2^e ~ max |Y|, so that contributions
@@ -289,12 +294,12 @@ def check_technique(integrand: str | rest.Integrand, technique: str | rest.Techn
         return UnbiasedResult("invalid", math.nan, math.nan, batches - 1, math.nan, math.nan, f.reference, n, alpha,
                               batches, math.nan, math.nan, math.nan, flags=("contributions with faults",),
                               counts=counts, examples=first.examples)
-    tails = _TailSample(min(max(int(math.sqrt(size)), 50), 20_000))
+    tails = TailSample.for_count(size)
     tails.add(rest.contributions(f, t, size, seed=seed, case_id=case_id, replica=0, threads=threads))
     return judge_batches(ests, tails, f.reference, alpha, iid=t.iid)
 
 
-def judge_batches(estimates: Sequence[rest.Estimate], tails: "_TailSample", reference: float, alpha: float, *,
+def judge_batches(estimates: Sequence[rest.Estimate], tails: TailSample, reference: float, alpha: float, *,
                   iid: bool) -> UnbiasedResult:
     """The verdict of check_technique from independent batch estimates (replicas) and the
     tail sample of their contributions; for non-iid point sets only the batch means count."""
