@@ -6,13 +6,14 @@
 #   Debian packages  compiler, CMake, Python headers; libllvm19 for drjit's LLVM backend
 #   .venv/           a virtual environment with the package installed in editable mode
 #                    (this builds reference_estimators/_core with scikit-build-core + nanobind)
+#   libosmesa6       headless OpenGL for pyrender;  chromium  the report tests' browser
 set -euo pipefail
 cd "$(dirname "$0")"
 
 SUDO=""
 if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
 
-PACKAGES=(g++ cmake ninja-build python3 python3-venv python3-dev libllvm19)
+PACKAGES=(g++ cmake ninja-build python3 python3-venv python3-dev libllvm19 libosmesa6 chromium)
 missing=()
 for p in "${PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -30,7 +31,10 @@ if [ ! -x .venv/bin/python ]; then
 fi
 .venv/bin/python -m pip install -q --upgrade pip
 echo "setup: building and installing the package (C++ core included)"
-.venv/bin/python -m pip install -q -e ".[test,bench]"
+.venv/bin/python -m pip install -q -e ".[test,bench,render]"
+# pyrender pins PyOpenGL==3.1.0 (no OSMesaCreateContextAttribs); its other requirements come
+# with the "render" extra above, so it is installed without its pin.
+.venv/bin/python -m pip install -q --no-deps "pyrender==0.1.45"
 
 echo "setup: running the main job: harness run suites/default.toml"
 .venv/bin/harness run suites/default.toml
