@@ -9,6 +9,7 @@ import reference_estimators as rest
 
 from tqdm import tqdm
 
+from .renders import format_render_table, render_failures
 from .runner import bad_verdicts, format_sampler_table, format_table, judge_samplers, results_table, run_suite
 from .store import load
 from .suite import SuiteError, load_suite
@@ -74,6 +75,11 @@ def _run(suite, db: str, threads: int | None, csv: str | None, dask: str | None)
     if summary.samplers:
         print("\nsampler checks (chi-square and friends; MCMC cross-check):")
         print(format_sampler_table(summary.samplers, suite.alpha))
+    if summary.renders:
+        print(f"\nrenders (per-pixel bias test, Holm over {len(summary.renders)} configurations at alpha "
+              f"{suite.alpha:g}; relMSE = mean (x - ref)^2 / (ref^2 + 0.01); efficiency 1/(relMSE·T) against the "
+              "scene's first configuration; relMSE at the longest time all configurations of a scene reached):")
+        print(format_render_table(summary.renders, suite.alpha))
     print(f"\n{len(summary.results)} cases in {summary.seconds:.1f} s: {summary.units_run} of {summary.units_planned} "
           f"work units computed, the rest read from {summary.db}.  t: Student t of {suite.batches} batch means "
           f"against the exact value; RMSE slope: log-log fit over budgets (expected -0.5 for Monte Carlo); "
@@ -84,12 +90,15 @@ def _run(suite, db: str, threads: int | None, csv: str | None, dask: str | None)
     sampler_bad = [r for r, v in zip(summary.samplers, judge_samplers(summary.samplers, suite.alpha)) if "failed" in v.values()]
     for r in sampler_bad:
         print(f"  FAILED sampler {r.case.label} on the {r.case.domain}")
-    failed = len(bad) + len(sampler_bad)
-    print(f"summary: {len(df) + len(summary.samplers) - failed} passed, {failed} failed")
+    render_bad = [(r, why) for r, why in zip(summary.renders, render_failures(summary.renders, suite.alpha)) if why]
+    for r, why in render_bad:
+        print(f"  FAILED render {r.case.scene} {r.case.label}: {why}")
+    failed = len(bad) + len(sampler_bad) + len(render_bad)
+    print(f"summary: {len(df) + len(summary.samplers) + len(summary.renders) - failed} passed, {failed} failed")
     if csv:
         df.to_csv(csv, index=False)
         print(f"table written to {csv}")
-    return 1 if len(bad) else 0
+    return 1 if failed else 0
 
 
 def _check_sampler(args) -> int:

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+from .renders import render_failures
 from .runner import RunSummary, judge, judge_convergence, judge_samplers, run_suite
 from .suite import Suite, SuiteError, load_suite
 
@@ -35,7 +36,7 @@ def _is_suite(path: Path) -> bool:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except (OSError, tomllib.TOMLDecodeError):
         return False
-    return "suite" in data or "case" in data
+    return "suite" in data or "case" in data or "render" in data
 
 
 class SuiteFile(pytest.File):
@@ -50,6 +51,8 @@ class SuiteFile(pytest.File):
             yield CaseItem.from_parent(self, name=f"{case.integrand}/{case.technique}#{case.case_id}", index=i)
         for i, sc in enumerate(suite.samplers):
             yield SamplerItem.from_parent(self, name=f"sampler:{sc.label}@{sc.domain}#{sc.case_id}", index=i)
+        for i, rc in enumerate(suite.renders):
+            yield RenderItem.from_parent(self, name=f"render:{rc.scene}/{rc.label}#{rc.case_id}", index=i)
 
     def run(self) -> RunSummary:
         if self.summary is None:
@@ -124,3 +127,14 @@ class SamplerItem(CaseItem):
                                 f"draws what its pdf claims{fails}\n{tests}")
         if problems:
             raise CaseFailure("\n".join(problems))
+
+
+class RenderItem(CaseItem):
+    """A [[render]] configuration: its expected bias verdict (per-pixel test, Holm over the
+    suite's renders), no invalid pixels, and a relMSE not converging slower than spp^-1/2."""
+
+    def runtest(self) -> None:
+        summary = self.parent.run()
+        why = render_failures(summary.renders, self.parent.suite.alpha)[self.index]
+        if why:
+            raise CaseFailure(why)

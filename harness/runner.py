@@ -25,6 +25,7 @@ from reference_estimators import _core
 
 from . import stats
 from .execute import UnitJob, execute
+from .renders import RenderResult, judge_renders, render_rows, run_renders
 from .plan import Unit, bias_budget, bias_stream, case_key, convergence_budgets, plan, sampler_key, sampler_spec
 from .store import Store
 from .suite import Case, SamplerCase, Suite
@@ -71,6 +72,7 @@ class RunSummary:
     seconds: float
     db: Path
     samplers: list[SamplerResult] = dataclasses.field(default_factory=list)
+    renders: list[RenderResult] = dataclasses.field(default_factory=list)
 
 
 def run_suite(suite: Suite, db: str | Path, *, threads: int | None = None, dask: str | None = None,
@@ -130,8 +132,13 @@ def run_suite(suite: Suite, db: str | Path, *, threads: int | None = None, dask:
         results = [_measure(suite, c, store.payloads(k), looks.get(k, 0)) for k, c in case_of.items()]
         samplers = [SamplerResult(sc, k, {key[6]: p for key, p in store.payloads(k).items()})
                     for k, sc in sampler_of.items()]
-        store.put_measurements(_measurement_rows(suite, results) + _sampler_rows(suite, samplers))
-        return RunSummary(results, total, ran, time.perf_counter() - start, Path(db), samplers)
+        core_total = total
+        renders, r_total, r_ran = run_renders(
+            suite, store, progress=(lambda d, t: progress(core_total + d, core_total + t)) if progress else None)
+        store.put_measurements(_measurement_rows(suite, results) + _sampler_rows(suite, samplers)
+                               + render_rows(suite, renders, judge_renders(renders, suite.alpha)))
+        return RunSummary(results, total + r_total, ran + r_ran, time.perf_counter() - start, Path(db), samplers,
+                          renders)
     finally:
         store.close()
 
@@ -265,7 +272,8 @@ def _sampler_rows(suite: Suite, samplers: list[SamplerResult]) -> list[dict[str,
             rows.append({"case_key": r.key, "suite": suite.name, "integrand": f"sampler:{r.case.label}",
                          "technique": r.case.domain, "measurement": m, "value": c["pvalue"], "n": r.case.samples,
                          "pvalue": c["pvalue"], "alpha": suite.alpha, "verdict": v[m],
-                         "detail": {"tests": c["tests"], "failures": c["failures"], "normalization": c["normalization"]}})
+                         "detail": {"tests": c["tests"], "failures": c["failures"], "normalization": c["normalization"],
+                                    "residuals": c.get("residuals", {}), "marginals": c.get("marginals", {})}})
     return rows
 
 

@@ -508,7 +508,8 @@ def convergence_rate(integrand: str | rest.Integrand, technique: str | rest.Tech
 def fit_convergence(reps: Sequence[Replicates], *, expected: float = -0.5, tolerance: float = 0.05,
                     confidence_level: float = 0.95, bootstrap: int = 400, seed: int = 0) -> ConvergenceResult:
     """The slope fit of convergence_rate, from replicates at increasing budgets."""
-    errors = [r.scaled_errors for r in reps]  # scaled: the fitted slope does not change
+    sc = min(r._scale for r in reps)  # one power-of-two scale for all budgets: the slope does not change
+    errors = [r.estimates * sc - r.reference * sc for r in reps]
     x = np.log([r.n for r in reps])
     x = x - x.mean()
     floor = np.finfo(float).tiny

@@ -32,7 +32,7 @@ from typing import Any
 
 import reference_estimators as rest
 
-__all__ = ["Suite", "Case", "SamplerCase", "SuiteError", "load_suite"]
+__all__ = ["Suite", "Case", "SamplerCase", "RenderCase", "SuiteError", "load_suite"]
 
 
 class SuiteError(ValueError):
@@ -57,6 +57,37 @@ class SamplerCase:
     @property
     def label(self) -> str:
         return self.name + ("(" + ", ".join(f"{k}={v:g}" for k, v in self.params) + ")" if self.params else "")
+
+
+@dataclass(frozen=True)
+class RenderCase:
+    """A renderer configuration (harness.adapters) measured from replica renders.
+
+    ``spec`` holds the adapter's keys (scene, integrator, points, ...); ``spp`` is the budget
+    (samples or frames per pixel) of each of the bias test's ``replicas`` renders; ``budgets``
+    those of the convergence renders; a scene without an exact answer is compared with
+    ``reference_parts`` independent renders of ``reference_spp`` in total.
+    """
+
+    adapter: str
+    spec: tuple[tuple[str, Any], ...]
+    case_id: int
+    spp: int
+    replicas: int
+    budgets: tuple[int, ...]
+    reference_spp: int
+    reference_parts: int
+    measurements: tuple[str, ...]
+    expect: str = "unbiased"           # or "biased": the bias test must then reject
+
+    @property
+    def scene(self) -> str:
+        return f"{self.adapter}:{dict(self.spec).get('scene', '?')}"
+
+    @property
+    def label(self) -> str:
+        """The configuration without its scene, e.g. "integrator=path, variant=scalar_rgb"."""
+        return ", ".join(f"{k}={v}" for k, v in self.spec if k != "scene") or self.adapter
 
 
 @dataclass(frozen=True)
@@ -93,8 +124,11 @@ class Suite:
     replicas: int = 32
     budgets: tuple[int, ...] | None = None
     samplers: tuple[SamplerCase, ...] = ()
+    renders: tuple[RenderCase, ...] = ()
 
 
+_RENDER_KEYS = {"adapter": str, "spp": int, "replicas": int, "budgets": list, "reference_spp": int,
+                "reference_parts": int, "measurements": list, "expect": str}
 _SUITE_KEYS = {"name": str, "seed": int, "samples": int, "threads": int, "alpha": float, "batches": int,
                "replicas": int, "budgets": list, "measurements": list}
 _SAMPLER_KEYS = {"name": str, "params": dict, "domain": str, "samples": int, "measurements": list}
@@ -116,8 +150,9 @@ def load_suite(path: str | Path) -> Suite:
     where = _Locator(path, text)
 
     for key in data:
-        if key not in ("suite", "case", "sampler"):
-            raise SuiteError(where.at(None, key, f"unknown table {key!r}; expected [suite], [[case]] and [[sampler]] tables"))
+        if key not in ("suite", "case", "sampler", "render"):
+            raise SuiteError(where.at(None, key, f"unknown table {key!r}; expected [suite], [[case]], [[sampler]] "
+                                      "and [[render]] tables"))
     head = data.get("suite", {})
     if not isinstance(head, dict):
         raise SuiteError(where.at(None, "suite", "expected a [suite] table"))
@@ -148,8 +183,8 @@ def load_suite(path: str | Path) -> Suite:
     measurements = _measurements(head.get("measurements", list(MEASUREMENTS)), where, "suite")
 
     raw_cases = data.get("case", [])
-    if not isinstance(raw_cases, list) or (not raw_cases and not data.get("sampler")):
-        raise SuiteError(where.at(None, "case", "expected at least one [[case]] (or [[sampler]]) table"))
+    if not isinstance(raw_cases, list) or (not raw_cases and not data.get("sampler") and not data.get("render")):
+        raise SuiteError(where.at(None, "case", "expected at least one [[case]], [[sampler]] or [[render]] table"))
     cases: list[Case] = []
     for i, c in enumerate(raw_cases):
         table = ("case", i)
@@ -181,8 +216,62 @@ def load_suite(path: str | Path) -> Suite:
                 target, max_samples = _target(c, case_samples, rest.integrand(name), where, table)
                 cases.append(Case(name, t, case_samples, len(cases), case_measurements, target, max_samples))
     samplers = _samplers(data.get("sampler", []), samples, len(cases), where)
+    renders = _renders(data.get("render", []), measurements, where)
     return Suite(head.get("name", path.stem), path, seed, samples, threads or None, tuple(cases), float(alpha),
-                 batches, replicas, budgets, samplers)
+                 batches, replicas, budgets, samplers, renders)
+
+
+def _renders(raw: list[dict[str, Any]], measurements: tuple[str, ...], where: "_Locator") -> tuple[RenderCase, ...]:
+    """[[render]] tables: runner keys (_RENDER_KEYS) plus the adapter's own keys; a list value
+    of an adapter key makes one case per element (cross product over such keys)."""
+    import itertools
+
+    from .adapters import ADAPTERS, renderer
+
+    out: list[RenderCase] = []
+    for i, c in enumerate(raw):
+        table = ("render", i)
+        runner_keys = {k: v for k, v in c.items() if k in _RENDER_KEYS}
+        _check_keys(runner_keys, _RENDER_KEYS, where, table)
+        adapter = c.get("adapter")
+        if adapter not in ADAPTERS:
+            raise SuiteError(where.at(table, "adapter", f"expected one of: {', '.join(ADAPTERS)}, got {adapter!r}"))
+        spp = c.get("spp", 64)
+        _positive(spp, where, table, "spp")
+        replicas = c.get("replicas", 16)
+        if replicas < 4:
+            raise SuiteError(where.at(table, "replicas", f"expected at least 4 replicas, got {replicas}"))
+        budgets = c.get("budgets", [max(1, spp >> k) for k in (6, 4, 2, 0)])
+        if len(set(budgets)) < 3 or any(isinstance(b, bool) or not isinstance(b, int) or b <= 0 for b in budgets):
+            raise SuiteError(where.at(table, "budgets", f"expected at least 3 distinct positive integer budgets, "
+                                      f"got {budgets}"))
+        budgets = tuple(sorted(set(budgets)))
+        parts = c.get("reference_parts", 8)
+        if parts < 2:
+            raise SuiteError(where.at(table, "reference_parts", f"expected at least 2 independent parts, got {parts}"))
+        ref_spp = c.get("reference_spp", 64 * max(budgets[-1], spp))
+        if ref_spp < parts or ref_spp % parts:
+            raise SuiteError(where.at(table, "reference_spp", f"expected a multiple of reference_parts = {parts}, "
+                                      f"got {ref_spp}"))
+        ms = _measurements(c["measurements"], where, table) if "measurements" in c else measurements
+        expect = c.get("expect", "unbiased")
+        if expect not in ("unbiased", "biased"):
+            raise SuiteError(where.at(table, "expect", f"expected \"unbiased\" or \"biased\", got {expect!r}"))
+        spec = {k: v for k, v in c.items() if k not in _RENDER_KEYS}
+        axes = [k for k, v in spec.items() if isinstance(v, list)]
+        for values in itertools.product(*(spec[k] for k in axes)):
+            one = {**spec, **dict(zip(axes, values))}
+            try:
+                renderer(adapter, one)
+            except ValueError as e:
+                msg = str(e)
+                key = next((k for k in one if msg.startswith(f"'{k}'")), None)
+                if key is not None:
+                    msg = msg[len(key) + 2:].lstrip(": ")
+                raise SuiteError(where.at(table, key, msg)) from None
+            out.append(RenderCase(adapter, tuple(sorted(one.items())), len(out), spp, replicas, budgets, ref_spp,
+                                  parts, ms, expect))
+    return tuple(out)
 
 
 def _samplers(raw: list[dict[str, Any]], samples: int, first_id: int, where: "_Locator") -> tuple[SamplerCase, ...]:

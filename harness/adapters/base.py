@@ -4,6 +4,7 @@
     out = r.render(spp=16, seed=3)       # Render: image (height, width, channels) float64, seconds
     r.exact()                            # the exact image where the scene has one, else None
     r.fingerprint()                      # JSON-able dict of everything that fixes the images
+    r.reference()                        # the renderer of the reference when exact() is None
 
 Adapters register a factory under a name; ``renderer`` imports the adapter's module on first
 use.  A factory validates its spec and raises ``ValueError`` naming the offending key.
@@ -38,6 +39,11 @@ class Renderer(Protocol):
     def exact(self) -> np.ndarray | None: ...
 
     def fingerprint(self) -> dict[str, Any]: ...
+
+    def reference(self) -> "Renderer":
+        """The renderer whose high-budget renders serve as this one's reference when
+        ``exact()`` is None (e.g. path tracing of the same scene)."""
+        ...
 
 
 @dataclass
