@@ -78,12 +78,16 @@ def _run(suite, db: str, threads: int | None, csv: str | None, dask: str | None)
     if summary.renders:
         print(f"\nrenders (per-pixel bias test, Holm over {len(summary.renders)} configurations at alpha "
               f"{suite.alpha:g}; relMSE = mean (x - ref)^2 / (ref^2 + 0.01); efficiency 1/(relMSE·T) against the "
-              "scene's first configuration; relMSE at the longest time all configurations of a scene reached):")
+              "first configuration of the same scene and reference; relMSE at the longest time all of those reached):")
         print(format_render_table(summary.renders, suite.alpha))
-    print(f"\n{len(summary.results)} cases in {summary.seconds:.1f} s: {summary.units_run} of {summary.units_planned} "
-          f"work units computed, the rest read from {summary.db}.  t: Student t of {suite.batches} batch means "
-          f"against the exact value; RMSE slope: log-log fit over budgets (expected -0.5 for Monte Carlo); "
-          f"1/(V·T): efficiency (background eq. 5) against uniform MC on the same integrand.")
+    what = ", ".join(f"{n} {w}" for n, w in ((len(summary.results), "cases"), (len(summary.samplers), "sampler checks"),
+                                             (len(summary.renders), "render configurations")) if n)
+    print(f"\n{what} in {summary.seconds:.1f} s: {summary.units_run} of {summary.units_planned} work units computed, "
+          f"the rest read from {summary.db}.")
+    if summary.results:
+        print(f"t: Student t of {suite.batches} batch means against the exact value; RMSE slope: log-log fit over "
+              f"budgets (expected -0.5 for Monte Carlo); 1/(V·T): efficiency (background eq. 5) against uniform MC "
+              f"on the same integrand.")
     bad = bad_verdicts(df) if len(df) else df
     for _, row in bad.iterrows():
         print(f"  FAILED {row['integrand']}/{row['technique']}: {row['verdict']} (p = {row['pvalue']:.3g}) {row['notes']}")

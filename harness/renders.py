@@ -340,31 +340,36 @@ def render_failures(results: list[RenderResult], alpha: float) -> list[str]:
     return out
 
 
-def _baselines(results: list[RenderResult]) -> dict[str, RenderResult]:
-    """The first case of each scene is the baseline of its efficiency ratios."""
-    base: dict[str, RenderResult] = {}
+def _estimand(r: RenderResult) -> tuple[str, str]:
+    """Cases compared with each other: one scene and one reference (exact, or the same
+    rendered reference, so the same path depth)."""
+    return r.case.scene, r.reference
+
+
+def _baselines(results: list[RenderResult]) -> dict[tuple[str, str], RenderResult]:
+    """The first case of each estimand is the baseline of its efficiency ratios."""
+    base: dict[tuple[str, str], RenderResult] = {}
     for r in results:
         if r.efficiency is not None:
-            base.setdefault(r.case.scene, r)
+            base.setdefault(_estimand(r), r)
     return base
 
 
 def equal_time_relmse(results: list[RenderResult]) -> dict[str, tuple[float, float]]:
-    """relMSE of each case at the longest time every case of its scene reached: (time s, relMSE),
-    interpolated linearly in log relMSE against log time between measured budgets."""
+    """relMSE of each case at the longest time every case of its estimand reached: (time s, relMSE).
+    From a least-squares line of log relMSE on log time over the case's budgets, because the
+    wall times of small renders are too noisy to interpolate between neighbouring budgets."""
     out: dict[str, tuple[float, float]] = {}
-    by_scene: dict[str, list[RenderResult]] = {}
+    by_scene: dict[tuple[str, str], list[RenderResult]] = {}
     for r in results:
-        if r.errors is not None and len(r.errors) >= 2:
-            by_scene.setdefault(r.case.scene, []).append(r)
+        if r.errors is not None and len(r.errors) >= 2 and (r.errors["relmse"] > 0).all():
+            by_scene.setdefault(_estimand(r), []).append(r)
     for group in by_scene.values():
         t_star = min(float(r.errors["seconds"].max()) for r in group)
         for r in group:
-            e = r.errors.sort_values("seconds")
-            lt, le = np.log(e["seconds"].to_numpy()), np.log(np.maximum(e["relmse"].to_numpy(), 1e-300))
-            i = int(np.clip(np.searchsorted(lt, math.log(t_star)), 1, len(lt) - 1))
-            w = (math.log(t_star) - lt[i - 1]) / (lt[i] - lt[i - 1]) if lt[i] != lt[i - 1] else 1.0
-            out[r.key] = (t_star, float(math.exp(le[i - 1] + w * (le[i] - le[i - 1]))))
+            lt, le = np.log(r.errors["seconds"].to_numpy()), np.log(r.errors["relmse"].to_numpy())
+            slope, icept = np.polyfit(lt, le, 1)
+            out[r.key] = (t_star, float(math.exp(icept + slope * math.log(t_star))))
     return out
 
 
@@ -399,7 +404,7 @@ def render_rows(suite: Suite, results: list[RenderResult], verdicts: list[str]) 
                                     "rmse_hi": c.table["rmse_hi"].tolist(), "seconds": c.table["seconds"].tolist(),
                                     "error": "sqrt(relMSE)"}})
         if r.efficiency is not None:
-            e, b0 = r.efficiency, base[r.case.scene]
+            e, b0 = r.efficiency, base[_estimand(r)]
             ratio, (lo, hi) = stats.efficiency_ratio(e, b0.efficiency)
             rows.append({**common, "measurement": "efficiency", "value": ratio, "lo": lo, "hi": hi,
                          "n": e.n * e.replicas, "detail": {"baseline": b0.case.label, "log10_value": e.log10_value,
@@ -440,7 +445,7 @@ def render_table(results: list[RenderResult], verdicts: list[str]) -> pd.DataFra
             c = r.convergence
             row["slope [95% CI]"] = f"{c.slope:+.2f} [{c.slope_interval[0]:+.2f}, {c.slope_interval[1]:+.2f}]"
         if r.efficiency is not None:
-            ratio, (lo, hi) = stats.efficiency_ratio(r.efficiency, base[r.case.scene].efficiency)
+            ratio, (lo, hi) = stats.efficiency_ratio(r.efficiency, base[_estimand(r)].efficiency)
             row["1/(relMSE·T) vs first [95% CI]"] = f"{ratio:.3g} [{lo:.3g}, {hi:.3g}]"
         if r.key in equal:
             t_star, e_star = equal[r.key]

@@ -158,7 +158,7 @@ class MitsubaRenderer:
             else:
                 self._scene = mi.load_dict(_scene_dict(self.scene_name, self.width, self.height))
             integ: dict[str, Any] = {"type": self.integrator_type}
-            if self.max_depth is not None:
+            if self.max_depth is not None and self.integrator_type != "direct":  # direct has no depth
                 integ["max_depth"] = self.max_depth
             self._integrator = mi.load_dict(integ)
         return mi
@@ -187,6 +187,8 @@ def make_renderer(spec: dict[str, Any]) -> MitsubaRenderer:
     if max_depth is not None and (isinstance(max_depth, bool) or not isinstance(max_depth, int) or max_depth < -1
                                   or max_depth == 0):
         raise ValueError(f"'max_depth': expected -1 (unlimited) or a positive integer, got {max_depth!r}")
+    if integrator == "direct" and max_depth not in (None, 2):
+        raise ValueError("'max_depth': the direct integrator renders paths of 2 segments only; give 2 or leave it out")
     size = {}
     for k in ("width", "height"):
         v = spec.get(k, 32)

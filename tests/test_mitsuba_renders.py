@@ -1,0 +1,257 @@
+"""Real Mitsuba 3 renders (scalar_rgb and llvm_ad_rgb, 32 x 32) through the harness: the
+adapter, the per-pixel bias test (false alarms and power), rendered-reference caching and a
+suite that compares integrators."""
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import stats as sps
+
+from harness.adapters import image_faults, renderer
+from harness.image_stats import Reference, pixel_bias_test, relmse
+from harness.runner import run_suite
+from harness.renders import judge_renders, render_failures
+from harness.store import load
+from harness.suite import SuiteError, load_suite
+
+VARIANTS = ["scalar_rgb", "llvm_ad_rgb"]
+
+
+def _stack(r, spp: int, seeds) -> np.ndarray:
+    return np.stack([r.render(spp, s).image for s in seeds])
+
+
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_render_protocol_and_exact_scenes(variant):
+    for scene, value in (("furnace", 1.0), ("plane", 0.5)):
+        r = renderer("mitsuba", {"scene": scene, "integrator": "path", "variant": variant})
+        out = r.render(16, 7)
+        assert out.image.shape == (32, 32, 3) and out.image.dtype == np.float64
+        assert out.spp == 16 and out.seconds > 0
+        assert np.array_equal(out.image, r.render(16, 7).image)          # a seed fixes the image
+        assert not np.array_equal(out.image, r.render(16, 8).image)
+        assert np.all(r.exact() == value)
+        assert image_faults(out.image).total == 0
+        # the exact answer is what the renderer converges to: image mean within 4 standard errors
+        imgs = _stack(r, 16, range(8))
+        means = imgs.reshape(8, -1).mean(axis=1)
+        assert abs(means.mean() - value) < 4 * means.std(ddof=1) / math.sqrt(8) + 1e-6
+        fp = r.fingerprint()
+        assert fp["variant"] == variant and fp["scene"] == scene and "mitsuba" in fp
+
+
+def test_spec_errors_name_the_key():
+    cases = [({"scene": "nowhere"}, "'scene'"), ({"scene": "furnace", "integrator": "nosuch"}, "'integrator'"),
+             ({"scene": "furnace", "variant": "llvm_ad_spectral"}, "'variant'"),
+             ({"scene": "furnace", "variant": "x"}, "'variant'"), ({"scene": "furnace", "max_depth": 0}, "'max_depth'"),
+             ({"scene": "furnace", "width": 0}, "'width'"), ({"scene": "furnace", "spp": 3}, "'spp'")]
+    for spec, key in cases:
+        with pytest.raises(ValueError, match=key):
+            renderer("mitsuba", spec)
+
+
+def test_pixel_bias_test_false_alarms_and_power():
+    """Furnace, path tracer, llvm: 40 independent bias tests at alpha = 0.05 must not reject
+    more often than Binomial(40, 0.05) allows at 1e-3; planted biases must be found."""
+    r = renderer("mitsuba", {"scene": "furnace", "integrator": "path", "variant": "llvm_ad_rgb"})
+    ref = Reference.exact(r.exact())
+    runs = [_stack(r, 32, range(16 * k, 16 * k + 16)) for k in range(40)]
+    p = np.array([pixel_bias_test(x, ref, 32).pvalue for x in runs])
+    assert (p <= 0.05).sum() <= sps.binom.isf(1e-3, 40, 0.05)
+    assert np.all((p >= 0) & (p <= 1))
+    x = runs[0]
+    # a global 1 % energy gain: the image-mean test sees it
+    b = pixel_bias_test(x * 1.01, ref, 32)
+    assert b.pvalue_mean < 1e-6 and b.pvalue < 1e-5
+    # one pixel 30 % too bright in every replica: the pixel test finds it and says where
+    y = x.copy()
+    y[:, 16, 20, :] *= 1.3
+    b = pixel_bias_test(y, ref, 32)
+    assert b.pvalue_pixels < 1e-4 and b.worst_pixel[:2] == (16, 20) and b.worst_t > 0
+    # a NaN pixel is excluded from the test, not averaged in
+    z = x.copy()
+    z[3, 5, 6, 1] = np.nan
+    b = pixel_bias_test(z, ref, 32)
+    assert b.excluded == 1 and math.isfinite(b.pvalue)
+    assert image_faults(z[3]).nan == 1 and image_faults(z[3]).examples["nan"] == [(5, 6)]
+
+
+def test_rendered_reference_error_enters_the_test():
+    """Against a noisy rendered reference the test uses both errors (Welch), so a reference
+    from few samples does not make a correct integrator look biased."""
+    r = renderer("mitsuba", {"scene": "cornell", "integrator": "path", "variant": "llvm_ad_rgb", "max_depth": 3})
+    ref = Reference.from_parts(_stack(r.reference(), 64, range(1000, 1008)))
+    assert ref.parts == 8 and ref.image_mean_variance > 0 and np.all(ref.variance >= 0)
+    b = pixel_bias_test(_stack(r, 64, range(16)), ref, 64)
+    assert b.pvalue > 1e-3
+    assert relmse(_stack(r, 64, range(16, 20)), ref).shape == (4,)
+
+
+def _suite(tmp: Path, body: str) -> Path:
+    path = tmp / "renders.toml"
+    path.write_text(textwrap.dedent(body))
+    return path
+
+
+SUITE = """\
+    [suite]
+    name = "renders"
+    alpha = 0.01
+
+    [[render]]
+    adapter = "mitsuba"
+    scene = "furnace"
+    integrator = ["path", "ptracer"]
+    variant = "{variant}"
+    spp = 256
+    replicas = 8
+    budgets = [16, 64, 256]
+
+    [[render]]
+    adapter = "mitsuba"
+    scene = "furnace"
+    integrator = "path"
+    max_depth = 1            # camera rays only: the sphere stays black, a planted bias
+    variant = "{variant}"
+    spp = 16
+    replicas = 8
+    measurements = ["bias"]
+    expect = "biased"
+
+    [[render]]
+    adapter = "mitsuba"
+    scene = "cornell"
+    integrator = ["path", "direct"]
+    max_depth = 2
+    variant = "{variant}"
+    spp = 32
+    replicas = 8
+    budgets = [4, 16, 32]
+    reference_spp = 2048
+"""
+
+
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_suite_compares_integrators_and_caches_references(tmp_path, variant):
+    path = _suite(tmp_path, SUITE.format(variant=variant))
+    suite = load_suite(path)
+    assert [rc.label for rc in suite.renders][:2] == [f"integrator=path, variant={variant}",
+                                                      f"integrator=ptracer, variant={variant}"]
+    db = tmp_path / "a.sqlite"
+    summary = run_suite(suite, db)
+    rs = summary.renders
+    assert len(rs) == 5
+    verdicts = judge_renders(rs, suite.alpha)
+    assert verdicts == ["unbiased", "unbiased", "biased (expected)", "unbiased", "unbiased"], verdicts
+    assert render_failures(rs, suite.alpha) == [""] * 5
+    # exact scenes render no reference; the Cornell box's reference is rendered once for both
+    # integrators (direct's reference is path tracing at depth 2, the same images) and cached
+    refs = sorted((tmp_path / "references").glob("*.json"))
+    assert len(refs) == 1 and json.loads(refs[0].read_text())["spp"] == 2048
+    assert rs[0].reference == "exact" and rs[3].reference == rs[4].reference != "exact"
+    for r in (rs[0], rs[1], rs[3]):
+        c = r.convergence
+        assert c.slope_interval[0] - 0.1 < -0.5 < c.slope_interval[1] + 0.1, c
+    df = load(db)
+    assert {"bias", "variance", "convergence", "efficiency", "relmse", "error_vs_time",
+            "equal_time_relmse"} <= set(df["measurement"])
+    eff = df[(df.measurement == "efficiency") & (df.integrand == "mitsuba:furnace")]
+    assert eff["value"].iloc[0] == pytest.approx(1.0)          # path is the baseline
+    assert eff["value"].iloc[1] < 0.1                             # the light tracer is far less efficient here
+    assert (eff["lo"] <= eff["value"]).all() and (eff["value"] <= eff["hi"]).all()
+    # a second database reuses the cached reference: the Cornell reference is not rendered again
+    again = run_suite(suite, tmp_path / "b.sqlite")
+    assert again.units_planned == summary.units_planned - 8
+    # and a rerun on the first database renders nothing
+    assert run_suite(suite, db).units_run == 0
+
+
+def test_nan_pixels_are_reported_with_positions(tmp_path, monkeypatch):
+    """A renderer that returns NaN pixels makes its case 'invalid', with counts and positions."""
+    from harness.adapters import mitsuba as adapter
+
+    real = adapter.MitsubaRenderer.render
+
+    def broken(self, spp, seed):
+        out = real(self, spp, seed)
+        out.image[2, 3, 0] = np.nan
+        return out
+
+    monkeypatch.setattr(adapter.MitsubaRenderer, "render", broken)
+    path = _suite(tmp_path, """\
+        [[render]]
+        adapter = "mitsuba"
+        scene = "plane"
+        spp = 8
+        replicas = 4
+        measurements = ["bias"]
+    """)
+    suite = load_suite(path)
+    summary = run_suite(suite, tmp_path / "nan.sqlite")
+    r = summary.renders[0]
+    assert r.faults.nan == 4 and r.faults.examples["nan"][0] == (0, 2, 3)
+    assert judge_renders(summary.renders, suite.alpha)[0] == "invalid (4 bad pixels)"
+    assert "nan pixel" in render_failures(summary.renders, suite.alpha)[0]
+    assert r.bias.excluded == 1
+
+
+def test_xml_scene_file(tmp_path):
+    xml = tmp_path / "scene.xml"
+    xml.write_text(textwrap.dedent("""\
+        <scene version="3.0.0">
+          <sensor type="perspective">
+            <transform name="to_world"><lookat origin="0,0,4" target="0,0,0" up="0,1,0"/></transform>
+            <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/>
+              <rfilter type="box"/></film>
+          </sensor>
+          <emitter type="constant"><rgb name="radiance" value="1"/></emitter>
+          <shape type="sphere"><bsdf type="diffuse"><rgb name="reflectance" value="1"/></bsdf></shape>
+        </scene>"""))
+    r = renderer("mitsuba", {"scene": str(xml), "integrator": "path"})
+    assert r.exact() is None and r.render(4, 1).image.shape == (16, 16, 3)
+    assert r.fingerprint()["scene"]["sha256"] == __import__("hashlib").sha256(xml.read_bytes()).hexdigest()
+    with pytest.raises(ValueError, match="'width'"):
+        renderer("mitsuba", {"scene": str(xml), "width": 8})
+
+
+def test_suite_errors_name_file_line_and_key(tmp_path):
+    for body, line, key in [
+        ('[[render]]\nadapter = "mitsuba"\nscene = "furnace"\nintegrator = "nosuch"\n', 4, "integrator"),
+        ('[[render]]\nadapter = "mitsuba"\nscene = "furnace"\nvariant = "bogus"\n', 4, "variant"),
+        ('[[render]]\nadapter = "mitsuba"\nscene = "nowhere"\n', 3, "scene"),
+        ('[[render]]\nadapter = "povray"\n', 2, "adapter"),
+        ('[[render]]\nadapter = "mitsuba"\nscene = "furnace"\nreplicas = 2\n', 4, "replicas"),
+        ('[[render]]\nadapter = "mitsuba"\nscene = "furnace"\nbudgets = [4, 4]\n', 4, "budgets"),
+        ('[[render]]\nadapter = "mitsuba"\nscene = "furnace"\nexpect = "maybe"\n', 4, "expect"),
+        ('[[render]]\nadapter = "mitsuba"\nscene = "cornell"\nreference_spp = 100\n', 4, "reference_spp"),
+    ]:
+        path = tmp_path / "bad.toml"
+        path.write_text(body)
+        with pytest.raises(SuiteError, match=rf"bad\.toml:{line}: {key}: "):
+            load_suite(path)
+
+
+def test_suite_file_as_pytest_items(tmp_path, root):
+    """`pytest suites/mitsuba.toml`-style collection: a render table becomes test items."""
+    path = _suite(tmp_path, """\
+        [suite]
+        name = "items"
+        [[render]]
+        adapter = "mitsuba"
+        scene = "plane"
+        integrator = ["path", "direct"]
+        spp = 32
+        replicas = 8
+        budgets = [4, 8, 32]
+    """)
+    out = subprocess.run([sys.executable, "-m", "pytest", "-q", str(path), "-p", "no:cacheprovider",
+                          "--harness-db", str(tmp_path / "items.sqlite")], capture_output=True, text=True, cwd=root)
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "2 passed" in out.stdout
