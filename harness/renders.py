@@ -405,7 +405,7 @@ def render_rows(suite: Suite, results: list[RenderResult], verdicts: list[str]) 
                                     "error": "sqrt(relMSE)"}})
         if r.efficiency is not None:
             e, b0 = r.efficiency, base[_estimand(r)]
-            ratio, (lo, hi) = stats.efficiency_ratio(e, b0.efficiency)
+            ratio, (lo, hi) = (1.0, (1.0, 1.0)) if b0 is r else stats.efficiency_ratio(e, b0.efficiency)
             rows.append({**common, "measurement": "efficiency", "value": ratio, "lo": lo, "hi": hi,
                          "n": e.n * e.replicas, "detail": {"baseline": b0.case.label, "log10_value": e.log10_value,
                                                             "seconds": e.seconds, "spp": e.n,
@@ -445,8 +445,9 @@ def render_table(results: list[RenderResult], verdicts: list[str]) -> pd.DataFra
             c = r.convergence
             row["slope [95% CI]"] = f"{c.slope:+.2f} [{c.slope_interval[0]:+.2f}, {c.slope_interval[1]:+.2f}]"
         if r.efficiency is not None:
-            ratio, (lo, hi) = stats.efficiency_ratio(r.efficiency, base[_estimand(r)].efficiency)
-            row["1/(relMSE·T) vs first [95% CI]"] = f"{ratio:.3g} [{lo:.3g}, {hi:.3g}]"
+            b0 = base[_estimand(r)]
+            ratio, (lo, hi) = stats.efficiency_ratio(r.efficiency, b0.efficiency)
+            row["1/(relMSE·T) vs first [95% CI]"] = "1 (baseline)" if b0 is r else f"{ratio:.3g} [{lo:.3g}, {hi:.3g}]"
         if r.key in equal:
             t_star, e_star = equal[r.key]
             row["relMSE @ equal time"] = f"{e_star:.3g} @ {t_star * 1e3:.3g} ms"
