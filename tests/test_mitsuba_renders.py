@@ -255,3 +255,42 @@ def test_suite_file_as_pytest_items(tmp_path, root):
                           "--harness-db", str(tmp_path / "items.sqlite")], capture_output=True, text=True, cwd=root)
     assert out.returncode == 0, out.stdout + out.stderr
     assert "2 passed" in out.stdout
+
+
+def test_interrupted_render_suite_resumes_without_rerendering(tmp_path, monkeypatch):
+    """A run stopped after 5 renders resumes with the missing ones only and ends with the same
+    measurements as an uninterrupted run (renders are seeded per case, stream and replica)."""
+    from harness.adapters import mitsuba as adapter
+
+    path = _suite(tmp_path, """\
+        [[render]]
+        adapter = "mitsuba"
+        scene = "cornell"
+        integrator = "path"
+        max_depth = 2
+        spp = 8
+        replicas = 4
+        budgets = [2, 4, 8]
+        reference_spp = 256
+    """)
+    suite = load_suite(path)
+    clean = run_suite(suite, tmp_path / "clean.sqlite")
+
+    real, calls = adapter.MitsubaRenderer.render, []
+
+    def flaky(self, spp, seed):
+        calls.append(seed)
+        if len(calls) > 5:
+            raise KeyboardInterrupt
+        return real(self, spp, seed)
+
+    monkeypatch.setattr(adapter.MitsubaRenderer, "render", flaky)
+    (tmp_path / "references").rename(tmp_path / "references.clean")  # the resumed run renders its own
+    with pytest.raises(KeyboardInterrupt):
+        run_suite(suite, tmp_path / "resumed.sqlite")
+    monkeypatch.setattr(adapter.MitsubaRenderer, "render", real)
+    resumed = run_suite(suite, tmp_path / "resumed.sqlite")
+    assert resumed.units_run == resumed.units_planned - 5
+    a, b = load(tmp_path / "clean.sqlite"), load(tmp_path / "resumed.sqlite")
+    assert a[["measurement", "pvalue"]].equals(b[["measurement", "pvalue"]])
+    assert clean.renders[0].bias.pvalue == resumed.renders[0].bias.pvalue
