@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import dataclasses
 import math
 import os
 import threading
@@ -650,8 +651,10 @@ def check_mitsuba_sampler(sampler: Any, *, sample_count: int = 1_000_000, seed: 
     rejected, adjusted = holm(np.nan_to_num(table["pvalue"].to_numpy(dtype=float), nan=0.0), alpha)
     table["adjusted"] = adjusted
     passed = not failures and not rejected.any()
-    return SamplerCheck(passed, float(adjusted.min()), alpha, n, table, tuple(failures), raw.normalization,
-                        shape.residuals)
+    # the shape check's per-cell results (residuals, marginals) are kept: they describe the
+    # produced samples, the only ones with a direction
+    return dataclasses.replace(shape, passed=passed, pvalue=float(adjusted.min()), sample_count=n, tests=table,
+                               failures=tuple(failures), normalization=raw.normalization)
 
 
 def _scalar_variant(sampler: Any) -> bool:
