@@ -37,4 +37,9 @@ echo "setup: building and installing the package (C++ core included)"
 .venv/bin/python -m pip install -q --no-deps "pyrender==0.1.45"
 
 echo "setup: running the main job: harness run suites/default.toml"
-.venv/bin/harness run suites/default.toml
+status=0
+.venv/bin/harness run suites/default.toml || status=$?
+# the report is written even when a check failed: that is when it is needed
+.venv/bin/harness report --db results/default.sqlite -o results/default.html
+echo "setup: report of the main job: $(pwd)/results/default.html (open it in a browser)"
+exit $status

@@ -1,4 +1,4 @@
-"""Command line: ``harness run SUITE``, ``harness show --db PATH`` and ``harness list``."""
+"""Command line: ``harness run SUITE``, ``harness report``, ``harness show --db PATH`` and ``harness list``."""
 from __future__ import annotations
 
 import argparse
@@ -27,6 +27,13 @@ def main(argv: list[str] | None = None) -> int:
     show = sub.add_parser("show", help="print the measurements stored in a results database")
     show.add_argument("--db", metavar="PATH", required=True)
     show.add_argument("--suite", help="only this suite")
+    rep = sub.add_parser("report", help="write the stored results as one self-contained HTML page (or CSV, Markdown)")
+    rep.add_argument("--db", metavar="PATH", default="results/default.sqlite",
+                     help="results database (default: results/default.sqlite)")
+    rep.add_argument("-o", "--output", metavar="PATH", help="output file (default: the database path with .html, "
+                                                           ".csv or .md)")
+    rep.add_argument("--format", choices=["html", "csv", "markdown"], default="html")
+    rep.add_argument("--suite", help="only this suite")
     sub.add_parser("list", help="list the catalogue's integrands, techniques and samplers")
     chk = sub.add_parser("check-sampler", help="test a sampler against its pdf (chi-square and friends)")
     chk.add_argument("target", help="module:attribute, an object with sample(u) and pdf(x), or a function returning "
@@ -42,6 +49,8 @@ def main(argv: list[str] | None = None) -> int:
         return _list()
     if args.command == "show":
         return _show(args.db, args.suite)
+    if args.command == "report":
+        return _report(args.db, args.output, args.format, args.suite)
     if args.command == "check-sampler":
         return _check_sampler(args)
     try:
@@ -149,6 +158,18 @@ def _check_sampler(args) -> int:
         ok = ok and m.passed
     print(f"summary: {int(ok)} passed, {int(not ok)} failed")
     return 0 if ok else 1
+
+
+def _report(db: str, output: str | None, fmt: str, suite: str | None) -> int:
+    from reports import write_report
+
+    try:
+        path = write_report(db, output, fmt=fmt, suite=suite)
+    except (FileNotFoundError, ValueError) as e:
+        print(f"harness: {e}", file=sys.stderr)
+        return 2
+    print(f"report written to {path.resolve()}")
+    return 0
 
 
 def _show(db: str, suite: str | None) -> int:

@@ -47,6 +47,8 @@ def _sampler_check(kind: str, spec_json: str, seed: int) -> tuple[dict[str, Any]
     """A sampler-check unit: 'integrand' carries the sampler's JSON spec (plan.sampler_spec)."""
     import json
 
+    import numpy as np
+
     from .sampler_check import check_sampler, mcmc_crosscheck
 
     spec = json.loads(spec_json)
@@ -59,7 +61,10 @@ def _sampler_check(kind: str, spec_json: str, seed: int) -> tuple[dict[str, Any]
                             seed=seed)
     payload = {"passed": r.passed, "pvalue": r.pvalue, "tests": json.loads(r.tests.to_json(orient="records")),
                "failures": json.loads(json.dumps(list(r.failures), default=float)),
-               "normalization": [float(v) for v in r.normalization]}
+               "normalization": [float(v) for v in r.normalization],
+               # for the report's heatmaps and marginal plots, rounded to keep rows small; pooled cells null
+               "residuals": {g: np.where(np.isnan(v), None, np.round(v, 2)).tolist() for g, v in r.residuals.items()},
+               "marginals": {a: {k: np.round(v, 2).tolist() for k, v in m.items()} for a, m in r.marginals.items()}}
     return payload, time.perf_counter() - start
 
 

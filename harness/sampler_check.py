@@ -224,7 +224,9 @@ class SamplerCheck:
     tests: pd.DataFrame           # name, statistic, df, pvalue, adjusted, detects
     failures: tuple[dict[str, Any], ...]
     normalization: tuple[float, float]   # integral of the pdf over the domain, its error bound
-    residuals: dict[str, np.ndarray] = field(default_factory=dict)  # standardised, per grid
+    residuals: dict[str, np.ndarray] = field(default_factory=dict)  # standardised, per grid; NaN: pooled cell
+    # per axis "s0", "s1": observed and expected counts at <= 128 bins (for plots)
+    marginals: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
 
     def __bool__(self) -> bool:
         return self.passed
@@ -328,16 +330,20 @@ class SamplerTest:
         for name, shape in grids.items():
             o, e, r = (_coarsen(a, shape) for a in (counts, self.mass, self.err))
             stat, df, resid = _chi_square(o.reshape(-1), n * e.reshape(-1), n * r.reshape(-1))
-            residuals[name] = resid.reshape(shape)
+            residuals[name] = np.where(n * e >= 5, resid.reshape(shape), np.nan)  # pooled cells: NaN
             tests.append((f"chi-square {'x'.join(map(str, shape))}", stat, df,
                           stats.chi2.sf(stat, df) if df > 0 else 1.0,
                           "large-scale misfit" if name == "coarse" else "narrow features: lobes, bands, steps"))
+        marginals = {}
         for axis in range(dom.k):
             shape = tuple(base[a] if a == axis else 1 for a in range(dom.k))
             o, e, r = (_coarsen(a, shape) for a in (counts, self.mass, self.err))
             stat, df, _ = _chi_square(o.reshape(-1), n * e.reshape(-1), n * r.reshape(-1))
             tests.append((f"marginal s{axis} ({base[axis]} bins)", stat, df,
                           stats.chi2.sf(stat, df) if df > 0 else 1.0, "fine structure along one axis"))
+            bins = min(base[axis], 128)
+            marginals[f"s{axis}"] = {"observed": o.reshape(bins, -1).sum(axis=1),
+                                     "expected": n * e.reshape(bins, -1).sum(axis=1)}
         # pdf moment: sample mean of h(p(X)) against its cubature value; the variance adds the
         # cubature error and a rounding floor (a constant pdf makes h constant)
         e1, e2, e1_err = self.h_moments
@@ -353,7 +359,7 @@ class SamplerTest:
         table["adjusted"] = adjusted
         passed = not failures and not rejected.any()
         return SamplerCheck(passed, float(adjusted.min()), self.alpha, n, table, tuple(failures), self.normalization,
-                            residuals)
+                            residuals, marginals)
 
 
 def check_sampler(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.ndarray], np.ndarray],
