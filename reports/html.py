@@ -211,7 +211,8 @@ def render_html(results: Results) -> str:
     alphas = sorted(set(results.measurements["alpha"].dropna()))
     when = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     if problems:
-        status = (f'<div class="status bad"><strong>{len(problems)} result(s) a CI run fails on:</strong><ul>'
+        status = (f'<div class="status bad"><strong>{len(problems)} result{"s" * (len(problems) != 1)} a CI run '
+                  'fails on:</strong><ul>'
                   + "".join(f"<li>{e(p)}</li>" for p in problems) + "</ul></div>")
     elif n_cases or n_samplers:
         status = (f'<div class="status good"><strong>No failures:</strong> {n_cases} cases and {n_samplers} sampler '
@@ -227,7 +228,8 @@ def render_html(results: Results) -> str:
     nav = "".join(f'<a href="#{i}">{t}</a>' for i, t, s in
                   (("summary", "Summary", sections[0]), ("convergence", "Convergence & efficiency", sections[1]),
                    ("samplers", "Sampler checks", sections[2]), ("renders", "Renders", sections[3])) if s)
-    stale = (f"; {results.superseded} superseded case(s) from earlier runs not shown" if results.superseded else "")
+    stale = (f"; {results.superseded} superseded case{'s' * (results.superseded != 1)} from earlier runs not shown"
+             if results.superseded else "")
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width, initial-scale=1">
 <title>mc-harness report: {e(", ".join(suites) or results.db.name)}</title>
