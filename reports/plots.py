@@ -377,6 +377,9 @@ def sampler_figure(domain: str, detail: dict[str, Any], n: int) -> bytes | None:
                 ax.set_xlim(0, 1)
                 ax.set_xlabel(labels[0])
                 ax.set_ylabel("(observed − expected)/σ")
+            if np.isnan(res[g]).all():
+                ax.text(0.5, 0.5, "every cell pooled:\nexpectation < 5 per cell", ha="center", va="center",
+                        transform=ax.transAxes, fontsize=8, color="0.3")
             ax.set_title(f"{g} grid {shape.replace('x', '×')}\n{_stat_text(_test(tests, f'chi-square {shape}'))}",
                          loc="left", fontsize=8)
         if image is not None:
