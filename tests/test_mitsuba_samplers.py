@@ -195,6 +195,11 @@ def test_planted_weight_mismatch_is_reported_with_examples():
     z = ex["direction"][2]
     assert ex["weight"][0] == pytest.approx(ex["eval/pdf"][0] / z, rel=1e-4)
     assert "weight(s) differ from eval/pdf" in str(w)
+    import json
+
+    payload = json.loads(json.dumps(w.to_payload()))
+    assert not payload["passed"] and payload["failures"][0]["check"] == "weight_mismatch"
+    assert payload["failures"][0]["count"] == w.mismatches
 
 
 def test_nan_and_negative_weights_are_reported():

@@ -669,9 +669,10 @@ def _examples(u: np.ndarray, mask: np.ndarray, k: int = 5) -> list[dict[str, Any
 @dataclass(frozen=True)
 class WeightCheck:
     """Outcome of :func:`weight_consistency`.  ``passed``: no weight differs from eval / pdf
-    beyond the tolerance and none is NaN, infinite or negative.  ``pdf_consistent``: the pdf
-    each sample call reports agrees with ``pdf()`` (reported separately: it matters for MIS
-    weights, not for the weight).  Counts are over the produced samples."""
+    beyond the tolerance and none is NaN, infinite or negative (vacuously True for samplers
+    without a weight: microfacet distributions).  ``pdf_consistent``: the pdf each sample call
+    reports agrees with ``pdf()`` (reported separately: it matters for MIS weights, not for
+    the weight).  Counts are over the produced samples."""
 
     passed: bool
     pdf_consistent: bool
@@ -689,6 +690,28 @@ class WeightCheck:
 
     def __bool__(self) -> bool:
         return self.passed
+
+    def to_payload(self) -> dict[str, Any]:
+        """JSON-able, in the shape a suite stores a sampler check (passed, pvalue, tests,
+        failures, normalization): deterministic, so pvalue is 1 and a mismatch is a failure;
+        the sample-pdf agreement is a test row, informational (never a failure)."""
+        tests = [{"test": "weight == eval/pdf", "statistic": float(self.mismatches), "df": 0, "pvalue": 1.0,
+                  "detects": f"weight off eval/pdf by > {self.atol:g} + {self.rtol:g} rel + float32 rounding",
+                  "adjusted": 1.0},
+                 {"test": "NaN/Inf/negative weights", "statistic": float(self.bad_weights), "df": 0, "pvalue": 1.0,
+                  "detects": "invalid weights", "adjusted": 1.0},
+                 {"test": "sample pdf == pdf() (informational)", "statistic": float(self.pdf_mismatches), "df": 0,
+                  "pvalue": 1.0, "detects": f"largest relative difference {self.max_pdf_rel_error:.3g}", "adjusted": 1.0}]
+        failures = []
+        for check, count, kind in (("weight_mismatch", self.mismatches, "weight != eval/pdf"),
+                                   ("bad_weight", self.bad_weights, "NaN/Inf/negative weight")):
+            if count:
+                failures.append({"check": check, "count": count,
+                                 "detail": f"{kind} ({count} of {self.produced} produced samples; largest relative "
+                                           f"difference {self.max_rel_error:.3g})",
+                                 "examples": [e for e in self.examples if e["check"] == kind]})
+        return {"passed": self.passed, "pvalue": 1.0, "tests": tests, "failures": failures,
+                "normalization": [float("nan"), float("nan")]}
 
     def __str__(self) -> str:
         head = (f"{'PASSED' if self.passed else 'FAILED'}: {self.produced} of {self.sample_count} samples produced; "
