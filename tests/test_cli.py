@@ -31,9 +31,11 @@ def test_main_job_prints_every_case_of_the_default_suite(root, tmp_path):
         match = [l for l in lines if l.split()[:2] == [case.integrand, case.technique]]
         assert match, case
         rows[(case.integrand, case.technique)] = match[0]
-    total = len(suite.cases) + len(suite.samplers)
-    assert f"{len(suite.cases)} cases in" in r.stdout and f"summary: {total} passed, 0 failed" in r.stdout
+    total = len(suite.cases) + len(suite.samplers) + len(suite.renders)
+    assert (f"{len(suite.cases)} cases, {len(suite.samplers)} sampler checks, {len(suite.renders)} render "
+            "configurations in") in r.stdout and f"summary: {total} passed, 0 failed" in r.stdout
     assert "sampler checks" in r.stdout and all(sc.label in r.stdout for sc in suite.samplers)
+    assert suite.renders and all(rc.label in r.stdout for rc in suite.renders)
     every = {(f.name, t) for f in rest.catalogue() for t in rest.techniques(f)}
     assert every <= set(rows)
     # the deliberately biased techniques are found, the others are not
@@ -92,7 +94,7 @@ BAD_SUITES = [
     (GOOD_HEAD + '[[case]]\nintegrand = 3\n', 6, "integrand", "expected str, got int 3"),
     ('[suite]\nseed = -1\n[[case]]\nintegrand = "gaussian"\n', 2, "seed", "expected an integer >= 0"),
     ('[suites]\nname = "x"\n', 1, "suites", "unknown table 'suites'"),
-    (GOOD_HEAD, None, "case", "expected at least one [[case]] (or [[sampler]]) table"),
+    (GOOD_HEAD, None, "case", "expected at least one [[case]], [[sampler]] or [[render]] table"),
     (GOOD_HEAD + '[[sampler]]\nname = "gxx"\n', 6, "name", "unknown sampler 'gxx'; expected one of: exponential"),
     (GOOD_HEAD + '[[sampler]]\nname = "ggx"\nparams = { alpha = -1 }\n', 7, "params",
      "sampler 'ggx': parameter 'alpha' must be > 0, got -1"),
