@@ -29,7 +29,7 @@ def compute(job: UnitJob) -> tuple[tuple, dict[str, Any], float]:
     estimate's contributions (for the tail-index test)."""
     key, integrand, technique, seed, core_case = job
     _, _, budget, replica, c0, c1, kind = key
-    if kind in ("chi_square", "mcmc"):
+    if kind in ("chi_square", "mcmc", "weight"):
         return key, *_sampler_check(kind, integrand, seed)
     f = rest.integrand(integrand)
     t = rest.technique(f, technique)
@@ -52,11 +52,20 @@ def _sampler_check(kind: str, spec_json: str, seed: int) -> tuple[dict[str, Any]
     from .sampler_check import check_sampler, mcmc_crosscheck
 
     spec = json.loads(spec_json)
-    s = rest.sampler(spec["name"], **spec["params"])
     start = time.perf_counter()
-    if kind == "chi_square":
+    if spec.get("adapter"):  # a renderer's sampler, which may fail to produce samples
+        from .adapters.mitsuba_samplers import check_mitsuba_sampler, make_sampler, weight_consistency
+
+        ms = make_sampler(spec["spec"])
+        if kind == "weight":
+            return weight_consistency(ms, sample_count=spec["samples"], seed=seed).to_payload(), \
+                time.perf_counter() - start
+        r = check_mitsuba_sampler(ms, sample_count=spec["samples"], seed=seed)
+    elif kind == "chi_square":
+        s = rest.sampler(spec["name"], **spec["params"])
         r = check_sampler(lambda u: s.sample(u)[0], s.pdf, spec["domain"], sample_count=spec["samples"], seed=seed)
     else:
+        s = rest.sampler(spec["name"], **spec["params"])
         r = mcmc_crosscheck(lambda u: s.sample(u)[0], s.pdf, spec["domain"], sample_count=min(spec["samples"], 20_000),
                             seed=seed)
     payload = {"passed": r.passed, "pvalue": r.pvalue, "tests": json.loads(r.tests.to_json(orient="records")),

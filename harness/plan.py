@@ -53,12 +53,17 @@ def sampler_key(suite: Suite, sc: SamplerCase) -> str:
     definition = {"sampler": sc.name, "params": list(sc.params), "domain": sc.domain, "samples": sc.samples,
                   "seed": suite.seed, "case_id": sc.case_id, "format": _FORMAT, "core": rest.__version__,
                   "build": rest.core_fingerprint()}
+    if sc.adapter:  # a renderer's sampler: its library version is part of what is tested
+        from .adapters.mitsuba_samplers import make_sampler
+
+        definition.update(adapter=sc.adapter, spec=sc.spec, fingerprint=make_sampler(json.loads(sc.spec)).fingerprint())
     return hashlib.sha256(json.dumps(definition, sort_keys=True).encode()).hexdigest()[:24]
 
 
 def sampler_spec(sc: SamplerCase) -> str:
     """What a worker needs to rebuild the sampler (JSON)."""
-    return json.dumps({"name": sc.name, "params": dict(sc.params), "domain": sc.domain, "samples": sc.samples})
+    return json.dumps({"name": sc.name, "params": dict(sc.params), "domain": sc.domain, "samples": sc.samples,
+                       "adapter": sc.adapter, "spec": json.loads(sc.spec) if sc.spec else None})
 
 
 def bias_budget(suite: Suite, case: Case, look: int = 0) -> int:

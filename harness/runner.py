@@ -279,14 +279,17 @@ def _sampler_rows(suite: Suite, samplers: list[SamplerResult]) -> list[dict[str,
 
 def format_sampler_table(samplers: list[SamplerResult], alpha: float) -> str:
     """Sampler checks as aligned text: p-values (within-check Holm), suite verdicts (Holm)."""
-    lines = [f"{'sampler':34s} {'domain':10s} {'n':>7s}  {'chi-square p':>12s}  {'mcmc p':>8s}  verdict (Holm, α={alpha:g})"]
+    width = max([34] + [len(r.case.label) for r in samplers])
+    lines = [f"{'sampler':{width}s} {'domain':10s} {'n':>7s}  {'chi-square p':>12s}  {'mcmc p':>8s}  {'weight':>8s}  verdict (Holm, α={alpha:g})"]
     for r, v in zip(samplers, judge_samplers(samplers, alpha)):
         cs, mc = r.checks.get("chi_square"), r.checks.get("mcmc")
         verdict = "failed" if "failed" in v.values() else "passed"
         notes = "; ".join(f"{f['check']}: {f['count']}" for c in r.checks.values() for f in c["failures"])
         p_cs = f"{cs['pvalue']:.3g}" if cs else "—"
         p_mc = f"{mc['pvalue']:.3g}" if mc else "—"
-        lines.append(f"{r.case.label[:34]:34s} {r.case.domain:10s} {r.case.samples:7.0e}  {p_cs:>12s}  {p_mc:>8s}  "
+        w = r.checks.get("weight")
+        weight = "—" if w is None else ("ok" if not w["failures"] else "mismatch")
+        lines.append(f"{r.case.label:{width}s} {r.case.domain:10s} {r.case.samples:7.0e}  {p_cs:>12s}  {p_mc:>8s}  {weight:>8s}  "
                      f"{verdict}{'  ' + notes if notes else ''}")
     return "\n".join(lines)
 

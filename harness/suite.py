@@ -40,7 +40,7 @@ class SuiteError(ValueError):
 
 
 MEASUREMENTS = ("bias", "variance", "convergence", "efficiency", "error_vs_time")
-SAMPLER_MEASUREMENTS = ("chi_square", "mcmc")
+SAMPLER_MEASUREMENTS = ("chi_square", "mcmc", "weight")
 
 
 @dataclass(frozen=True)
@@ -53,9 +53,13 @@ class SamplerCase:
     samples: int
     case_id: int
     measurements: tuple[str, ...] = ("chi_square",)
+    adapter: str | None = None   # "mitsuba": a renderer's sampler (``spec`` holds its keys as JSON)
+    spec: str = ""
 
     @property
     def label(self) -> str:
+        if self.adapter:
+            return f"{self.adapter}:{self.name}"
         return self.name + ("(" + ", ".join(f"{k}={v:g}" for k, v in self.params) + ")" if self.params else "")
 
 
@@ -265,8 +269,9 @@ def _renders(raw: list[dict[str, Any]], measurements: tuple[str, ...], where: "_
                 renderer(adapter, one)
             except ValueError as e:
                 msg = str(e)
-                key = next((k for k in one if msg.startswith(f"'{k}'")), None)
-                if key is not None:
+                named = sorted((msg.find(f"'{k}'"), k) for k in one if f"'{k}'" in msg)
+                key = named[0][1] if named else None  # the key the adapter's message names first
+                if key is not None and msg.startswith(f"'{key}'"):
                     msg = msg[len(key) + 2:].lstrip(": ")
                 raise SuiteError(where.at(table, key, msg)) from None
             out.append(RenderCase(adapter, tuple(sorted(one.items())), len(out), spp, replicas, budgets, ref_spp,
@@ -281,6 +286,9 @@ def _samplers(raw: list[dict[str, Any]], samples: int, first_id: int, where: "_L
     registry = {s["name"]: s for s in rest.samplers()}
     for i, c in enumerate(raw):
         table = ("sampler", i)
+        if "adapter" in c:
+            out.append(_adapter_sampler(c, samples, first_id + i, where, table))
+            continue
         _check_keys(c, _SAMPLER_KEYS, where, table)
         name = c.get("name")
         if name not in registry:
@@ -300,12 +308,52 @@ def _samplers(raw: list[dict[str, Any]], samples: int, first_id: int, where: "_L
             raise SuiteError(where.at(table, "samples", f"expected at least 1000 samples, got {n}"))
         ms = c.get("measurements", ["chi_square"])
         for m in ms:
+            if m == "weight":
+                raise SuiteError(where.at(table, "measurements", "'weight' (sample weight == eval/pdf) applies to "
+                                          "renderer samplers ([[sampler]] with adapter = \"mitsuba\")"))
             if m not in SAMPLER_MEASUREMENTS:
                 raise SuiteError(where.at(table, "measurements", f"unknown sampler measurement {m!r}; expected some of: "
                                           f"{', '.join(SAMPLER_MEASUREMENTS)}"))
         out.append(SamplerCase(name, tuple(sorted((k, float(v)) for k, v in params.items())), domain, n,
                                first_id + i, tuple(dict.fromkeys(ms)) or ("chi_square",)))
     return tuple(out)
+
+
+_ADAPTER_SAMPLER_KEYS = {"adapter": str, "plugin": dict, "wi": (int, float, list), "variant": str, "samples": int,
+                         "measurements": list}
+
+
+def _adapter_sampler(c: dict[str, Any], samples: int, case_id: int, where: "_Locator", table: Any) -> SamplerCase:
+    """A renderer's sampler (a Mitsuba BSDF, microfacet distribution or environment map):
+    chi-square with failed samples accounted for, and the weight == eval/pdf check."""
+    import json
+
+    _check_keys(c, _ADAPTER_SAMPLER_KEYS, where, table)
+    if c["adapter"] != "mitsuba":
+        raise SuiteError(where.at(table, "adapter", f"expected \"mitsuba\" (samplers of other adapters are not "
+                                  f"supported), got {c['adapter']!r}"))
+    from .adapters.mitsuba_samplers import make_sampler
+
+    spec = {k: c[k] for k in ("plugin", "wi", "variant") if k in c}
+    try:
+        s = make_sampler(spec)
+    except (ValueError, TypeError, RuntimeError) as e:
+        msg = str(e)
+        named = sorted((msg.find(f"'{k}'"), k) for k in spec if f"'{k}'" in msg)
+        raise SuiteError(where.at(table, named[0][1] if named else "plugin", msg.splitlines()[0])) from None
+    n = c.get("samples", samples)
+    if n < 1000:
+        raise SuiteError(where.at(table, "samples", f"expected at least 1000 samples, got {n}"))
+    ms = c.get("measurements", ["chi_square"] + (["weight"] if s.kind != "microfacet" else []))
+    for m in ms:
+        if m not in ("chi_square", "weight"):
+            raise SuiteError(where.at(table, "measurements", f"expected some of: chi_square, weight for a renderer's "
+                                      f"sampler (it may fail to produce samples, which MCMC cannot use), got {m!r}"))
+    if "weight" in ms and s.kind == "microfacet":
+        raise SuiteError(where.at(table, "measurements", "a microfacet distribution returns no weight to check"))
+    label = s.name if spec.get("variant", "llvm_ad_rgb") == "llvm_ad_rgb" else f"{s.name} [{spec['variant']}]"
+    return SamplerCase(label, (), s.domain, n, case_id, tuple(dict.fromkeys(ms)) or ("chi_square",), "mitsuba",
+                       json.dumps(spec, sort_keys=True))
 
 
 def _check_keys(table: dict[str, Any], spec: dict[str, Any], where: "_Locator", name: Any) -> None:

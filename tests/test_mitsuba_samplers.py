@@ -302,3 +302,48 @@ def test_make_sampler_from_a_suite_table():
 def test_make_sampler_errors_name_the_key(spec, match):
     with pytest.raises(ValueError, match=match):
         ms.make_sampler(spec)
+
+
+# --- suite wiring: [[sampler]] tables with adapter = "mitsuba" ---------------------------------
+def test_suite_sampler_tables_run_mitsuba_checks(tmp_path):
+    from harness.runner import judge_samplers, run_suite
+    from harness.suite import load_suite
+
+    path = tmp_path / "samplers.toml"
+    path.write_text(
+        '[suite]\nname = "ms"\nsamples = 200_000\n'
+        '[[sampler]]\nadapter = "mitsuba"\nplugin = { type = "roughconductor", distribution = "ggx", alpha = 0.1 }\n'
+        'wi = 45\n'
+        '[[sampler]]\nadapter = "mitsuba"\nplugin = { type = "microfacet", distribution = "ggx", alpha = 0.5 }\n'
+        '[[sampler]]\nadapter = "mitsuba"\nplugin = { type = "envmap" }\n')
+    suite = load_suite(path)
+    assert [sc.measurements for sc in suite.samplers] == [("chi_square", "weight"), ("chi_square",),
+                                                          ("chi_square", "weight")]
+    assert suite.samplers[0].domain == "hemisphere" and suite.samplers[2].domain == "sphere"
+    summary = run_suite(suite, tmp_path / "ms.sqlite")
+    verdicts = judge_samplers(summary.samplers, suite.alpha)
+    assert verdicts[0]["chi_square"] == verdicts[0]["weight"] == "passed"
+    assert verdicts[1]["chi_square"] == "passed"
+    # the environment map's weights differ from eval/pdf on the sun's rim (float32 in Mitsuba)
+    assert verdicts[2]["chi_square"] == "passed" and verdicts[2]["weight"] == "failed"
+    w = summary.samplers[2].checks["weight"]
+    assert w["failures"][0]["check"] == "weight_mismatch" and w["failures"][0]["examples"]
+    assert run_suite(suite, tmp_path / "ms.sqlite").units_run == 0
+
+
+@pytest.mark.parametrize("body, key", [
+    ('plugin = { type = "nosuchbsdf" }', "plugin"),
+    ('plugin = { type = "diffuse" }\nwi = 95', "wi"),
+    ('plugin = { type = "diffuse" }\nvariant = "bogus"', "variant"),
+    ('plugin = { type = "diffuse" }\nmeasurements = ["mcmc"]', "measurements"),
+    ('plugin = { type = "microfacet" }\nmeasurements = ["weight"]', "measurements"),
+    ('plugin = { type = "diffuse" }\nsamples = 10', "samples"),
+    ('plugin = { type = "diffuse" }\nfoo = 1', "foo"),
+])
+def test_suite_sampler_table_errors_name_the_key(tmp_path, body, key):
+    from harness.suite import SuiteError, load_suite
+
+    path = tmp_path / "bad.toml"
+    path.write_text(f'[[sampler]]\nadapter = "mitsuba"\n{body}\n')
+    with pytest.raises(SuiteError, match=rf"bad\.toml:\d+: {key}: "):
+        load_suite(path)

@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from .base import Render
+from .mitsuba_samplers import VARIANT_LOCK
 
 os.environ.setdefault("DRJIT_LIBLLVM_PATH", "/usr/lib/x86_64-linux-gnu/libLLVM-19.so")
 
@@ -109,6 +110,10 @@ class MitsubaRenderer:
 
     # --- protocol ----------------------------------------------------------------------------
     def render(self, spp: int, seed: int) -> Render:
+        with VARIANT_LOCK:  # Mitsuba's variant is process-global: hold it for the whole render
+            return self._render(spp, seed)
+
+    def _render(self, spp: int, seed: int) -> Render:
         mi = self._activate()
         if spp not in self._warm and not self.variant.startswith("scalar"):
             # some kernels depend on spp (the light tracer's): compile untimed at this budget
@@ -199,7 +204,8 @@ def make_renderer(spec: dict[str, Any]) -> MitsubaRenderer:
         size[k] = v
     r = MitsubaRenderer(scene, integrator, variant, max_depth, size["width"], size["height"])
     try:
-        r._activate()
+        with VARIANT_LOCK:
+            r._activate()
     except Exception as e:  # Mitsuba's own message: unknown plugin, bad XML, ...
         key = "integrator" if "integrator" in str(e).lower() or "plugin" in str(e).lower() else "scene"
         raise ValueError(f"'{key}': Mitsuba cannot load it: {str(e).splitlines()[0]}") from e

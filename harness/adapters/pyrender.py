@@ -230,6 +230,7 @@ class PyrenderRenderer:
         unknown = sorted(set(spec) - set(_KEYS))
         if unknown:
             raise ValueError(f"pyrender spec: unknown key(s) {unknown}; expected keys among {list(_KEYS)}")
+        self._spec = dict(spec)
         self.scene_name = _choice(spec, "scene", SCENE_NAMES, None)
         self.technique = _choice(spec, "technique", TECHNIQUES, None)
         self.points = _choice(spec, "points", POINTS, "random")
@@ -342,6 +343,12 @@ class PyrenderRenderer:
         """None: a rasterizer's filtered or area-lit image has no closed form; references are
         this estimator at a high frame count, rendered and cached by the suite runner."""
         return None
+
+    def reference(self) -> "PyrenderRenderer":
+        """The renderer of this configuration's reference: the same estimand with random points.
+        Stratified and Sobol' frames can put a pixel on one side of a shadow or object edge in
+        every replica; independent random parts give the reference an honest standard error."""
+        return PyrenderRenderer({**self._spec, "points": "random"})
 
     def fingerprint(self) -> dict[str, Any]:
         """Everything that fixes the images (JSON-able), and ``estimand_digest``: a hash of all
