@@ -258,6 +258,7 @@ def _measure(rc: RenderCase, key: str, store: Store, reference: ist.Reference, r
         store.put_image(f"{key}/estimate", images.mean(axis=0))
     store.put_image(f"{key}/reference", reference.mean)
     chosen = sorted({k[1] for k in payloads} - {0})
+    noise = reference.noise_relmse()
     reps, rows = [], []
     for stream in chosen:
         images, seconds, spp = _stack(store, payloads, stream)
@@ -265,6 +266,10 @@ def _measure(rc: RenderCase, key: str, store: Store, reference: ist.Reference, r
         reps.append((spp, err, seconds))
         rows.append({"spp": spp, "seconds": float(np.median(seconds)), "relmse": float(err.mean()),
                      "relmse_se": float(err.std(ddof=1) / math.sqrt(err.size)), "replicas": int(err.size)})
+    if reps and min(row["relmse"] for row in rows) <= 0:
+        notes.append(f"relMSE at or below the reference's own ({noise:.2g}) at some budget: the reference is too "
+                     "noisy to measure this configuration's error; render it with more samples")
+        reps = []
     if reps:
         errors = pd.DataFrame(rows)
         spp, err, seconds = reps[-1]
@@ -273,7 +278,6 @@ def _measure(rc: RenderCase, key: str, store: Store, reference: ist.Reference, r
             convergence = stats.fit_convergence([ist.as_replicates(rc.scene, rc.label, s, e, t) for s, e, t in reps])
         if "bias" not in wanted and "variance" not in wanted:
             store.put_image(f"{key}/estimate", _stack(store, payloads, chosen[-1])[0].mean(axis=0))
-    noise = reference.noise_relmse()
     if reps and noise > 0.1 * max(reps[-1][1].mean() + noise, 1e-300):
         notes.append(f"the reference's own relMSE {noise:.2g} is over 10 % of the top budget's: "
                      "render the reference with more samples")

@@ -245,10 +245,14 @@ def _renders(raw: list[dict[str, Any]], measurements: tuple[str, ...], where: "_
         replicas = c.get("replicas", 16)
         if replicas < 4:
             raise SuiteError(where.at(table, "replicas", f"expected at least 4 replicas, got {replicas}"))
+        ms = _measurements(c["measurements"], where, table) if "measurements" in c else measurements
         budgets = c.get("budgets", [max(1, spp >> k) for k in (6, 4, 2, 0)])
-        if len(set(budgets)) < 3 or any(isinstance(b, bool) or not isinstance(b, int) or b <= 0 for b in budgets):
-            raise SuiteError(where.at(table, "budgets", f"expected at least 3 distinct positive integer budgets, "
-                                      f"got {budgets}"))
+        if any(isinstance(b, bool) or not isinstance(b, int) or b <= 0 for b in budgets):
+            raise SuiteError(where.at(table, "budgets", f"expected positive integer budgets, got {budgets}"))
+        if len(set(budgets)) < 3 and set(ms) & {"convergence", "error_vs_time", "efficiency"}:
+            key = "budgets" if "budgets" in c else "spp"
+            raise SuiteError(where.at(table, key, f"expected at least 3 distinct budgets for {', '.join(ms)}, got "
+                                      f"{sorted(set(budgets))}" + ("" if "budgets" in c else " (give budgets)")))
         budgets = tuple(sorted(set(budgets)))
         parts = c.get("reference_parts", 8)
         if parts < 2:
@@ -257,7 +261,6 @@ def _renders(raw: list[dict[str, Any]], measurements: tuple[str, ...], where: "_
         if ref_spp < parts or ref_spp % parts:
             raise SuiteError(where.at(table, "reference_spp", f"expected a multiple of reference_parts = {parts}, "
                                       f"got {ref_spp}"))
-        ms = _measurements(c["measurements"], where, table) if "measurements" in c else measurements
         expect = c.get("expect", "unbiased")
         if expect not in ("unbiased", "biased"):
             raise SuiteError(where.at(table, "expect", f"expected \"unbiased\" or \"biased\", got {expect!r}"))

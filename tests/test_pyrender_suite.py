@@ -1,0 +1,154 @@
+"""pyrender render cases through the suite runner (real OSMesa frames, 32 x 32): random,
+stratified and Sobol' antialiasing and soft shadows measured like any estimator."""
+from __future__ import annotations
+
+import json
+import textwrap
+
+import numpy as np
+import pytest
+
+from harness.renders import judge_renders, render_failures
+from harness.runner import run_suite
+from harness.store import load
+from harness.suite import SuiteError, load_suite
+
+SUITE = """\
+    [suite]
+    name = "raster"
+    alpha = 0.01
+
+    [[render]]
+    adapter = "pyrender"
+    scene = "edges"
+    technique = "antialias"
+    points = ["random", "stratified", "sobol"]
+    spp = 32
+    replicas = 12
+    budgets = [4, 16, 64]
+    reference_spp = 4096
+
+    [[render]]
+    adapter = "pyrender"
+    scene = "shadow"
+    technique = "soft_shadow"
+    points = ["random", "sobol"]
+    spp = 16
+    replicas = 8
+    budgets = [2, 4, 16]
+    reference_spp = 1024
+"""
+
+
+@pytest.fixture(scope="module")
+def raster(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("raster")
+    path = tmp / "raster.toml"
+    path.write_text(textwrap.dedent(SUITE))
+    suite = load_suite(path)
+    return suite, tmp, run_suite(suite, tmp / "raster.sqlite")
+
+
+def test_rasterizer_estimators_are_unbiased_and_stratification_pays(raster):
+    suite, tmp, summary = raster
+    rs = summary.renders
+    assert [r.case.label for r in rs][:3] == ["points=random, technique=antialias",
+                                              "points=stratified, technique=antialias",
+                                              "points=sobol, technique=antialias"]
+    assert judge_renders(rs, suite.alpha) == ["unbiased"] * 5
+    assert render_failures(rs, suite.alpha) == [""] * 5
+    assert all(r.faults.total == 0 for r in rs)
+    random_aa, strat_aa, sobol_aa, random_sh, sobol_sh = rs
+    # random points converge at spp^-1/2; stratified and Sobol' faster at edges (about -3/4:
+    # only the strata an edge crosses vary), with the whole 95 % interval below -0.6
+    lo, hi = random_aa.convergence.slope_interval
+    assert lo - 0.05 < -0.5 < hi + 0.05
+    for r in (strat_aa, sobol_aa, sobol_sh):
+        assert r.convergence.slope_interval[1] < -0.6, r.convergence
+    df = load(tmp / "raster.sqlite")
+    eff = df[df.measurement == "efficiency"].set_index("technique")
+    # at equal frames and at equal time, Sobol' beats random by far more than the interval width
+    assert eff.loc["points=sobol, technique=antialias", "lo"] > 2
+    assert eff.loc["points=sobol, technique=soft_shadow", "lo"] > 2
+    equal = df[df.measurement == "equal_time_relmse"].set_index("technique")["value"]
+    assert equal["points=sobol, technique=antialias"] < equal["points=random, technique=antialias"]
+
+
+def test_one_cached_reference_per_estimand(raster):
+    """Random, stratified and Sobol' estimate one image: they share one reference (Sobol'
+    parts), rendered once and cached beside the database."""
+    suite, tmp, summary = raster
+    rs = summary.renders
+    assert len({r.reference for r in rs[:3]}) == 1 and rs[3].reference == rs[4].reference != rs[0].reference
+    metas = [json.loads(p.read_text()) for p in (tmp / "references").glob("*.json")]
+    assert sorted(m["spp"] for m in metas) == [1024, 4096]
+    assert all(m["fingerprint"]["points"] == "sobol" and m["parts"] == 8 for m in metas)
+    assert run_suite(suite, tmp / "raster.sqlite").units_run == 0
+
+
+def test_a_planted_offset_bias_is_found(tmp_path, monkeypatch):
+    """Sub-pixel offsets shifted by 0.15 pixel (a filter not centred on the pixel) estimate a
+    different image: the per-pixel test must say so."""
+    from harness.adapters import pyrender as adapter
+
+    real = adapter.PyrenderRenderer._placements
+
+    def shifted(self, u):
+        out = real(self, u)
+        if self.points == "random":   # the reference (Sobol') stays correct
+            out[:, 0] += 0.15
+        return out
+
+    monkeypatch.setattr(adapter.PyrenderRenderer, "_placements", shifted)
+    path = tmp_path / "shifted.toml"
+    path.write_text(textwrap.dedent("""\
+        [[render]]
+        adapter = "pyrender"
+        scene = "edges"
+        technique = "antialias"
+        spp = 64
+        replicas = 8
+        measurements = ["bias"]
+        expect = "biased"
+        reference_spp = 2048
+    """))
+    suite = load_suite(path)
+    summary = run_suite(suite, tmp_path / "shifted.sqlite")
+    b = summary.renders[0].bias
+    assert judge_renders(summary.renders, suite.alpha) == ["biased (expected)"]
+    # a shift keeps the image's mean: the pixel test (at alpha / 2) is what finds it
+    assert b.pvalue_pixels <= suite.alpha / 2 and b.pvalue_mean > suite.alpha
+
+
+def test_nan_frames_are_counted_not_averaged(tmp_path, monkeypatch):
+    from harness.adapters import pyrender as adapter
+
+    real = adapter.PyrenderRenderer.render
+
+    def broken(self, spp, seed):
+        out = real(self, spp, seed)
+        if self.points == "random":
+            out.image[7, 9, :] = np.nan
+        return out
+
+    monkeypatch.setattr(adapter.PyrenderRenderer, "render", broken)
+    path = tmp_path / "nan.toml"
+    path.write_text('[[render]]\nadapter = "pyrender"\nscene = "edges"\ntechnique = "antialias"\nspp = 4\n'
+                    'replicas = 4\nmeasurements = ["bias"]\nreference_spp = 64\n')
+    suite = load_suite(path)
+    summary = run_suite(suite, tmp_path / "nan.sqlite")
+    r = summary.renders[0]
+    assert r.faults.nan == 4 and r.faults.examples["nan"][0] == (0, 7, 9)
+    assert judge_renders(summary.renders, suite.alpha) == ["invalid (4 bad pixels)"]
+    assert r.bias.excluded == 1
+
+
+@pytest.mark.parametrize("line, key", [('scene = "nowhere"', "scene"), ('technique = "blur"', "technique"),
+                                       ('points = "halton"', "points"), ('light_size = 9', "light_size")])
+def test_suite_errors_name_the_key(tmp_path, line, key):
+    path = tmp_path / "bad.toml"
+    body = {"scene": 'scene = "shadow"', "technique": 'technique = "soft_shadow"'}
+    body[line.split()[0]] = line
+    path.write_text('[[render]]\nadapter = "pyrender"\n' + "\n".join(body.values()) + "\n")
+    with pytest.raises(SuiteError, match=rf"bad\.toml:\d+: {key}: "):
+        load_suite(path)
