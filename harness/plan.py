@@ -23,6 +23,7 @@ UNIT_CHUNKS = 32                     # core chunks (of 65 536 samples) per store
 BIAS_STREAM = 0                      # stream 0: the bias test's batches; 1 + i: convergence budget i;
 TARGET_STREAM = 200                  # 200 + s: the bias test's batches at look s >= 1 of a target
 _FORMAT = 1                          # bump when a unit's meaning changes: old rows stop matching
+_SAMPLER_PAYLOAD = 2                 # sampler-check payloads: 2 adds residual grids and marginals (report)
 
 
 @dataclass(frozen=True, order=True)
@@ -51,7 +52,7 @@ def case_key(suite: Suite, case: Case) -> str:
 def sampler_key(suite: Suite, sc: SamplerCase) -> str:
     """Fingerprint of a sampler check: the sampler, its parameters, domain, samples and seed."""
     definition = {"sampler": sc.name, "params": list(sc.params), "domain": sc.domain, "samples": sc.samples,
-                  "seed": suite.seed, "case_id": sc.case_id, "format": _FORMAT, "core": rest.__version__,
+                  "seed": suite.seed, "case_id": sc.case_id, "format": _FORMAT, "payload": _SAMPLER_PAYLOAD, "core": rest.__version__,
                   "build": rest.core_fingerprint()}
     if sc.adapter:  # a renderer's sampler: its library version is part of what is tested
         from .adapters.mitsuba_samplers import make_sampler

@@ -105,4 +105,6 @@ def load_results(db: str | Path, suite: str | None = None) -> Results:
         shown = key in keep_keys if suite else key not in stale
         if kind == "reference" and f"{key}/estimate" in images and shown:
             pairs[key] = (name, f"{key}/estimate")
+    order = {k: i for i, k in enumerate(dict.fromkeys(m["case_key"]))}  # the suite's order of cases
+    pairs = dict(sorted(pairs.items(), key=lambda kv: order.get(kv[0], len(order))))
     return Results(path, m, pairs, len(stale), labels)
