@@ -360,20 +360,29 @@ def _baselines(results: list[RenderResult]) -> dict[tuple[str, str], RenderResul
 
 
 def equal_time_relmse(results: list[RenderResult]) -> dict[str, tuple[float, float]]:
-    """relMSE of each case at the longest time every case of its estimand reached: (time s, relMSE).
-    From a least-squares line of log relMSE on log time over the case's budgets, because the
-    wall times of small renders are too noisy to interpolate between neighbouring budgets."""
+    """relMSE of each case at the longest time every case of its estimand reached: (time s,
+    relMSE), interpolated linearly in log relMSE against log time between the two measured
+    budgets around that time.  Budgets are taken in spp order with their median times made
+    non-decreasing (timing noise of small renders), and nothing is extrapolated: a case whose
+    smallest budget already takes longer gets NaN."""
     out: dict[str, tuple[float, float]] = {}
-    by_scene: dict[tuple[str, str], list[RenderResult]] = {}
+    by_estimand: dict[tuple[str, str], list[RenderResult]] = {}
     for r in results:
         if r.errors is not None and len(r.errors) >= 2 and (r.errors["relmse"] > 0).all():
-            by_scene.setdefault(_estimand(r), []).append(r)
-    for group in by_scene.values():
+            by_estimand.setdefault(_estimand(r), []).append(r)
+    for group in by_estimand.values():
         t_star = min(float(r.errors["seconds"].max()) for r in group)
         for r in group:
-            lt, le = np.log(r.errors["seconds"].to_numpy()), np.log(r.errors["relmse"].to_numpy())
-            slope, icept = np.polyfit(lt, le, 1)
-            out[r.key] = (t_star, float(math.exp(icept + slope * math.log(t_star))))
+            e = r.errors.sort_values("spp")
+            t = np.maximum.accumulate(e["seconds"].to_numpy())
+            lt, le = np.log(t), np.log(e["relmse"].to_numpy())
+            x = math.log(t_star)
+            if x < lt[0]:
+                out[r.key] = (t_star, math.nan)
+                continue
+            i = int(np.clip(np.searchsorted(lt, x), 1, len(lt) - 1))
+            w = (x - lt[i - 1]) / (lt[i] - lt[i - 1]) if lt[i] > lt[i - 1] else 1.0
+            out[r.key] = (t_star, float(math.exp(le[i - 1] + min(w, 1.0) * (le[i] - le[i - 1]))))
     return out
 
 
