@@ -32,7 +32,7 @@ from . import image_stats as ist
 from . import stats
 from .adapters import ImageFaults, Renderer, image_faults, renderer
 from .plan import Unit
-from .store import Store
+from .store import Store, read_exr, write_exr
 from .suite import RenderCase, Suite
 
 __all__ = ["RenderResult", "run_renders", "render_key", "judge_renders", "judge_render_convergence",
@@ -114,44 +114,18 @@ class ReferenceCache:
         if not meta_p.exists():  # written last: its presence means both images are complete
             return None
         meta = json.loads(meta_p.read_text())
-        return ist.Reference(_read_exr(mean_p), _read_exr(var_p), int(meta["parts"]), float(meta["image_mean_variance"]))
+        return ist.Reference(read_exr(mean_p).astype(np.float64), read_exr(var_p).astype(np.float64), int(meta["parts"]),
+                             float(meta["image_mean_variance"]))
 
     def save(self, key: str, ref: ist.Reference, meta: dict[str, Any]) -> None:
         self.folder.mkdir(parents=True, exist_ok=True)
         mean_p, var_p, meta_p = self._paths(key)
-        _write_exr(mean_p, ref.mean)
-        _write_exr(var_p, ref.variance)
+        write_exr(mean_p, ref.mean)
+        write_exr(var_p, ref.variance)
         tmp = meta_p.with_suffix(".json.partial")
         tmp.write_text(json.dumps({**meta, "parts": ref.parts, "image_mean_variance": ref.image_mean_variance},
                                   indent=1, sort_keys=True, default=str))
         os.replace(tmp, meta_p)
-
-
-def _write_exr(path: Path, image: np.ndarray) -> None:
-    import OpenImageIO as oiio
-
-    a = np.ascontiguousarray(image, dtype=np.float32)
-    tmp = path.with_name(path.name + ".partial.exr")
-    out = oiio.ImageOutput.create(str(tmp))
-    if out is None or not out.open(str(tmp), oiio.ImageSpec(a.shape[1], a.shape[0], a.shape[2], "float")):
-        raise OSError(f"cannot write {tmp}: {oiio.geterror()}")
-    ok = out.write_image(a)
-    out.close()
-    if not ok:
-        raise OSError(f"cannot write {tmp}: {oiio.geterror()}")
-    os.replace(tmp, path)
-
-
-def _read_exr(path: Path) -> np.ndarray:
-    import OpenImageIO as oiio
-
-    inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        raise OSError(f"cannot read {path}: {oiio.geterror()}")
-    try:
-        return np.asarray(inp.read_image("float"), dtype=np.float64)
-    finally:
-        inp.close()
 
 
 # --- running ------------------------------------------------------------------------------------
@@ -211,21 +185,19 @@ def run_renders(suite: Suite, store: Store, *, progress: Callable[[int, int], No
 def _build_reference(store: Store, cache: ReferenceCache, rc: RenderCase, ref_key: str, ref: Renderer) -> ist.Reference:
     payloads = store.payloads(ref_key)
     images = np.stack([store.image(p["image"]) for _, p in sorted(payloads.items())]).astype(np.float64)
-    bad = sum(p["faults"]["nan"] + p["faults"]["inf"] + p["faults"]["negative"] for p in payloads.values())
     reference = ist.Reference.from_parts(images)
-    seconds = float(store.db.execute("SELECT SUM(seconds) FROM units WHERE case_key = ?", (ref_key,)).fetchone()[0])
     cache.save(ref_key, reference, {"fingerprint": ref.fingerprint(), "spp": rc.reference_spp,
-                                    "invalid_pixels": bad, "seconds": seconds})
+                                    "invalid_pixels": _faults(payloads).total,
+                                    "seconds": float(sum(store.seconds(ref_key).values()))})
     return reference
 
 
-def _stack(store: Store, payloads: dict[tuple, dict], stream: int) -> tuple[np.ndarray, np.ndarray, int]:
+def _stack(store: Store, payloads: dict[tuple, dict], seconds: dict[tuple, float],
+           stream: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """The replica images of one stream (R, h, w, c), their wall times (R,) and their budget."""
     rows = sorted((k, p) for k, p in payloads.items() if k[1] == stream)
     images = np.stack([store.image(p["image"]) for _, p in rows]).astype(np.float64)
-    seconds = np.array([float(store.db.execute(
-        "SELECT seconds FROM units WHERE case_key = ? AND stream = ? AND budget = ? AND replica = ? AND kind = ?",
-        (k[0], k[1], k[2], k[3], k[6])).fetchone()[0]) for k, _ in rows])
-    return images, seconds, rows[0][0][2]
+    return images, np.array([seconds[k] for k, _ in rows]), rows[0][0][2]
 
 
 def _faults(payloads: dict[tuple, dict]) -> ImageFaults:
@@ -241,13 +213,13 @@ def _faults(payloads: dict[tuple, dict]) -> ImageFaults:
 
 
 def _measure(rc: RenderCase, key: str, store: Store, reference: ist.Reference, ref_label: str) -> RenderResult:
-    payloads = store.payloads(key)
+    payloads, seconds_of = store.payloads(key), store.seconds(key)
     wanted = set(rc.measurements)
     faults = _faults(payloads)
     notes: list[str] = []
     bias = variance = convergence = eff = errors = None
     if wanted & {"bias", "variance"}:
-        images, _, spp = _stack(store, payloads, 0)
+        images, _, spp = _stack(store, payloads, seconds_of, 0)
         if "bias" in wanted:
             bias = ist.pixel_bias_test(images, reference, spp)
             if bias.untestable > bias.tested:
@@ -261,7 +233,7 @@ def _measure(rc: RenderCase, key: str, store: Store, reference: ist.Reference, r
     noise = reference.noise_relmse()
     reps, rows = [], []
     for stream in chosen:
-        images, seconds, spp = _stack(store, payloads, stream)
+        images, seconds, spp = _stack(store, payloads, seconds_of, stream)
         err = ist.relmse(images, reference)
         reps.append((spp, err, seconds))
         rows.append({"spp": spp, "seconds": float(np.median(seconds)), "relmse": float(err.mean()),
@@ -276,8 +248,8 @@ def _measure(rc: RenderCase, key: str, store: Store, reference: ist.Reference, r
         eff = ist.image_efficiency(rc.label, spp, err, seconds)
         if "convergence" in wanted and len(reps) >= 3:
             convergence = stats.fit_convergence([ist.as_replicates(rc.scene, rc.label, s, e, t) for s, e, t in reps])
-        if "bias" not in wanted and "variance" not in wanted:
-            store.put_image(f"{key}/estimate", _stack(store, payloads, chosen[-1])[0].mean(axis=0))
+        if "bias" not in wanted and "variance" not in wanted:  # the top budget's images, read last above
+            store.put_image(f"{key}/estimate", images.mean(axis=0))
     if reps and noise > 0.1 * max(reps[-1][1].mean() + noise, 1e-300):
         notes.append(f"the reference's own relMSE {noise:.2g} is over 10 % of the top budget's: "
                      "render the reference with more samples")

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-__all__ = ["Store", "load"]
+__all__ = ["Store", "load", "write_exr", "read_exr"]
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS cases (
@@ -121,6 +121,12 @@ class Store:
                                "FROM units WHERE case_key = ?", (case_key,))
         return {tuple(r[:7]): json.loads(r[7]) for r in rows}
 
+    def seconds(self, case_key: str) -> dict[UnitKey, float]:
+        """Wall time (s) of each of the case's stored units."""
+        rows = self.db.execute("SELECT case_key, stream, budget, replica, chunk_begin, chunk_end, kind, seconds "
+                               "FROM units WHERE case_key = ?", (case_key,))
+        return {tuple(r[:7]): r[7] for r in rows}
+
     def unit_count(self) -> int:
         return self.db.execute("SELECT COUNT(*) FROM units").fetchone()[0]
 
@@ -131,24 +137,10 @@ class Store:
 
     def put_image(self, name: str, image: np.ndarray) -> Path:
         """Stores a float image (height, width[, channels]) as EXR and records it; returns the file."""
-        import OpenImageIO as oiio  # only runs that store images need it
-
-        a = np.asarray(image, dtype=np.float32)
-        if a.ndim == 2:
-            a = a[:, :, None]
-        if a.ndim != 3 or a.shape[2] < 1:
-            raise ValueError(f"'image' must have shape (height, width) or (height, width, channels), got {a.shape}")
         self.image_dir.mkdir(parents=True, exist_ok=True)
         file = re.sub(r"[^A-Za-z0-9._-]", "_", name) + ".exr"
-        final, tmp = self.image_dir / file, self.image_dir / (file + ".partial.exr")
-        out = oiio.ImageOutput.create(str(tmp))
-        if out is None or not out.open(str(tmp), oiio.ImageSpec(a.shape[1], a.shape[0], a.shape[2], "float")):
-            raise OSError(f"cannot write {tmp}: {oiio.geterror()}")
-        ok = out.write_image(np.ascontiguousarray(a))
-        out.close()
-        if not ok:
-            raise OSError(f"cannot write {tmp}: {oiio.geterror()}")
-        os.replace(tmp, final)
+        final = self.image_dir / file
+        a = write_exr(final, image)
         self.commit()
         self.db.execute("INSERT OR REPLACE INTO images VALUES (?, ?, ?, ?, ?, ?)",
                         (name, file, a.shape[0], a.shape[1], a.shape[2], time.time()))
@@ -156,18 +148,8 @@ class Store:
 
     def image(self, name: str) -> np.ndarray | None:
         """The stored image (height, width, channels) as float32, or None."""
-        import OpenImageIO as oiio
-
         row = self.db.execute("SELECT file FROM images WHERE name = ?", (name,)).fetchone()
-        if row is None:
-            return None
-        inp = oiio.ImageInput.open(str(self.image_dir / row[0]))
-        if inp is None:
-            raise OSError(f"cannot read {self.image_dir / row[0]}: {oiio.geterror()}")
-        try:
-            return inp.read_image("float")
-        finally:
-            inp.close()
+        return None if row is None else read_exr(self.image_dir / row[0])
 
     # --- measurements ------------------------------------------------------------------------
     def put_measurements(self, rows: list[dict[str, Any]]) -> None:
@@ -183,6 +165,41 @@ class Store:
     def measurements(self, suite: str | None = None) -> pd.DataFrame:
         query = "SELECT * FROM measurements" + (" WHERE suite = ?" if suite else "") + " ORDER BY rowid"
         return pd.read_sql_query(query, self.db, params=(suite,) if suite else ())
+
+
+def write_exr(path: Path, image: np.ndarray) -> np.ndarray:
+    """Writes a float image (height, width[, channels]) as float32 EXR: to a temporary name,
+    then renamed, so ``path`` is always a complete file.  Returns the array written."""
+    import OpenImageIO as oiio  # only runs that store images need it
+
+    a = np.asarray(image, dtype=np.float32)
+    if a.ndim == 2:
+        a = a[:, :, None]
+    if a.ndim != 3 or a.shape[2] < 1:
+        raise ValueError(f"'image' must have shape (height, width) or (height, width, channels), got {a.shape}")
+    tmp = path.with_name(path.name + ".partial.exr")
+    out = oiio.ImageOutput.create(str(tmp))
+    if out is None or not out.open(str(tmp), oiio.ImageSpec(a.shape[1], a.shape[0], a.shape[2], "float")):
+        raise OSError(f"cannot write {tmp}: {oiio.geterror()}")
+    ok = out.write_image(np.ascontiguousarray(a))
+    out.close()
+    if not ok:
+        raise OSError(f"cannot write {tmp}: {oiio.geterror()}")
+    os.replace(tmp, path)
+    return a
+
+
+def read_exr(path: Path) -> np.ndarray:
+    """An EXR image as float32 (height, width, channels)."""
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise OSError(f"cannot read {path}: {oiio.geterror()}")
+    try:
+        return inp.read_image("float")
+    finally:
+        inp.close()
 
 
 def load(db: str | Path, suite: str | None = None) -> pd.DataFrame:

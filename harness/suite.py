@@ -272,8 +272,7 @@ def _renders(raw: list[dict[str, Any]], measurements: tuple[str, ...], where: "_
                 renderer(adapter, one)
             except ValueError as e:
                 msg = str(e)
-                named = sorted((msg.find(f"'{k}'"), k) for k in one if f"'{k}'" in msg)
-                key = named[0][1] if named else None  # the key the adapter's message names first
+                key = _named_key(msg, one)
                 if key is not None and msg.startswith(f"'{key}'"):
                     msg = msg[len(key) + 2:].lstrip(": ")
                 raise SuiteError(where.at(table, key, msg)) from None
@@ -342,8 +341,7 @@ def _adapter_sampler(c: dict[str, Any], samples: int, case_id: int, where: "_Loc
         s = make_sampler(spec)
     except (ValueError, TypeError, RuntimeError) as e:
         msg = str(e)
-        named = sorted((msg.find(f"'{k}'"), k) for k in spec if f"'{k}'" in msg)
-        raise SuiteError(where.at(table, named[0][1] if named else "plugin", msg.splitlines()[0])) from None
+        raise SuiteError(where.at(table, _named_key(msg, spec) or "plugin", msg.splitlines()[0])) from None
     n = c.get("samples", samples)
     if n < 1000:
         raise SuiteError(where.at(table, "samples", f"expected at least 1000 samples, got {n}"))
@@ -357,6 +355,12 @@ def _adapter_sampler(c: dict[str, Any], samples: int, case_id: int, where: "_Loc
     label = s.name if spec.get("variant", "llvm_ad_rgb") == "llvm_ad_rgb" else f"{s.name} [{spec['variant']}]"
     return SamplerCase(label, (), s.domain, n, case_id, tuple(dict.fromkeys(ms)) or ("chi_square",), "mitsuba",
                        json.dumps(spec, sort_keys=True))
+
+
+def _named_key(message: str, keys: Any) -> str | None:
+    """The key an adapter's error message names first (quoted as 'key'), or None."""
+    named = sorted((message.find(f"'{k}'"), k) for k in keys if f"'{k}'" in message)
+    return named[0][1] if named else None
 
 
 def _check_keys(table: dict[str, Any], spec: dict[str, Any], where: "_Locator", name: Any) -> None:
