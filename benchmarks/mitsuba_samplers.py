@@ -1,4 +1,4 @@
-"""Which Mitsuba 3 samplers pass: every plugin of harness.adapters.mitsuba_samplers.catalogue()
+"""Which Mitsuba 3 samplers pass: every plugin of harness.adapters.mitsuba.samplers.catalogue()
 (diffuse, roughconductor GGX/Beckmann at alpha 0.01, 0.1, 0.5 with and without visible-normal
 sampling, roughdielectric, roughplastic, the microfacet distributions, envmaps) at
 theta_i = 0, 45, 80 degrees, and the planted faults of wrong_catalogue(), through
@@ -48,7 +48,7 @@ import time
 
 os.environ.setdefault("DRJIT_LIBLLVM_PATH", "/usr/lib/x86_64-linux-gnu/libLLVM-19.so")
 
-from harness.adapters.mitsuba_samplers import catalogue, run_catalogue, wrong_catalogue  # noqa: E402
+from harness.adapters.mitsuba.samplers import catalogue, run_catalogue, wrong_catalogue  # noqa: E402
 
 
 def _row(r) -> str:

@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 
 import reference_estimators as rest
-from harness.plan import BIAS_STREAM, bias_budget
-from harness.runner import _core_case, run_suite
-from harness.suite import load_suite
+from harness.suite.plan import BIAS_STREAM, bias_budget
+from harness.suite.run import _core_case, run_suite
+from harness.suite.parse import load_suite
 
 SUITE = """
 [suite]

@@ -1,7 +1,7 @@
 """Sampler tests side by side: harness.check_sampler against Mitsuba 3's mitsuba.chi2.ChiSquareTest
 (llvm_ad_rgb, its defaults: 1e6 samples, 101 x 202 cells on the sphere, 4 x 4 points per
 cell, pooling below 5), on the same zoo of correct and subtly wrong samplers
-(harness.sampler_zoo), at the same sample count and seeds.
+(harness.samplers.zoo), at the same sample count and seeds.
 
     .venv/bin/python benchmarks/sampler_tests.py [--seeds 10] [--samples 1e6]
 
@@ -23,8 +23,8 @@ import numpy as np
 
 os.environ.setdefault("DRJIT_LIBLLVM_PATH", "/usr/lib/x86_64-linux-gnu/libLLVM-19.so")
 
-from harness import sampler_zoo  # noqa: E402
-from harness.sampler_check import SamplerTest, _domain  # noqa: E402
+from harness.samplers import zoo as sampler_zoo  # noqa: E402
+from harness.samplers.check import SamplerTest, _domain  # noqa: E402
 
 
 def mitsuba_test(mi, s, n: int, seed: int) -> tuple[bool, float]:

@@ -2,7 +2,7 @@
 
     .venv/bin/python benchmarks/unbiased_calibration.py [--seeds 200] [--samples 1e5]
 
-Prints, per estimator of harness.calibration.zoo(), how often each verdict came out over the
+Prints, per estimator of harness.stats.zoo.zoo(), how often each verdict came out over the
 seeds: for correct estimators the rate of "biased" is the false-alarm rate (alpha = 0.01), for
 wrong ones it is the power.  The subtle faults are measured again at 10x the samples.
 """
@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from harness import calibration
+from harness.stats import zoo as calibration
 
 COLUMNS = ["estimator", "fault", "runs", "biased", "inconclusive", "consistent", "rate", "rate_lo", "rate_hi"]
 

@@ -1,3 +1,3 @@
-from .cli import entry
+from harness.cli import entry
 
 entry()

@@ -9,10 +9,10 @@ import reference_estimators as rest
 
 from tqdm import tqdm
 
-from .renders import format_render_table, render_failures
-from .runner import bad_verdicts, format_sampler_table, format_table, judge_samplers, results_table, run_suite
-from .store import load
-from .suite import SuiteError, load_suite
+from harness.suite.renders import format_render_table, render_failures
+from harness.suite.run import bad_verdicts, format_sampler_table, format_table, judge_samplers, results_table, run_suite
+from harness.suite.store import load
+from harness.suite.parse import SuiteError, load_suite
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -117,7 +117,7 @@ def _run(suite, db: str, threads: int | None, csv: str | None, dask: str | None)
 def _check_sampler(args) -> int:
     import importlib
 
-    from .sampler_check import check_sampler, mcmc_crosscheck
+    from harness.samplers.check import check_sampler, mcmc_crosscheck
 
     module, _, attr = args.target.partition(":")
     if not attr:

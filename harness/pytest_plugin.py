@@ -14,9 +14,9 @@ from pathlib import Path
 
 import pytest
 
-from .renders import render_failures
-from .runner import RunSummary, judge, judge_convergence, judge_samplers, run_suite
-from .suite import Suite, SuiteError, load_suite
+from harness.suite.renders import render_failures
+from harness.suite.run import RunSummary, judge, judge_convergence, judge_samplers, run_suite
+from harness.suite.parse import Suite, SuiteError, load_suite
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:

@@ -10,7 +10,7 @@ from scipy import stats as sps
 
 import reference_estimators as rest
 
-from . import stats
+from harness import stats
 
 __all__ = ["HarnessWarning", "assert_unbiased", "assert_biased", "assert_converges", "assert_rare"]
 
@@ -34,7 +34,7 @@ def assert_unbiased(contributions: Callable[[np.ndarray], np.ndarray], dim: int,
 def assert_biased(contributions: Callable[[np.ndarray], np.ndarray], dim: int, reference: float, *,
                   sample_count: int, alpha: float = 0.01, seed: int = 0) -> stats.UnbiasedResult:
     """Fails when a bias that should be there is not found: a power check for a test suite
-    (how often it fails for a real bias is the power, see harness.calibration)."""
+    (how often it fails for a real bias is the power, see harness.stats.zoo)."""
     r = stats.check_unbiased(contributions, dim, reference, sample_count=sample_count, seed=seed, alpha=alpha)
     if r.verdict != "biased":
         raise AssertionError(f"expected a detectable bias against {reference!r} at alpha = {alpha}, got {r}")

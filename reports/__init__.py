@@ -11,9 +11,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .data import Results, load_results
-from .html import render_html
-from .tables import to_csv, to_markdown, wide_table
+from reports.data import Results, load_results
+from reports.html import render_html
+from reports.tables import to_csv, to_markdown, wide_table
 
 __all__ = ["FORMATS", "Results", "load_results", "render_html", "to_csv", "to_markdown", "wide_table", "write_report"]
 

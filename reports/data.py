@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from harness.store import Store
+from harness.suite.store import Store
 
 __all__ = ["Results", "load_results", "SAMPLER_PREFIX"]
 

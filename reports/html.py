@@ -11,8 +11,8 @@ import re
 import struct
 from typing import Any
 
-from . import images, plots, pool, tables
-from .data import SAMPLER_PREFIX, Results
+from reports import images, plots, pool, tables
+from reports.data import SAMPLER_PREFIX, Results
 
 __all__ = ["render_html"]
 

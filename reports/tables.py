@@ -16,7 +16,7 @@ from typing import Any
 
 import pandas as pd
 
-from .data import SAMPLER_PREFIX, Results
+from reports.data import SAMPLER_PREFIX, Results
 
 __all__ = ["Cell", "Column", "value_of", "wide_table", "summary_columns", "sampler_columns", "render_rows", "to_markdown",
            "to_csv", "BAD", "GOOD", "HIDDEN", "verdict_class", "fmt_num", "fmt_p", "p_equals", "fmt_n", "fmt_interval"]

@@ -5,6 +5,6 @@ renders at a budget (samples or frames per pixel) and a seed and returns a float
 its wall time.  Renderer modules are imported only when a suite or test uses them, so a
 suite of core cases never imports Mitsuba or OpenGL.
 """
-from .base import ADAPTERS, ImageFaults, Render, Renderer, image_faults, renderer
+from harness.adapters.base import ADAPTERS, ImageFaults, Render, Renderer, image_faults, renderer
 
 __all__ = ["ADAPTERS", "ImageFaults", "Render", "Renderer", "image_faults", "renderer"]

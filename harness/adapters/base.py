@@ -20,7 +20,7 @@ import numpy as np
 __all__ = ["Render", "Renderer", "ImageFaults", "image_faults", "renderer", "ADAPTERS"]
 
 # adapter name -> module that defines `make_renderer(spec: dict) -> Renderer`
-ADAPTERS = {"mitsuba": "harness.adapters.mitsuba", "pyrender": "harness.adapters.pyrender"}
+ADAPTERS = {"mitsuba": "harness.adapters.mitsuba.render", "pyrender": "harness.adapters.pyrender.render"}
 
 
 @dataclass

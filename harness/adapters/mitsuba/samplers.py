@@ -1,5 +1,5 @@
 """Mitsuba 3 BSDFs, microfacet distributions and environment maps as sample / pdf pairs for
-``harness.sampler_check``, and the check Mitsuba's own chi-square cannot make: that the
+``harness.samplers.check``, and the check Mitsuba's own chi-square cannot make: that the
 weight a sampler returns equals eval / pdf.
 
     s = bsdf_sampler({"type": "roughconductor", "distribution": "ggx", "alpha": 0.01}, wi=45)
@@ -54,8 +54,8 @@ from scipy import stats
 
 import reference_estimators as rest
 
-from ..sampler_check import SamplerCheck, SamplerTest, _domain
-from ..stats import holm
+from harness.samplers.check import SamplerCheck, SamplerTest, _domain
+from harness.stats import holm
 
 os.environ.setdefault("DRJIT_LIBLLVM_PATH", "/usr/lib/x86_64-linux-gnu/libLLVM-19.so")
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import reference_estimators as rest
 
-from .suite import MEASUREMENTS, Case, SamplerCase, Suite
+from harness.suite.parse import MEASUREMENTS, Case, SamplerCase, Suite
 
 __all__ = ["UNIT_CHUNKS", "MEASUREMENTS", "Unit", "case_key", "sampler_key", "sampler_spec", "bias_budget",
            "bias_stream", "convergence_budgets", "plan"]
@@ -55,7 +55,7 @@ def sampler_key(suite: Suite, sc: SamplerCase) -> str:
                   "seed": suite.seed, "case_id": sc.case_id, "format": _FORMAT, "payload": _SAMPLER_PAYLOAD, "core": rest.__version__,
                   "build": rest.core_fingerprint()}
     if sc.adapter:  # a renderer's sampler: its library version is part of what is tested
-        from .adapters.mitsuba_samplers import make_sampler
+        from harness.adapters.mitsuba.samplers import make_sampler
 
         definition.update(adapter=sc.adapter, spec=sc.spec, fingerprint=make_sampler(json.loads(sc.spec)).fingerprint())
     return hashlib.sha256(json.dumps(definition, sort_keys=True).encode()).hexdigest()[:24]

@@ -191,7 +191,7 @@ class TailSample:
 
     @classmethod
     def from_tops(cls, upper: Sequence[float], lower: Sequence[float]) -> "TailSample":
-        """A tail sample from stored largest deviations (see harness.execute)."""
+        """A tail sample from stored largest deviations (see harness.suite.execute)."""
         t = cls(max(len(upper), len(lower)))
         t.upper, t.lower = np.asarray(upper, dtype=float), np.asarray(lower, dtype=float)
         return t

@@ -15,7 +15,7 @@ from scipy import stats as sps
 
 from harness import stats
 from harness.adapters import image_faults, renderer
-from harness.adapters import pyrender as pa
+from harness.adapters.pyrender import render as pa
 
 EDGES = {"scene": "edges", "technique": "antialias"}
 SHADOW = {"scene": "shadow", "technique": "soft_shadow"}

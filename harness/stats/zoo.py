@@ -20,7 +20,7 @@ from scipy import stats as sps
 
 import reference_estimators as rest
 
-from .stats import check_unbiased
+from harness.stats import check_unbiased
 
 __all__ = ["ZooEstimator", "zoo", "measure"]
 

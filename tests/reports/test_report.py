@@ -18,9 +18,9 @@ from PIL import Image
 from playwright.sync_api import sync_playwright
 
 from harness.cli import main
-from harness.runner import run_suite
-from harness.store import Store, load
-from harness.suite import load_suite
+from harness.suite.run import run_suite
+from harness.suite.store import Store, load
+from harness.suite.parse import load_suite
 from reports import images, load_results
 
 CHROMIUM = "/usr/bin/chromium"
@@ -39,7 +39,7 @@ def _scene(h: int = 48, w: int = 64) -> np.ndarray:
 
 
 def _render_rows(key: str, technique: str, scale: float, baseline: str) -> list[dict]:
-    """Measurement rows as a renderer adapter stores them (names and detail keys as in harness.renders)."""
+    """Measurement rows as a renderer adapter stores them (names and detail keys as in harness.suite.renders)."""
     budgets = [4, 16, 64]
     rmse = [scale * 0.4 * (b / 4) ** -0.5 for b in budgets]
     common = {"case_key": key, "suite": "tiny", "integrand": "toy_scene", "technique": technique, "alpha": 0.01}

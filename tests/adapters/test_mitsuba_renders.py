@@ -15,11 +15,11 @@ import pytest
 from scipy import stats as sps
 
 from harness.adapters import image_faults, renderer
-from harness.image_stats import Reference, pixel_bias_test, relmse
-from harness.runner import run_suite
-from harness.renders import judge_renders, render_failures
-from harness.store import load
-from harness.suite import SuiteError, load_suite
+from harness.stats.images import Reference, pixel_bias_test, relmse
+from harness.suite.run import run_suite
+from harness.suite.renders import judge_renders, render_failures
+from harness.suite.store import load
+from harness.suite.parse import SuiteError, load_suite
 
 VARIANTS = ["scalar_rgb", "llvm_ad_rgb"]
 
@@ -175,7 +175,7 @@ def test_suite_compares_integrators_and_caches_references(tmp_path, variant):
 
 def test_nan_pixels_are_reported_with_positions(tmp_path, monkeypatch):
     """A renderer that returns NaN pixels makes its case 'invalid', with counts and positions."""
-    from harness.adapters import mitsuba as adapter
+    from harness.adapters.mitsuba import render as adapter
 
     real = adapter.MitsubaRenderer.render
 
@@ -260,7 +260,7 @@ def test_suite_file_as_pytest_items(tmp_path, root):
 def test_interrupted_render_suite_resumes_without_rerendering(tmp_path, monkeypatch):
     """A run stopped after 5 renders resumes with the missing ones only and ends with the same
     measurements as an uninterrupted run (renders are seeded per case, stream and replica)."""
-    from harness.adapters import mitsuba as adapter
+    from harness.adapters.mitsuba import render as adapter
 
     path = _suite(tmp_path, """\
         [[render]]

@@ -1,4 +1,4 @@
-"""Mitsuba 3 samplers (harness.adapters.mitsuba_samplers) against their pdfs and weights.
+"""Mitsuba 3 samplers (harness.adapters.mitsuba.samplers) against their pdfs and weights.
 
 Real llvm_ad_rgb objects.  Statistical checks state alpha and use seed 0 (chosen before the
 tests were written); 2e5 samples per check here, 1e6 in benchmarks/mitsuba_samplers.py.
@@ -10,8 +10,8 @@ import math
 import numpy as np
 import pytest
 
-from harness.adapters import mitsuba_samplers as ms
-from harness.sampler_check import check_sampler
+from harness.adapters.mitsuba import samplers as ms
+from harness.samplers.check import check_sampler
 
 N = 200_000
 ALPHA = 0.01
@@ -306,8 +306,8 @@ def test_make_sampler_errors_name_the_key(spec, match):
 
 # --- suite wiring: [[sampler]] tables with adapter = "mitsuba" ---------------------------------
 def test_suite_sampler_tables_run_mitsuba_checks(tmp_path):
-    from harness.runner import judge_samplers, run_suite
-    from harness.suite import load_suite
+    from harness.suite.run import judge_samplers, run_suite
+    from harness.suite.parse import load_suite
 
     path = tmp_path / "samplers.toml"
     path.write_text(
@@ -341,7 +341,7 @@ def test_suite_sampler_tables_run_mitsuba_checks(tmp_path):
     ('plugin = { type = "diffuse" }\nfoo = 1', "foo"),
 ])
 def test_suite_sampler_table_errors_name_the_key(tmp_path, body, key):
-    from harness.suite import SuiteError, load_suite
+    from harness.suite.parse import SuiteError, load_suite
 
     path = tmp_path / "bad.toml"
     path.write_text(f'[[sampler]]\nadapter = "mitsuba"\n{body}\n')

@@ -45,7 +45,7 @@ SAMPLER_MEASUREMENTS = ("chi_square", "mcmc", "weight")
 
 @dataclass(frozen=True)
 class SamplerCase:
-    """A catalogue sampler checked against its pdf (harness.sampler_check)."""
+    """A catalogue sampler checked against its pdf (harness.samplers.check)."""
 
     name: str
     params: tuple[tuple[str, float], ...]
@@ -230,7 +230,7 @@ def _renders(raw: list[dict[str, Any]], measurements: tuple[str, ...], where: "_
     of an adapter key makes one case per element (cross product over such keys)."""
     import itertools
 
-    from .adapters import ADAPTERS, renderer
+    from harness.adapters import ADAPTERS, renderer
 
     out: list[RenderCase] = []
     for i, c in enumerate(raw):
@@ -282,7 +282,7 @@ def _renders(raw: list[dict[str, Any]], measurements: tuple[str, ...], where: "_
 
 
 def _samplers(raw: list[dict[str, Any]], samples: int, first_id: int, where: "_Locator") -> tuple[SamplerCase, ...]:
-    from .sampler_check import DOMAINS
+    from harness.samplers.check import DOMAINS
 
     out = []
     registry = {s["name"]: s for s in rest.samplers()}
@@ -334,7 +334,7 @@ def _adapter_sampler(c: dict[str, Any], samples: int, case_id: int, where: "_Loc
     if c["adapter"] != "mitsuba":
         raise SuiteError(where.at(table, "adapter", f"expected \"mitsuba\" (samplers of other adapters are not "
                                   f"supported), got {c['adapter']!r}"))
-    from .adapters.mitsuba_samplers import make_sampler
+    from harness.adapters.mitsuba.samplers import make_sampler
 
     spec = {k: c[k] for k in ("plugin", "wi", "variant") if k in c}
     try:

@@ -14,8 +14,8 @@ from typing import Any
 import reference_estimators as rest
 from reference_estimators import _core
 
-from .plan import Unit
-from .stats import TailSample
+from harness.suite.plan import Unit
+from harness.stats import TailSample
 
 __all__ = ["UnitJob", "compute", "run_local", "run_dask"]
 
@@ -49,12 +49,12 @@ def _sampler_check(kind: str, spec_json: str, seed: int) -> tuple[dict[str, Any]
 
     import numpy as np
 
-    from .sampler_check import check_sampler, mcmc_crosscheck
+    from harness.samplers.check import check_sampler, mcmc_crosscheck
 
     spec = json.loads(spec_json)
     start = time.perf_counter()
     if spec.get("adapter"):  # a renderer's sampler, which may fail to produce samples
-        from .adapters.mitsuba_samplers import check_mitsuba_sampler, make_sampler, weight_consistency
+        from harness.adapters.mitsuba.samplers import check_mitsuba_sampler, make_sampler, weight_consistency
 
         ms = make_sampler(spec["spec"])
         if kind == "weight":

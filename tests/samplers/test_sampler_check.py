@@ -12,8 +12,8 @@ import pytest
 from scipy import stats
 
 import reference_estimators as rest
-from harness import sampler_zoo as zoo
-from harness.sampler_check import SamplerTest, check_sampler, mcmc_crosscheck
+from harness.samplers import zoo
+from harness.samplers.check import SamplerTest, check_sampler, mcmc_crosscheck
 
 CORRECT = zoo.correct()
 WRONG = zoo.wrong()

@@ -8,10 +8,10 @@ import textwrap
 import numpy as np
 import pytest
 
-from harness.renders import judge_renders, render_failures
-from harness.runner import run_suite
-from harness.store import load
-from harness.suite import SuiteError, load_suite
+from harness.suite.renders import judge_renders, render_failures
+from harness.suite.run import run_suite
+from harness.suite.store import load
+from harness.suite.parse import SuiteError, load_suite
 
 SUITE = """\
     [suite]
@@ -89,7 +89,7 @@ def test_one_cached_reference_per_estimand(raster):
 def test_a_planted_offset_bias_is_found(tmp_path, monkeypatch):
     """Sub-pixel offsets shifted by 0.15 pixel (a filter not centred on the pixel) estimate a
     different image: the per-pixel test must say so."""
-    from harness.adapters import pyrender as adapter
+    from harness.adapters.pyrender import render as adapter
 
     real = adapter.PyrenderRenderer._placements
 
@@ -121,7 +121,7 @@ def test_a_planted_offset_bias_is_found(tmp_path, monkeypatch):
 
 
 def test_nan_frames_are_counted_not_averaged(tmp_path, monkeypatch):
-    from harness.adapters import pyrender as adapter
+    from harness.adapters.pyrender import render as adapter
 
     real = adapter.PyrenderRenderer.render
 

@@ -23,12 +23,12 @@ from scipy import stats as sps
 import reference_estimators as rest
 from reference_estimators import _core
 
-from . import stats
-from .execute import UnitJob, execute
-from .renders import RenderResult, judge_renders, render_rows, run_renders
-from .plan import Unit, bias_budget, bias_stream, case_key, convergence_budgets, plan, sampler_key, sampler_spec
-from .store import Store
-from .suite import Case, SamplerCase, Suite
+from harness import stats
+from harness.suite.execute import UnitJob, execute
+from harness.suite.renders import RenderResult, judge_renders, render_rows, run_renders
+from harness.suite.plan import Unit, bias_budget, bias_stream, case_key, convergence_budgets, plan, sampler_key, sampler_spec
+from harness.suite.store import Store
+from harness.suite.parse import Case, SamplerCase, Suite
 
 __all__ = ["CaseResult", "SamplerResult", "RunSummary", "run_suite", "results_table", "format_table", "judge",
            "judge_convergence", "judge_samplers", "format_sampler_table", "bad_verdicts"]

@@ -50,7 +50,7 @@ cache is keyed by the current context's ctypes pointer object, which under OSMes
 unequal on every call, so every frame recompiled (and leaked) its shaders, ~110 instead of
 ~1300 frames/s at 32x32 -- each renderer here gets a cache keyed by shader names and defines
 (it owns exactly one context); and ``Mesh.bounds`` uses ``np.infty`` (removed in numpy 2),
-so scenes set mesh bounds up front (pyrender_scenes).  Shadow frames cost ~4 ms, most of it
+so scenes set mesh bounds up front (harness.adapters.pyrender.scenes).  Shadow frames cost ~4 ms, most of it
 pyrender's fixed 2048^2 shadow map.
 
     r = make_renderer({"scene": "shadow", "technique": "soft_shadow", "points": "stratified"})
@@ -82,8 +82,8 @@ from pyrender.shader_program import ShaderProgramCache
 
 import reference_estimators as rest
 
-from . import pyrender_scenes
-from .base import Render
+from harness.adapters.pyrender import scenes
+from harness.adapters.base import Render
 
 __all__ = ["make_renderer", "PyrenderRenderer", "TECHNIQUES", "POINTS", "PIXEL_FILTERS", "LIGHT_SHAPES",
            "SCENE_NAMES", "frame_offsets", "light_points"]
@@ -92,7 +92,7 @@ TECHNIQUES = ("antialias", "soft_shadow", "antialias+soft_shadow")
 POINTS = ("random", "stratified", "sobol")
 PIXEL_FILTERS = ("box", "tent")
 LIGHT_SHAPES = ("rectangle", "disk")
-SCENE_NAMES = tuple(pyrender_scenes.SCENES)
+SCENE_NAMES = tuple(scenes.SCENES)
 MAX_SIZE = 1024           # pixels per side; OSMesa renders in software
 MAX_SEED = 2**64 - 1
 MAX_SPP = 2**24        # frames per estimate: their points are held in memory (dim x 8 bytes each)
@@ -235,7 +235,7 @@ class PyrenderRenderer:
         self.technique = _choice(spec, "technique", TECHNIQUES, None)
         self.points = _choice(spec, "points", POINTS, "random")
         self.width, self.height = _size(spec, "width"), _size(spec, "height")
-        self.desc = pyrender_scenes.scene(self.scene_name)
+        self.desc = scenes.scene(self.scene_name)
         self.antialias = self.technique in ("antialias", "antialias+soft_shadow")
         self.soft_shadow = self.technique in ("soft_shadow", "antialias+soft_shadow")
         if not self.antialias and "pixel_filter" in spec:
@@ -246,7 +246,7 @@ class PyrenderRenderer:
         self.light_size: float | None = None
         if self.soft_shadow:
             if self.desc.area_light is None:
-                with_light = [n for n in SCENE_NAMES if pyrender_scenes.scene(n).area_light is not None]
+                with_light = [n for n in SCENE_NAMES if scenes.scene(n).area_light is not None]
                 raise ValueError(f"pyrender spec: 'scene' {self.scene_name!r} has no area light for technique "
                                  f"{self.technique!r}; expected one of {with_light}")
             self.light_shape = _choice(spec, "light_shape", LIGHT_SHAPES, "rectangle")
@@ -264,7 +264,7 @@ class PyrenderRenderer:
                                      f"not to technique {self.technique!r}")
         self.dim = 2 * (self.antialias + self.soft_shadow)
         self.flags = pyrender.RenderFlags.SHADOWS_SPOT if self.desc.area_light is not None else pyrender.RenderFlags.NONE
-        self._scene, self._cam_node, self._camera, self._spot_node = pyrender_scenes.build(
+        self._scene, self._cam_node, self._camera, self._spot_node = scenes.build(
             self.desc, self.width, self.height)
         self._cx, self._cy = 0.5 * self.width, 0.5 * self.height
         self._light_pose = np.eye(4)
@@ -355,7 +355,7 @@ class PyrenderRenderer:
         """Everything that fixes the images (JSON-able), and ``estimand_digest``: a hash of all
         of it but the point set, which names the expected image a reference estimates."""
         fp: dict[str, Any] = {
-            "adapter": "pyrender", "scene": self.scene_name, "scene_digest": pyrender_scenes.digest(self.desc),
+            "adapter": "pyrender", "scene": self.scene_name, "scene_digest": scenes.digest(self.desc),
             "width": self.width, "height": self.height, "technique": self.technique, "points": self.points,
             "pixel_filter": self.pixel_filter, "light_shape": self.light_shape, "light_size": self.light_size,
             "image": "mean of 8-bit frames / 255 (pyrender gamma 1/2.2, clamped)",

@@ -17,9 +17,9 @@ import pytest
 from scipy import stats
 
 import harness
-from harness.plan import plan
-from harness.runner import run_suite
-from harness.suite import load_suite
+from harness.suite.plan import plan
+from harness.suite.run import run_suite
+from harness.suite.parse import load_suite
 
 HARNESS = str(Path(sys.executable).with_name("harness"))
 
@@ -191,7 +191,7 @@ def test_show_prints_the_stored_measurements(reference_db):
 
 
 def test_images_are_stored_as_exr_beside_the_database(tmp_path):
-    from harness.store import Store
+    from harness.suite.store import Store
 
     store = Store(tmp_path / "img.sqlite")
     a = np.random.default_rng(0).random((8, 16, 3)).astype(np.float32)

@@ -28,12 +28,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from . import image_stats as ist
-from . import stats
-from .adapters import ImageFaults, Renderer, image_faults, renderer
-from .plan import Unit
-from .store import Store, read_exr, write_exr
-from .suite import RenderCase, Suite
+from harness.stats import images as ist
+from harness import stats
+from harness.adapters import ImageFaults, Renderer, image_faults, renderer
+from harness.suite.plan import Unit
+from harness.suite.store import Store, read_exr, write_exr
+from harness.suite.parse import RenderCase, Suite
 
 __all__ = ["RenderResult", "run_renders", "render_key", "judge_renders", "judge_render_convergence",
            "render_failures", "render_rows", "render_table", "format_render_table", "equal_time_relmse",

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats as sps
 
-from . import stats
+from harness import stats
 
 __all__ = ["RELMSE_EPSILON", "Reference", "ImageBias", "pixel_bias_test", "relmse", "as_replicates",
            "image_efficiency", "pixel_variance"]

@@ -39,8 +39,8 @@ from typing import Any
 
 import numpy as np
 
-from .base import Render
-from .mitsuba_samplers import VARIANT_LOCK
+from harness.adapters.base import Render
+from harness.adapters.mitsuba.samplers import VARIANT_LOCK
 
 os.environ.setdefault("DRJIT_LIBLLVM_PATH", "/usr/lib/x86_64-linux-gnu/libLLVM-19.so")
 

@@ -1,0 +1,2 @@
+"""pyrender (OSMesa, headless): Monte Carlo over a rasterizer (``render``) on scenes built in
+code (``scenes``).  OpenGL is imported only when ``render`` is."""

@@ -1,0 +1,74 @@
+"""The result family: what every check of the harness returns.
+
+Every check (a bias test, a sampler check, a render's pixel test, a convergence fit) returns a
+frozen dataclass with the same reading surface, so a caller, the runner, the CLI, the pytest
+plugin and the report treat them alike:
+
+``verdict``    one word (or short phrase) from the vocabulary of the check, e.g. "unbiased",
+               "biased", "inconclusive", "invalid", "passed", "failed", "as expected",
+               "slower than expected";
+``passed``     the verdict is not a failure (a CI run passes on it);
+``pvalue``     the p-value of the check's null hypothesis (NaN where none was computed);
+``alpha``      the level the verdict was taken at;
+``n``          the sample count the figures come from;
+``statistic``  the test statistic, where one exists (else NaN);
+``confidence_interval(confidence_level=0.95)``  a :class:`ConfidenceInterval`;
+``failures``   a list of :class:`Failure`: deterministic findings (NaN values, points
+               outside the domain, ...) with counts and first examples;
+``str(r)``     one paragraph that says why.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple
+
+__all__ = ["ConfidenceInterval", "Failure", "failures_from_dicts", "check_confidence_level"]
+
+
+class ConfidenceInterval(NamedTuple):
+    """A two-sided interval (unpacks as ``low, high``); NaN ends where none can be given."""
+
+    low: float
+    high: float
+
+    def __str__(self) -> str:
+        return f"[{self.low:.6g}, {self.high:.6g}]"
+
+
+@dataclass(frozen=True)
+class Failure:
+    """A deterministic finding of a check: ``count`` occurrences of ``check`` (e.g.
+    "outside_domain", "nan_pdf"), what it means (``detail``) and the first ``examples``
+    (each a dict naming the sample index, the input and the offending value)."""
+
+    check: str
+    count: int
+    detail: str = ""
+    examples: tuple[Mapping[str, Any], ...] = field(default_factory=tuple)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-able form (for stored payloads)."""
+        return {"check": self.check, "count": int(self.count), "detail": self.detail,
+                "examples": [dict(e) for e in self.examples]}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Failure:
+        return cls(str(d["check"]), int(d["count"]), str(d.get("detail", "")),
+                   tuple(dict(e) for e in d.get("examples", ())))
+
+    def __str__(self) -> str:
+        ex = f"; e.g. {list(self.examples[:2])}" if self.examples else ""
+        return f"{self.check}: {self.count} ({self.detail}){ex}" if self.detail else f"{self.check}: {self.count}{ex}"
+
+
+def failures_from_dicts(items: Sequence[Mapping[str, Any]]) -> list[Failure]:
+    """Failures read back from their stored dict form."""
+    return [Failure.from_dict(d) for d in items]
+
+
+def check_confidence_level(confidence_level: float) -> float:
+    """The level, validated: a number strictly between 0 and 1."""
+    if not 0 < confidence_level < 1:
+        raise ValueError(f"'confidence_level' must be in (0, 1), got {confidence_level!r}")
+    return float(confidence_level)
