@@ -1,4 +1,4 @@
-"""Which Mitsuba 3 samplers pass: every plugin of harness.adapters.mitsuba.samplers.catalogue()
+"""Which Mitsuba 3 samplers pass: every plugin of harness.adapters.mitsuba.catalogue.catalogue()
 (diffuse, roughconductor GGX/Beckmann at alpha 0.01, 0.1, 0.5 with and without visible-normal
 sampling, roughdielectric, roughplastic, the microfacet distributions, envmaps) at
 theta_i = 0, 45, 80 degrees, and the planted faults of wrong_catalogue(), through
@@ -42,18 +42,17 @@ are Mitsuba's, not the adapter's:
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 
-os.environ.setdefault("DRJIT_LIBLLVM_PATH", "/usr/lib/x86_64-linux-gnu/libLLVM-19.so")
-
-from harness.adapters.mitsuba.samplers import catalogue, run_catalogue, wrong_catalogue  # noqa: E402
+from harness.adapters.mitsuba.catalogue import catalogue, run_catalogue, wrong_catalogue
+from harness.adapters.mitsuba.runtime import use_libllvm
 
 
 def _row(r) -> str:
     theta = "" if r["theta"] is None or r["theta"] != r["theta"] else f"{r['theta']:g}°"
-    weight = r["weight"] if r["weight"] == "n/a" else f"{r['weight']} {r['weight_mismatches']}/{r['weight_max_rel']:.1e}"
+    weight = (r["weight"] if r["weight"] == "n/a"
+              else f"{r['weight']} {r['weight_mismatches']}/{r['weight_max_rel']:.1e}")
     if r["bad_weights"]:
         weight += f" ({r['bad_weights']} NaN/Inf/neg)"
     verdict = r.get("chi2", "")
@@ -64,12 +63,13 @@ def _row(r) -> str:
             + (f"  {notes}" if notes else "") + (f"  [{r['fault']}]" if r["fault"] else ""))
 
 
-HEADER = (f"{'plugin':52s} {'θi':>4s} {'dom':4s} {'P (pdf integral)':16s} {'failed':>7s} {'p':>9s} {'adj':>9s} "
-          f"{'chi2':5s} {'weight mism/max rel':22s} {'spdf':>7s} {'s':>6s}")
+HEADER = (f"{'plugin':52s} {'θi':>4s} {'dom':4s} {'P (pdf integral)':16s} {'failed':>7s} {'p':>9s} "
+          f"{'adj':>9s} {'chi2':5s} {'weight mism/max rel':22s} {'spdf':>7s} {'s':>6s}")
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--samples", default="1e6")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--alpha", type=float, default=0.01)
@@ -77,11 +77,12 @@ def main() -> None:
     parser.add_argument("--only", default=None, help="run only entries whose label contains this text")
     args = parser.parse_args()
     n = int(float(args.samples))
+    use_libllvm()  # before drjit is imported (the catalogue imports Mitsuba lazily)
     entries = catalogue() + wrong_catalogue()
     if args.only:
         entries = [e for e in entries if args.only in e.label]
-    print(f"{n:.0e} samples per check, seed {args.seed}, family-wise alpha = {args.alpha} (Holm over {len(entries)} "
-          f"checks), llvm_ad_rgb\n", flush=True)
+    print(f"{n:.0e} samples per check, seed {args.seed}, family-wise alpha = {args.alpha} "
+          f"(Holm over {len(entries)} checks), llvm_ad_rgb\n", flush=True)
     start = time.perf_counter()
     print("running (unadjusted):\n" + HEADER, file=sys.stderr, flush=True)
     table = run_catalogue(entries, sample_count=n, seed=args.seed, alpha=args.alpha,

@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 
 import reference_estimators as rest
-from harness.suite.plan import BIAS_STREAM, bias_budget
-from harness.suite.run import _core_case, run_suite
+from harness.suite.plan import BIAS_STREAM, bias_budget, core_case_id
+from harness.suite.run import run_suite
 from harness.suite.parse import load_suite
 
 SUITE = """
@@ -39,7 +39,7 @@ def direct(suite, threads: int) -> float:
     start = time.perf_counter()
     for case in suite.cases:
         b = bias_budget(suite, case)
-        core_case = _core_case(case, BIAS_STREAM)
+        core_case = core_case_id(case, BIAS_STREAM)
         ests = [rest.integrate(case.integrand, case.technique, b, seed=suite.seed, case_id=core_case, replica=k,
                                threads=threads) for k in range(suite.batches)]
         y = rest.contributions(case.integrand, case.technique, b, seed=suite.seed, case_id=core_case, threads=threads)

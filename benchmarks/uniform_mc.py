@@ -20,8 +20,6 @@ import numpy as np
 
 import reference_estimators as rest
 
-LLVM = "/usr/lib/x86_64-linux-gnu/libLLVM-19.so"
-
 
 def best_of(repeat: int, fn) -> float:
     fn()
@@ -52,7 +50,9 @@ def numpy_mc(n: int) -> float:
 
 
 def drjit_mc(n: int, threads: int) -> float | None:
-    os.environ.setdefault("DRJIT_LIBLLVM_PATH", LLVM)
+    from harness.adapters.mitsuba.runtime import use_libllvm
+
+    use_libllvm()  # before drjit is imported
     try:
         import drjit as dr
         from drjit.llvm import PCG32

@@ -5,14 +5,14 @@ import argparse
 import os
 import sys
 
-import reference_estimators as rest
-
+import pandas as pd
 from tqdm import tqdm
 
-from harness.suite.renders import format_render_table, render_failures
-from harness.suite.run import bad_verdicts, format_sampler_table, format_table, judge_samplers, results_table, run_suite
-from harness.suite.store import load
+import reference_estimators as rest
+
 from harness.suite.parse import SuiteError, load_suite
+from harness.suite.run import run_suite
+from harness.suite.store import load
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -75,49 +75,29 @@ def _run(suite, db: str, threads: int | None, csv: str | None, dask: str | None)
 
     summary = run_suite(suite, db, threads=threads, dask=dask, progress=progress)
     bar.close()
-    df = results_table(summary.results, suite.alpha)
-    print(f"suite {suite.name!r} ({suite.path}): {len(summary.results)} cases, seed {suite.seed}, "
+    print(f"suite {suite.name!r} ({suite.path}): {len(suite.cases)} cases, seed {suite.seed}, "
           f"family-wise alpha {suite.alpha:g} (Holm), {suite.batches} batches per bias test, "
           f"{suite.replicas} replicas per budget")
-    if len(df):
-        print(format_table(df, suite.alpha))
-    if summary.samplers:
-        print("\nsampler checks (chi-square and friends; MCMC cross-check):")
-        print(format_sampler_table(summary.samplers, suite.alpha))
-    if summary.renders:
-        print(f"\nrenders (per-pixel bias test, Holm over {len(summary.renders)} configurations at alpha "
-              f"{suite.alpha:g}; relMSE = mean (x - ref)^2 / (ref^2 + 0.01); efficiency 1/(relMSE·T) against the "
-              "first configuration of the same scene and reference; relMSE at the longest time all of those reached):")
-        print(format_render_table(summary.renders, suite.alpha))
-    what = ", ".join(f"{n} {w}" for n, w in ((len(summary.results), "cases"), (len(summary.samplers), "sampler checks"),
-                                             (len(summary.renders), "render configurations")) if n)
-    print(f"\n{what} in {summary.seconds:.1f} s: {summary.units_run} of {summary.units_planned} work units computed, "
-          f"the rest read from {summary.db}.")
-    if summary.results:
-        print(f"t: Student t of {suite.batches} batch means against the exact value; RMSE slope: log-log fit over "
-              f"budgets (expected -0.5 for Monte Carlo); 1/(V·T): efficiency (background eq. 5) against uniform MC "
-              f"on the same integrand.")
-    bad = bad_verdicts(df) if len(df) else df
-    for _, row in bad.iterrows():
-        print(f"  FAILED {row['integrand']}/{row['technique']}: {row['verdict']} (p = {row['pvalue']:.3g}) {row['notes']}")
-    sampler_bad = [r for r, v in zip(summary.samplers, judge_samplers(summary.samplers, suite.alpha)) if "failed" in v.values()]
-    for r in sampler_bad:
-        print(f"  FAILED sampler {r.case.label} on the {r.case.domain}")
-    render_bad = [(r, why) for r, why in zip(summary.renders, render_failures(summary.renders, suite.alpha)) if why]
-    for r, why in render_bad:
-        print(f"  FAILED render {r.case.scene} {r.case.label}: {why}")
-    failed = len(bad) + len(sampler_bad) + len(render_bad)
-    print(f"summary: {len(df) + len(summary.samplers) + len(summary.renders) - failed} passed, {failed} failed")
+    print("\n\n".join(o.text for o in summary.outcomes if o.text))
+    what = ", ".join(f"{len(o.names)} {o.noun}" for o in summary.outcomes if o.names)
+    print(f"\n{what} in {summary.seconds:.1f} s: {summary.units_run} of {summary.units_planned} work units "
+          f"computed, the rest read from {summary.db}.")
+    for o in summary.outcomes:
+        for name, why in zip(o.names, o.failures):
+            if why:
+                print(f"  FAILED {name}: " + why.replace("\n", "\n    "))
+    print(f"summary: {summary.cases - summary.failed} passed, {summary.failed} failed")
     if csv:
-        df.to_csv(csv, index=False)
+        frames = [o.frame.assign(kind=o.kind) for o in summary.outcomes if len(o.frame)]
+        (pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()).to_csv(csv, index=False)
         print(f"table written to {csv}")
-    return 1 if failed else 0
+    return 1 if summary.failed else 0
 
 
 def _check_sampler(args) -> int:
     import importlib
 
-    from harness.samplers.check import check_sampler, mcmc_crosscheck
+    from harness.samplers import check_sampler, mcmc_crosscheck
 
     module, _, attr = args.target.partition(":")
     if not attr:

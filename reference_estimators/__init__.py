@@ -4,12 +4,15 @@
     >>> est = rest.integrate("gaussian", "uniform", 1_000_000, seed=1)
     >>> abs(est.z_score()) < 5
     True
+
+``reference_estimators.sampling`` holds the samplers' pbrt-style triples by name and
+``reference_estimators.kernels`` the raw streams and elementary functions, for tests.
 """
 from . import _core, sobol
 
 _core.set_sobol_directions(sobol.direction_numbers())
 
-from . import sampling  # noqa: E402  (its functions are built from the registry)
+from . import kernels, sampling  # noqa: E402  (sampling's functions are built from the registry)
 from .api import *  # noqa: E402,F403
 from .api import __all__ as _api_all  # noqa: E402
 from .estimate import ERROR_ISSUES, Estimate  # noqa: E402

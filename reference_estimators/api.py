@@ -1,4 +1,5 @@
-"""Python face of the C++ core: catalogue look-ups, samplers and estimators over numpy arrays.
+"""Python face of the C++ core: catalogue look-ups, samplers and estimators over numpy arrays,
+and estimates computed in pieces (accumulator states of chunk ranges, merged in chunk order).
 
 Every call validates its arguments here and names the argument and the rule when one is
 wrong; the heavy work runs in C++ with the GIL released.
@@ -19,7 +20,8 @@ __all__ = [
     "samplers", "sampler", "rejection_sampler", "tabulated_integrand",
     "uniform", "importance", "rejection", "roulette", "splitting", "mis", "snis", "with_points", "clamped",
     "points",
-    "integrate", "contributions", "accumulate", "estimate_from_samples",
+    "integrate", "integrate_chunks", "estimate_from_states", "contributions", "accumulate",
+    "estimate_from_samples", "hardware_threads",
 ]
 
 Integrand = _core.Integrand
@@ -219,6 +221,60 @@ def integrate(f: str | Integrand, t: str | Technique, n: int, *, seed: int = 0, 
                               nonnegative=fi.nonnegative, iid=ti.iid)
 
 
+def integrate_chunks(f: str | Integrand, t: str | Technique, n: int, chunk_begin: int, chunk_end: int, *,
+                     seed: int = 0, case_id: int = 0, replica: int = 0,
+                     threads: int | None = None) -> dict[str, Any]:
+    """The accumulator state of chunks [chunk_begin, chunk_end) of the estimate ``integrate``
+    makes from n samples with the same seed, case_id and replica (chunks of ``CHUNK_SIZE``
+    samples, the last one partial).
+
+    The state is a dict of plain numbers and lists (JSON-serialisable, to be stored as is):
+    count, Welford moments M2..M4, compensated sum, min, max, issue counts with examples,
+    drawn and candidate counts, wall time (s), chunks and threads.  ``estimate_from_states``
+    merges the states of all chunk ranges, in chunk order, into the estimate.
+    """
+    fi = integrand(f)
+    ti = technique(fi, t)
+    n = _count(n, "n")
+    chunks = -(-n // _core.CHUNK_SIZE)
+    begin, end = _seed(chunk_begin, "chunk_begin"), _seed(chunk_end, "chunk_end")
+    if not begin < end <= chunks:
+        raise ValueError(f"chunks [{chunk_begin}, {chunk_end}) must be a non-empty range within the {chunks} "
+                         f"chunk(s) of n = {n} samples")
+    return _core.integrate_chunks(fi, ti, n, _seed(seed), _seed(case_id, "case_id"),
+                                  _seed(replica, "replica"), begin, end, _threads(threads))
+
+
+_STATE_KEYS = frozenset(("n", "mean", "m2", "m3", "m4", "sum", "comp", "min", "max", "scale_exp", "scale_set",
+                         "counts", "examples", "drawn", "candidates", "seconds", "chunks", "threads"))
+
+
+def estimate_from_states(f: str | Integrand, t: str | Technique, states: list[dict[str, Any]]) -> Estimate:
+    """The estimate of f with technique t from the accumulator states of ``integrate_chunks``,
+    merged (Chan et al.) in the order given; give them in chunk order, each chunk once.
+
+    The same states always give the same bits.  With one chunk per state the result is
+    bitwise what ``integrate`` computes in one call; with wider chunk ranges the moments may
+    differ from it in the last bits (the merge is not associative), counts never do.
+    ``seconds`` is the sum of the states' wall times.
+    """
+    fi = integrand(f)
+    ti = technique(fi, t)
+    states = list(states)
+    if not states:
+        raise ValueError("'states' must hold at least one accumulator state (from integrate_chunks)")
+    for i, s in enumerate(states):
+        if not isinstance(s, dict):
+            raise TypeError(f"'states'[{i}] must be a dict from integrate_chunks, got {type(s).__name__}")
+        missing = _STATE_KEYS - s.keys()
+        if missing:
+            raise ValueError(f"'states'[{i}] is not an accumulator state (from integrate_chunks): "
+                             f"missing {', '.join(sorted(missing))}")
+    raw = _core.estimate_from_state(_core.merge_states(states))
+    return Estimate.from_core(raw, integrand=fi.name, technique=ti.name, reference=fi.reference,
+                              nonnegative=fi.nonnegative, iid=ti.iid)
+
+
 def contributions(f: str | Integrand, t: str | Technique, n: int, *, seed: int = 0, threads: int | None = None,
                   case_id: int = 0, replica: int = 0) -> np.ndarray:
     """The n per-sample contributions Y that ``integrate`` with the same arguments averages
@@ -249,6 +305,11 @@ def estimate_from_samples(f: str | Integrand, points: Any, pdf: Any, *, sampler:
     raw = _core.estimate_from_samples(fi, x, p, None if sampler is None else _core_sampler(sampler), _threads(threads))
     return Estimate.from_core(raw, integrand=fi.name, technique="importance:given", reference=fi.reference,
                               nonnegative=fi.nonnegative)
+
+
+def hardware_threads() -> int:
+    """Threads a call with ``threads=None`` runs on: the machine's hardware threads (at least 1)."""
+    return _core.hardware_threads()
 
 
 # --- argument normalisation ------------------------------------------------------------------

@@ -5,8 +5,9 @@ sRGB transfer curve (no exposure change, no operator), so a value above 1 is whi
 reference and estimate are mapped identically.  The error map is the per-pixel relative
 squared error (est - ref)^2 / (ref^2 + 0.01), averaged over the colour channels (the 0.01
 keeps black reference pixels from dividing by zero, as in the relMSE of the rendering
-literature), shown on a log10 colour scale spanning four decades below the decade that holds
-the map's 99.5th percentile.  Non-finite estimate pixels are drawn magenta and counted.
+literature; the harness's one definition, ``harness.stats.images.relative_squared_error``),
+shown on a log10 colour scale spanning four decades below the decade that holds the map's
+99.5th percentile.  Non-finite estimate pixels are drawn magenta and counted.
 """
 from __future__ import annotations
 
@@ -18,10 +19,11 @@ from dataclasses import dataclass
 import numpy as np
 from PIL import Image
 
-__all__ = ["ErrorMap", "tonemap", "relmse_map", "error_map", "colorbar_png", "png_bytes", "data_uri", "EPSILON",
+from harness.stats.images import relative_squared_error
+
+__all__ = ["ErrorMap", "tonemap", "relmse_map", "error_map", "colorbar_png", "png_bytes", "data_uri",
            "DECADES"]
 
-EPSILON = 1e-2     # in (est - ref)^2 / (ref^2 + EPSILON)
 DECADES = 4        # the colour scale spans this many powers of ten
 _MAGENTA = np.array([255, 0, 255], dtype=np.uint8)
 
@@ -53,7 +55,7 @@ def relmse_map(reference: np.ndarray, estimate: np.ndarray) -> np.ndarray:
     if ref.shape != est.shape:
         raise ValueError(f"reference and estimate must have the same shape, got {ref.shape} and {est.shape}")
     with np.errstate(invalid="ignore", over="ignore"):
-        e = np.mean((est - ref) ** 2 / (ref * ref + EPSILON), axis=2)
+        e = np.mean(relative_squared_error(est, ref), axis=2)
     return np.where(np.isfinite(e), e, np.nan)
 
 

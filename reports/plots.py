@@ -32,7 +32,7 @@ _STYLE = {"font.size": 8.5, "axes.titlesize": 9, "axes.labelsize": 8.5, "legend.
 _DPI = 100
 _MARKERS = "osD^v<>ph*XP"
 
-# the equal-measure parameters s of harness.samplers.check, per domain
+# the equal-measure parameters s of harness.samplers.domains, per domain
 PARAM_LABELS = {"interval": ("s = (x − a)/(b − a)",), "half_line": ("s = x/(1 + x)",), "square": ("x", "y"),
                 "disk": ("s0 = r²", "s1 = φ/2π"), "hemisphere": ("s0 = cos θ", "s1 = φ/2π"),
                 "sphere": ("s0 = (1 − cos θ)/2", "s1 = φ/2π")}

@@ -1,9 +1,14 @@
 """Sampler validation: does a sampler draw what its pdf claims?
 
-Domains and their equal-measure maps, adaptive cubature of the claimed pdf, the chi-square
-check with its deterministic pre-checks and marginal and moment tests (``check``), the emcee
-cross-check, and the zoo of correct and wrong samplers (``zoo``).
+Domains and their equal-measure maps (``domains``), adaptive cubature of the claimed pdf over
+many cells at once (``cubature``), the chi-square check with its deterministic pre-checks and
+marginal and moment tests (``check``), the emcee cross-check (``mcmc``), and the zoo of
+correct and wrong samplers (``zoo``).
 """
-from harness.samplers.check import DOMAINS, Domain, SamplerCheck, SamplerTest, check_sampler, mcmc_crosscheck
+from harness.samplers.check import SAMPLE_CASE, SamplerCheck, SamplerTest, check_sampler, histogram
+from harness.samplers.cubature import cell_integrals
+from harness.samplers.domains import DOMAINS, Domain, as_domain
+from harness.samplers.mcmc import mcmc_crosscheck
 
-__all__ = ["DOMAINS", "Domain", "SamplerCheck", "SamplerTest", "check_sampler", "mcmc_crosscheck"]
+__all__ = ["DOMAINS", "SAMPLE_CASE", "Domain", "SamplerCheck", "SamplerTest", "as_domain", "cell_integrals",
+           "check_sampler", "histogram", "mcmc_crosscheck"]

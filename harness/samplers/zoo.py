@@ -67,8 +67,10 @@ def _envmap(table: np.ndarray, scale_texel: tuple[int, int] | None = None) -> Zo
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(st > 0, c.pdf(uv) / (2 * math.pi**2 * st), np.inf)
     share = f"{table[scale_texel] / table.sum():.1%} of the mass" if scale_texel is not None else ""
-    name = "envmap 16x32 on the sphere" + (f", one texel's pdf 10 % too large ({share})" if scale_texel else "")
-    return ZooSampler(name, "sphere", sample, pdf, "one texel's pdf 10 % too large" if scale_texel is not None else "")
+    name = "envmap 16x32 on the sphere" + (f", one texel's pdf 10 % too large ({share})"
+                                           if scale_texel else "")
+    fault = "one texel's pdf 10 % too large" if scale_texel is not None else ""
+    return ZooSampler(name, "sphere", sample, pdf, fault)
 
 
 def _disk_polar() -> ZooSampler:
@@ -88,7 +90,8 @@ def _disk_uniform() -> ZooSampler:
     def sample(u):
         r, ph = np.sqrt(u[:, 0]), 2 * math.pi * u[:, 1]
         return np.column_stack([r * np.cos(ph), r * np.sin(ph)])
-    return ZooSampler("disk, uniform", "disk", sample, lambda x: np.where(np.hypot(x[:, 0], x[:, 1]) <= 1, 1 / math.pi, 0))
+    return ZooSampler("disk, uniform", "disk", sample,
+                      lambda x: np.where(np.hypot(x[:, 0], x[:, 1]) <= 1, 1 / math.pi, 0))
 
 
 def _env_table(seed: int = 3) -> np.ndarray:
@@ -100,13 +103,13 @@ def _env_table(seed: int = 3) -> np.ndarray:
 
 def correct() -> list[ZooSampler]:
     table1d = np.array([0.0, 1.0, 0.0, 2.0, 0.0, 0.0, 3.0, 0.5, 0.0])
+    steps = rest.sampler("piecewise_constant_1d", table=table1d, a=-1.0, b=2.0)
     return [
         _core("linear", "interval", a=1.0, b=0.37),
         _core("power", "interval", k=-0.5),
         _core("trimmed_logistic", "interval", mu=0.3, s=1e-3, a=0.0, b=1.0),
         ZooSampler("piecewise_constant_1d (zero bins, steps in cells)", ("interval", -1.0, 2.0),
-                   lambda u, s=rest.sampler("piecewise_constant_1d", table=table1d, a=-1.0, b=2.0): s.sample(u)[0],
-                   rest.sampler("piecewise_constant_1d", table=table1d, a=-1.0, b=2.0).pdf),
+                   lambda u: steps.sample(u)[0], steps.pdf),
         _core("cosine_hemisphere", "hemisphere"),
         _core("ggx", "hemisphere", alpha=0.01),
         _core("ggx", "hemisphere", alpha=0.5),
@@ -139,15 +142,15 @@ def wrong() -> list[ZooSampler]:
         return np.column_stack([r * np.cos(ph), r * np.sin(ph), z])
 
     return [
-        ZooSampler("linear, pdf 0.5 % too large", "interval", lambda u: lin.sample(u)[0], lambda x: 1.005 * lin.pdf(x),
-                   "pdf 0.5 % too large"),
+        ZooSampler("linear, pdf 0.5 % too large", "interval", lambda u: lin.sample(u)[0],
+                   lambda x: 1.005 * lin.pdf(x), "pdf 0.5 % too large"),
         ZooSampler("cosine, pdf 1.1x in a thin band", "hemisphere", lambda u: cos.sample(u)[0], band_pdf,
                    "pdf 1.1x too large in a thin band (renormalised)"),
-        ZooSampler("ggx alpha 0.0105 sampled, 0.01 claimed", "hemisphere", lambda u: ggx_wide.sample(u)[0], ggx.pdf,
-                   "lobe 5 % too wide"),
-        ZooSampler("power k=-0.48 sampled, -0.5 claimed", "interval", lambda u: power_off.sample(u)[0], power.pdf,
-                   "exponent off by 0.02 at a singularity"),
-        ZooSampler("sphere, azimuth u^1.02", "sphere", sphere_skewed_azimuth, lambda w: np.full(w.shape[0], 0.25 / math.pi),
-                   "azimuth slightly non-uniform"),
-        _envmap(_env_table(), scale_texel=np.unravel_index(np.argmax(_env_table()), (16, 32))),  # the brightest
+        ZooSampler("ggx alpha 0.0105 sampled, 0.01 claimed", "hemisphere", lambda u: ggx_wide.sample(u)[0],
+                   ggx.pdf, "lobe 5 % too wide"),
+        ZooSampler("power k=-0.48 sampled, -0.5 claimed", "interval", lambda u: power_off.sample(u)[0],
+                   power.pdf, "exponent off by 0.02 at a singularity"),
+        ZooSampler("sphere, azimuth u^1.02", "sphere", sphere_skewed_azimuth,
+                   lambda w: np.full(w.shape[0], 0.25 / math.pi), "azimuth slightly non-uniform"),
+        _envmap(_env_table(), scale_texel=np.unravel_index(np.argmax(_env_table()), (16, 32))),  # brightest
     ]

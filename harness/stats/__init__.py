@@ -1,12 +1,38 @@
-"""Statistics of Monte Carlo estimates: bias tests, tail estimation, multiple testing,
-replicas, convergence and efficiency (``bias``), image statistics (``images``) and the
-calibration zoo of correct and subtly wrong estimators (``zoo``).
+"""Statistics of Monte Carlo estimates, one job a module:
+
+``bias``      is an estimator unbiased (check_unbiased, check_technique, judge_batches);
+``tails``     the tail index of the contributions (TailSample);
+``multiple``  multiple testing (holm);
+``replicas``  replicas, convergence rates, efficiency, error against time;
+``results``   the result family every check returns (ConfidenceInterval, Failure);
+``merge``     Chan's merge of (count, mean, variance) summaries;
+``validate``  argument validators shared across the harness;
+``images``    image statistics (imported as ``harness.stats.images``);
+``zoo``       the calibration zoo of correct and subtly wrong estimators (``harness.stats.zoo``).
 
 Every figure here carries its uncertainty and its sample count; every test states its
 false-alarm rate and what it detects.
 """
-from harness.stats.bias import *  # noqa: F403
-from harness.stats.bias import __all__ as _bias_all
-from harness.stats.results import ConfidenceInterval, Failure
+from harness.stats.bias import UnbiasedResult, check_technique, check_unbiased, judge_batches
+from harness.stats.multiple import holm
+from harness.stats.replicas import (
+    ConvergenceResult,
+    Efficiency,
+    Replicates,
+    convergence_rate,
+    efficiency,
+    efficiency_ratio,
+    error_vs_time,
+    fit_convergence,
+    median_time,
+    replicate,
+)
+from harness.stats.results import ConfidenceInterval, Failure, failure_counts, failures_from_counts
+from harness.stats.tails import TailSample
 
-__all__ = [*_bias_all, "ConfidenceInterval", "Failure"]
+__all__ = [
+    "UnbiasedResult", "check_unbiased", "check_technique", "judge_batches", "TailSample", "holm",
+    "Replicates", "replicate", "median_time", "ConvergenceResult", "convergence_rate", "fit_convergence",
+    "Efficiency", "efficiency", "efficiency_ratio", "error_vs_time",
+    "ConfidenceInterval", "Failure", "failure_counts", "failures_from_counts",
+]

@@ -2,23 +2,42 @@
 relMSE, variance, convergence and efficiency, each from independent replica renders.
 
 Pixels where any replica (or the reference) is NaN, infinite or negative are excluded from
-every average and reported with counts and positions by the caller (``adapters.image_faults``).
+every average; the bias test counts them as ``failures`` (with their first positions), and the
+caller reports them per kind and image (``harness.adapters.base.image_faults``).
+
+relMSE is defined here once (:func:`relative_squared_error`, :data:`RELMSE_EPSILON`); the
+report's error maps (``reports.images``) use the same definition.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import stats as sps
 
 from harness import stats
+from harness.stats.replicas import median_time
+from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
+from harness.stats.validate import level
 
-__all__ = ["RELMSE_EPSILON", "Reference", "ImageBias", "pixel_bias_test", "relmse", "as_replicates",
-           "image_efficiency", "pixel_variance"]
+__all__ = ["RELMSE_EPSILON", "relative_squared_error", "Reference", "ImageBias", "pixel_bias_test", "relmse",
+           "as_replicates", "image_efficiency", "pixel_variance"]
 
 RELMSE_EPSILON = 1e-2   # relMSE = mean over pixels of (x - ref)^2 / (ref^2 + eps): keeps black pixels finite
 _ROUNDING = 2.0**-20    # relative float32 rounding floor of an accumulated render (8 ulp of 2^-23)
+_MAX_EXAMPLES = 8       # first excluded pixels listed in a failure
+
+
+def relative_squared_error(estimate: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """(estimate - reference)^2 / (reference^2 + RELMSE_EPSILON), elementwise (broadcasting):
+    the squared error relative to the reference's brightness, finite on black pixels.  Its mean
+    over pixels and channels is the relMSE of the rendering literature."""
+    return (estimate - reference) ** 2 / _relmse_scale(reference)
+
+
+def _relmse_scale(reference: np.ndarray) -> np.ndarray:
+    return reference**2 + RELMSE_EPSILON
 
 
 @dataclass(frozen=True)
@@ -33,29 +52,31 @@ class Reference:
     image_mean_variance: float
 
     @classmethod
-    def exact(cls, image: np.ndarray) -> "Reference":
+    def exact(cls, image: np.ndarray) -> Reference:
         a = np.asarray(image, dtype=np.float64)
         return cls(a, np.zeros_like(a), 0, 0.0)
 
     @classmethod
-    def from_parts(cls, parts: np.ndarray) -> "Reference":
+    def from_parts(cls, parts: np.ndarray) -> Reference:
         """From K >= 2 independent renders (K, h, w, c) of equal budget."""
         p = np.asarray(parts, dtype=np.float64)
         k = p.shape[0]
         if k < 2:
-            raise ValueError(f"a rendered reference needs >= 2 independent parts to know its own error, got {k}")
+            raise ValueError(f"a rendered reference needs >= 2 independent parts to know its own error, "
+                             f"got {k}")
         means = p.reshape(k, -1).mean(axis=1)
         return cls(p.mean(axis=0), p.var(axis=0, ddof=1) / k, k, float(np.var(means, ddof=1) / k))
 
     def noise_relmse(self, valid: np.ndarray | None = None) -> float:
         """The reference's own contribution to a relMSE measured against it."""
-        share = self.variance / (self.mean**2 + RELMSE_EPSILON)
+        share = self.variance / _relmse_scale(self.mean)
         return float(np.mean(share if valid is None else share[valid]))
 
 
 @dataclass(frozen=True)
 class ImageBias:
-    """Per-pixel bias test of one render configuration.
+    """Per-pixel bias test of one render configuration, a member of the result family
+    (:mod:`harness.stats.results`).
 
     H0: every pixel's expected value equals the reference.  Two tests at alpha/2 each,
     Bonferroni-combined, so the false-alarm rate is at most alpha under any dependence between
@@ -72,6 +93,13 @@ class ImageBias:
     t law to hold at its Bonferroni level (an Edgeworth bound on the sample skewness); the
     rest (a light tracer's sparse hits, fireflies) are counted in ``untestable`` and covered
     by the image-mean test only.  ``gate_alpha`` is the family-wise level that bound is set for.
+
+    ``verdict``: "invalid" when pixels had to be excluded (NaN, infinite or negative in a
+    replica or the reference: ``failures`` has their count and first positions), else "biased"
+    when ``pvalue`` <= ``alpha``, else "consistent".  A suite judges many renders together
+    (Holm) and takes its own verdict from ``pvalue``.  ``statistic`` is NaN: the p-value
+    combines two tests (see ``worst_t`` and ``bias_mean`` / ``bias_mean_se``).  ``n`` =
+    ``replicas`` x ``spp``, the samples per pixel behind the figures.
     """
 
     pvalue: float
@@ -87,9 +115,43 @@ class ImageBias:
     replicas: int
     spp: int
     t_map: np.ndarray           # (h, w) largest |t| over channels, NaN where excluded
+    alpha: float = 0.01
+    failures: list[Failure] = field(default_factory=list)
 
-    def rejected(self, alpha: float) -> bool:
-        return self.pvalue <= alpha
+    @property
+    def verdict(self) -> str:
+        if self.failures:
+            return "invalid"
+        return "biased" if self.pvalue <= self.alpha else "consistent"
+
+    @property
+    def passed(self) -> bool:
+        return self.verdict == "consistent"
+
+    @property
+    def n(self) -> int:
+        return self.replicas * self.spp
+
+    @property
+    def statistic(self) -> float:
+        return math.nan
+
+    def confidence_interval(self, confidence_level: float = 0.95) -> ConfidenceInterval:
+        """Student-t interval (``replicas`` - 1 degrees of freedom, the image-mean test's) of the
+        image-average bias, replicas' and reference's errors included."""
+        check_confidence_level(confidence_level)
+        half = float(sps.t.ppf(0.5 + confidence_level / 2, self.replicas - 1)) * self.bias_mean_se
+        return ConfidenceInterval(self.bias_mean - half, self.bias_mean + half)
+
+    def __str__(self) -> str:
+        lo, hi = self.confidence_interval(1 - self.alpha)
+        s = (f"{self.verdict}: p = {self.pvalue:.3g} (pixels {self.pvalue_pixels:.3g}, image mean "
+             f"{self.pvalue_mean:.3g}), alpha = {self.alpha}, {self.replicas} replicas x {self.spp} spp, "
+             f"{self.tested} pixel-channels tested ({self.untestable} too skewed to test); worst pixel "
+             f"(row, col, channel) {self.worst_pixel} t = {self.worst_t:+.2f}; image-mean bias "
+             f"{self.bias_mean:+.3g} ± {self.bias_mean_se:.2g}, "
+             f"{100 * (1 - self.alpha):g} % CI [{lo:+.3g}, {hi:+.3g}]")
+        return s + "".join(f"; {f}" for f in self.failures)
 
 
 def _valid(images: np.ndarray, reference: Reference) -> np.ndarray:
@@ -100,8 +162,13 @@ def _valid(images: np.ndarray, reference: Reference) -> np.ndarray:
     return ok(images).all(axis=0) & ok(reference.mean) & ok(reference.variance)
 
 
-def pixel_bias_test(images: np.ndarray, reference: Reference, spp: int, *, gate_alpha: float = 0.01) -> ImageBias:
-    """Tests replica renders (R, h, w, c) against a reference; see ImageBias."""
+def pixel_bias_test(images: np.ndarray, reference: Reference, spp: int, *, alpha: float = 0.01,
+                    gate_alpha: float = 0.01) -> ImageBias:
+    """Tests replica renders (R, h, w, c) against a reference; see ImageBias.  ``alpha`` is the
+    level of the result's own verdict; it changes no figure (``gate_alpha`` sets the pixels'
+    normality gate)."""
+    level(alpha, "alpha")
+    level(gate_alpha, "gate_alpha")
     x = np.asarray(images, dtype=np.float64)
     r = x.shape[0]
     if r < 2:
@@ -155,8 +222,13 @@ def pixel_bias_test(images: np.ndarray, reference: Reference, spp: int, *, gate_
         worst, worst_t = (int(rows[pix]), int(cols[pix]), int(ch)), float(t[pix, ch])
     else:
         worst, worst_t = (-1, -1, -1), math.nan
+    excluded = int((~valid).sum())
+    failures = [Failure("excluded_pixels", excluded, "pixels NaN, infinite or negative in a replica or the "
+                        "reference, left out of every average",
+                        tuple({"row": int(i), "col": int(j)} for i, j in np.argwhere(~valid)[:_MAX_EXAMPLES]))
+                ] if excluded else []
     return ImageBias(min(1.0, 2 * min(p_pix, p_mean)), p_pix, p_mean, bias, se, worst, worst_t, tested,
-                     int(testable.size - tested), int((~valid).sum()), r, int(spp), t_map)
+                     int(testable.size - tested), excluded, r, int(spp), t_map, alpha, failures)
 
 
 def relmse(images: np.ndarray, reference: Reference) -> np.ndarray:
@@ -165,7 +237,7 @@ def relmse(images: np.ndarray, reference: Reference) -> np.ndarray:
     x = np.asarray(images, dtype=np.float64)
     valid = _valid(x, reference)
     ref = reference.mean[valid]
-    err = ((x[:, valid] - ref) ** 2 / (ref**2 + RELMSE_EPSILON)).reshape(x.shape[0], -1).mean(axis=1)
+    err = relative_squared_error(x[:, valid], ref).reshape(x.shape[0], -1).mean(axis=1)
     return err - reference.noise_relmse(valid)
 
 
@@ -177,10 +249,12 @@ def pixel_variance(images: np.ndarray, reference: Reference, spp: int) -> tuple[
     v = x[:, valid].var(axis=0, ddof=1).ravel() * spp
     if v.size == 0:
         return math.nan, math.nan, 0
-    return float(v.mean()), float(v.std(ddof=1) / math.sqrt(v.size)) if v.size > 1 else math.nan, x.shape[0] * spp
+    se = float(v.std(ddof=1) / math.sqrt(v.size)) if v.size > 1 else math.nan
+    return float(v.mean()), se, x.shape[0] * spp
 
 
-def as_replicates(scene: str, label: str, spp: int, errors: np.ndarray, seconds: np.ndarray) -> stats.Replicates:
+def as_replicates(scene: str, label: str, spp: int, errors: np.ndarray,
+                  seconds: np.ndarray) -> stats.Replicates:
     """Replicas' relMSEs as stats.Replicates (error sqrt(relMSE) against 0), so convergence
     slopes come from the same bootstrap fit as the core's: RMSE there is sqrt(mean relMSE)."""
     e = np.sqrt(np.maximum(np.asarray(errors, dtype=np.float64), 0.0))
@@ -195,8 +269,7 @@ def image_efficiency(label: str, spp: int, errors: np.ndarray, seconds: np.ndarr
     t = np.asarray(seconds, dtype=np.float64)
     r = e.size
     mse = float(e.mean())
-    med = float(np.median(t))
-    t_se = 1.2533 * 1.4826 * float(np.median(np.abs(t - med))) / math.sqrt(r)
+    med, t_se = median_time(t)
     if not (mse > 0 and med > 0):
         return stats.Efficiency(label, math.nan, math.nan, spp, r, math.nan, med)
     rel = float(e.std(ddof=1)) / math.sqrt(r) / mse

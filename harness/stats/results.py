@@ -19,11 +19,14 @@ plugin and the report treat them alike:
 """
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
-__all__ = ["ConfidenceInterval", "Failure", "failures_from_dicts", "check_confidence_level"]
+from harness.stats.validate import level
+
+__all__ = ["ConfidenceInterval", "Failure", "failures_from_dicts", "failures_from_counts", "failure_counts",
+           "check_confidence_level"]
 
 
 class ConfidenceInterval(NamedTuple):
@@ -59,7 +62,8 @@ class Failure:
 
     def __str__(self) -> str:
         ex = f"; e.g. {list(self.examples[:2])}" if self.examples else ""
-        return f"{self.check}: {self.count} ({self.detail}){ex}" if self.detail else f"{self.check}: {self.count}{ex}"
+        what = f" ({self.detail})" if self.detail else ""
+        return f"{self.check}: {self.count}{what}{ex}"
 
 
 def failures_from_dicts(items: Sequence[Mapping[str, Any]]) -> list[Failure]:
@@ -67,8 +71,22 @@ def failures_from_dicts(items: Sequence[Mapping[str, Any]]) -> list[Failure]:
     return [Failure.from_dict(d) for d in items]
 
 
+def failures_from_counts(counts: Mapping[str, int], examples: Iterable[Mapping[str, Any]] = (),
+                         details: Mapping[str, str] | None = None) -> list[Failure]:
+    """One Failure per non-zero entry of ``counts`` (in its order), with the ``examples``
+    whose ``"issue"`` names that entry and its text from ``details``."""
+    examples = list(examples)
+    details = details or {}
+    return [Failure(check, int(c), details.get(check, ""),
+                    tuple(dict(e) for e in examples if e.get("issue") == check))
+            for check, c in counts.items() if c]
+
+
+def failure_counts(failures: Iterable[Failure]) -> dict[str, int]:
+    """``{check: count}`` of ``failures`` in their order (the stored form of a result's faults)."""
+    return {f.check: f.count for f in failures}
+
+
 def check_confidence_level(confidence_level: float) -> float:
     """The level, validated: a number strictly between 0 and 1."""
-    if not 0 < confidence_level < 1:
-        raise ValueError(f"'confidence_level' must be in (0, 1), got {confidence_level!r}")
-    return float(confidence_level)
+    return level(confidence_level, "confidence_level")

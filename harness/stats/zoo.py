@@ -107,25 +107,31 @@ def zoo() -> list[ZooEstimator]:
         ZooEstimator("roulette(q=0.5)", 2, i_gauss, roulette(0.5, True)),
         ZooEstimator(f"stratified({strata})", strata, i_gauss, stratified(False)),
         ZooEstimator("mis_balance(uniform,linear)", 2, i_gauss, mis(0.0)),
-        ZooEstimator("hit_or_miss(c=1)", 2, i_gauss, lambda u: (u[:, 1] < _gauss(u[:, 0])).astype(float)),
-        ZooEstimator("peak(sigma=1e-4)/uniform", 1, peak_ref, lambda u: sps.norm.pdf(u[:, 0], 0.3, peak_sigma)),
+        ZooEstimator("hit_or_miss(c=1)", 2, i_gauss,
+                     lambda u: (u[:, 1] < _gauss(u[:, 0])).astype(float)),
+        ZooEstimator("peak(sigma=1e-4)/uniform", 1, peak_ref,
+                     lambda u: sps.norm.pdf(u[:, 0], 0.3, peak_sigma)),
         ZooEstimator("ggx(alpha=0.01)/cosine", 2, 1.0, ggx_cosine),
         ZooEstimator("singularity/uniform", 1, 1.0, lambda u: 0.5 / np.sqrt(u[:, 0]), heavy=True),
         ZooEstimator("pareto(3/2)/uniform", 1, 1.0, lambda u: u[:, 0] ** (-2 / 3) / 3, heavy=True),
         ZooEstimator("half_cauchy/exponential", 1, 1.0, half_cauchy_exp, heavy=True),
         # subtly wrong twins
         ZooEstimator("importance:linear, pdf 1% too large", 1, i_gauss, linear_is(1.01), "pdf off by 1 %"),
-        ZooEstimator("importance:linear, pdf 0.1% too large", 1, i_gauss, linear_is(1.001), "pdf off by 0.1 %"),
+        ZooEstimator("importance:linear, pdf 0.1% too large", 1, i_gauss, linear_is(1.001),
+                     "pdf off by 0.1 %"),
         ZooEstimator("roulette(q=0.99) without 1/q", 2, i_gauss, roulette(0.99, False), "missing 1/q"),
         ZooEstimator("roulette(q=0.999) without 1/q", 2, i_gauss, roulette(0.999, False), "missing 1/q"),
-        ZooEstimator(f"stratified({strata}), a stratum twice", strata, i_gauss, stratified(True), "stratum counted twice"),
-        ZooEstimator("mis_balance, weights sum to 1.02", 2, i_gauss, mis(0.02), "MIS weights do not sum to one"),
-        ZooEstimator("uniform clamped at 0.99", 1, i_gauss, lambda u: np.minimum(_gauss(u[:, 0]), 0.99), "clamping"),
+        ZooEstimator(f"stratified({strata}), a stratum twice", strata, i_gauss, stratified(True),
+                     "stratum counted twice"),
+        ZooEstimator("mis_balance, weights sum to 1.02", 2, i_gauss, mis(0.02),
+                     "MIS weights do not sum to one"),
+        ZooEstimator("uniform clamped at 0.99", 1, i_gauss, lambda u: np.minimum(_gauss(u[:, 0]), 0.99),
+                     "clamping"),
         ZooEstimator("hit_or_miss(c=0.95), bound violated", 2, i_gauss,
                      lambda u: 0.95 * (u[:, 1] * 0.95 < _gauss(u[:, 0])), "rejection bound violated"),
         ZooEstimator("snis(b=16)", 16, i_gauss, snis(16), "self-normalised (ratio) estimator"),
-        ZooEstimator("singularity/uniform x 1.01", 1, 1.0, lambda u: 0.505 / np.sqrt(u[:, 0]), "1 % too large",
-                     heavy=True),
+        ZooEstimator("singularity/uniform x 1.01", 1, 1.0, lambda u: 0.505 / np.sqrt(u[:, 0]),
+                     "1 % too large", heavy=True),
     ]
 
 
@@ -141,6 +147,7 @@ def measure(estimators: Iterable[ZooEstimator], seeds: Iterable[int], sample_cou
         k, n = verdicts.count("biased"), len(verdicts)
         ci = sps.binomtest(k, n).proportion_ci(0.95, method="exact")
         rows.append({"estimator": e.name, "fault": e.fault or "-", "heavy": e.heavy, "runs": n, "biased": k,
-                     "inconclusive": verdicts.count("inconclusive"), "consistent": verdicts.count("consistent"),
-                     "invalid": verdicts.count("invalid"), "rate": k / n, "rate_lo": ci.low, "rate_hi": ci.high})
+                     "inconclusive": verdicts.count("inconclusive"),
+                     "consistent": verdicts.count("consistent"), "invalid": verdicts.count("invalid"),
+                     "rate": k / n, "rate_lo": ci.low, "rate_hi": ci.high})
     return pd.DataFrame(rows)

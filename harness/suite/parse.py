@@ -1,25 +1,62 @@
-"""Suite files (TOML): what to estimate, with how many samples, from which seed.
+"""Suite files (TOML): what to measure, with how many samples, from which seed.
 
-At this stage a suite lists cases as integrand x techniques from the reference catalogue:
+A suite has one [suite] table and at least one [[case]], [[sampler]] or [[render]] table;
+any other top-level table is an error.  Every key is optional unless marked required:
 
     [suite]
-    name = "default"
-    seed = 0                  # chunk streams are keyed by (seed, case, replica, chunk)
-    samples = 1_000_000       # per bias test (split into `batches` replicas); a case may override it
-    alpha = 0.01              # family-wise false-alarm rate of the suite's bias tests (Holm)
-    batches = 64              # independent replicas the bias test compares
-    replicas = 32             # replicas per budget for convergence and efficiency
-    budgets = [1024, 4096]    # optional: convergence budgets (default: samples/1024 .. samples/16)
-    measurements = ["bias", "variance", "convergence", "efficiency", "error_vs_time"]  # the default
+    name = "default"          # default: the file's stem
+    seed = 0                  # >= 0; streams are keyed by (seed, case, replica, chunk)
+    samples = 1_000_000       # per bias test (split into `batches` replicas); cases may override it
+    threads = 0               # >= 0; 0 or absent: all cores
+    alpha = 0.01              # in (0, 1): family-wise false-alarm rate (Holm) of the cases' bias
+                              #   tests, of the sampler checks, and of the renders' tests
+    batches = 64              # independent replicas the bias test compares, in [8, samples]
+    replicas = 32             # >= 2: replicas per budget for convergence and efficiency
+    budgets = [1024, 4096, 16384]  # >= 3 positive convergence budgets (default: five geometric,
+                              #   samples/4096 .. samples/16 by factors of 4, none below 16)
+    measurements = ["bias", "variance", "convergence", "efficiency", "error_vs_time"]  # the default,
+                              #   for [[case]] and [[render]] tables that give none
 
-    [[case]]                  # a case may override samples and measurements
-    target = 1e-4             # optional: double the bias test's samples until its CI half-width
-    max_samples = 64_000_000  #   is <= target, at most up to max_samples (alpha split over the looks)
+    [[case]]                  # catalogue integrand x techniques; one case per pair, in order
+    integrand = "gaussian"    # required: a catalogue name, or "all"
+    techniques = "all"        # "all" (the default), one technique name, or a list of them
+    samples = 10_000_000      # >= batches; default: the suite's
+    measurements = ["bias"]   # some of the five names above; default: the suite's
+    target = 1e-4             # with max_samples: double the bias test's samples until its CI
+    max_samples = 64_000_000  #   half-width is <= target, up to max_samples (alpha split over looks)
 
-    [[case]]
-    integrand = "all"         # or a catalogue name
-    techniques = "all"        # or a list of technique names of that integrand
+    [[sampler]]               # a catalogue sampler against its pdf (harness.samplers.check)
+    name = "ggx"              # required: a registry sampler (not a tabulated one)
+    params = { alpha = 0.01 } # numbers; default: the registry's
+    domain = "hemisphere"     # interval, half_line, square, disk, hemisphere or sphere; default:
+                              #   the sampler's own
+    samples = 1_000_000       # >= 1000; default: the suite's samples
+    measurements = ["chi_square", "mcmc"]  # default ["chi_square"]
 
+    [[sampler]]               # a renderer's sampler: Mitsuba BSDF, microfacet distribution, envmap
+    adapter = "mitsuba"       # required (the only adapter with samplers)
+    plugin = { type = "roughconductor", alpha = 0.1 }  # required: a Mitsuba plugin dict
+    wi = 45                   # incident direction: polar angle in degrees or a 3-vector (default 0)
+    variant = "llvm_ad_rgb"   # the default
+    samples = 1_000_000       # >= 1000; default: the suite's samples
+    measurements = ["chi_square", "weight"]  # the default (for microfacet distributions: chi_square)
+
+    [[render]]                # renderer configurations measured from replica renders
+    adapter = "mitsuba"       # required: one of harness.adapters.ADAPTERS
+    spp = 64                  # budget of each of the bias test's renders (default 64)
+    replicas = 16             # >= 4 (default 16)
+    budgets = [4, 16, 64]     # convergence budgets (default spp/64, spp/16, spp/4, spp, none below 1);
+                              #   >= 3 distinct ones for convergence, efficiency or error_vs_time
+    reference_spp = 4096      # without an exact answer: total spp of the reference render, a
+    reference_parts = 8       #   multiple of reference_parts (>= 2) independent parts
+                              #   (defaults: 64 x max(budgets, spp) and 8)
+    measurements = ["bias"]   # default: the suite's
+    expect = "biased"         # "unbiased" (the default), or the bias test must reject
+    scene = "cornell"         # every other key is the adapter's (scene, integrator, variant, ...);
+    integrator = ["path", "direct"]  # a list makes one case per element (cross product over lists)
+
+Cases are numbered in order and the number keys their random streams; sampler tables are
+numbered after the cases, render cases from 0 on their own.
 Every mistake is reported as ``file:line: key: what was expected``.
 """
 from __future__ import annotations
@@ -282,7 +319,7 @@ def _renders(raw: list[dict[str, Any]], measurements: tuple[str, ...], where: "_
 
 
 def _samplers(raw: list[dict[str, Any]], samples: int, first_id: int, where: "_Locator") -> tuple[SamplerCase, ...]:
-    from harness.samplers.check import DOMAINS
+    from harness.samplers import DOMAINS
 
     out = []
     registry = {s["name"]: s for s in rest.samplers()}

@@ -1,64 +1,75 @@
 """The plan: the work units a suite's measurements need, and nothing else.
 
-A unit is a contiguous range of at most UNIT_CHUNKS core chunks of one estimate, keyed by
-(case fingerprint, stream, budget, replica, chunk range, kind).  Shared work is planned once:
-the bias test's batches also give the variance, the convergence replicas also give the
-efficiency and the error against time.  No reference run is planned (the catalogue's values
-are exact), no renderer or sampler test unless a case asks for one.
+A unit is named by a :class:`Unit` (case fingerprint, stream, budget, replica, chunk range,
+kind).  For estimator cases a unit is a contiguous range of at most ``UNIT_CHUNKS`` core chunks
+of one estimate; a sampler check is one unit per measurement; a render is one unit per image.
+Shared work is planned once: the bias test's batches also give the variance, the convergence
+replicas also give the efficiency and the error against time.  No reference run is planned
+where an exact value exists (the catalogue's values are exact, some scenes have exact images),
+no renderer or sampler test unless a case asks for one.
+
+Fingerprints (``case_key``, ``sampler_key``, ``render_key``, ``reference_key``) hash what fixes
+a case's numbers; a unit's random stream is keyed by its case, stream and replica.
 """
 from __future__ import annotations
 
 import hashlib
 import json
 from dataclasses import dataclass
+from typing import Any
 
 import reference_estimators as rest
 
-from harness.suite.parse import MEASUREMENTS, Case, SamplerCase, Suite
+from harness.suite.parse import Case, RenderCase, SamplerCase, Suite
 
-__all__ = ["UNIT_CHUNKS", "MEASUREMENTS", "Unit", "case_key", "sampler_key", "sampler_spec", "bias_budget",
-           "bias_stream", "convergence_budgets", "plan"]
+__all__ = ["UNIT_CHUNKS", "BIAS_STREAM", "Unit", "case_key", "sampler_key", "sampler_spec", "render_key",
+           "reference_key", "render_seed", "core_case_id", "bias_budget", "bias_stream", "convergence_budgets",
+           "chosen_budgets", "estimator_units", "sampler_units", "render_units", "reference_units", "plan"]
 
 UNIT_CHUNKS = 32                     # core chunks (of 65 536 samples) per stored unit
 BIAS_STREAM = 0                      # stream 0: the bias test's batches; 1 + i: convergence budget i;
 TARGET_STREAM = 200                  # 200 + s: the bias test's batches at look s >= 1 of a target
 _FORMAT = 1                          # bump when a unit's meaning changes: old rows stop matching
 _SAMPLER_PAYLOAD = 2                 # sampler-check payloads: 2 adds residual grids and marginals (report)
+_RENDER_FORMAT = 1                   # bump when a render unit's meaning changes
+RENDER = "render"                    # the kind of a render unit
 
 
 @dataclass(frozen=True, order=True)
 class Unit:
+    """The key of one stored unit of work (one row of the store's ``units`` table)."""
+
     case_key: str
     stream: int
-    budget: int       # contributions in the estimate this unit is part of
+    budget: int       # contributions (samples, spp) in the estimate this unit is part of
     replica: int
     chunk_begin: int
     chunk_end: int
-    kind: str         # "state" or "tail"
-
-    @property
-    def key(self) -> tuple[str, int, int, int, int, int, str]:
-        return (self.case_key, self.stream, self.budget, self.replica, self.chunk_begin, self.chunk_end, self.kind)
+    kind: str         # "state", "tail", a sampler measurement, or "render"
 
 
+def _hash(obj: Any) -> str:
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:24]
+
+
+# --- fingerprints --------------------------------------------------------------------------------
 def case_key(suite: Suite, case: Case) -> str:
     """Fingerprint of what fixes a case's random numbers and contributions."""
-    definition = {"integrand": case.integrand, "technique": case.technique, "seed": suite.seed,
+    return _hash({"integrand": case.integrand, "technique": case.technique, "seed": suite.seed,
                   "case_id": case.case_id, "unit_chunks": UNIT_CHUNKS, "format": _FORMAT,
-                  "core": rest.__version__, "build": rest.core_fingerprint()}
-    return hashlib.sha256(json.dumps(definition, sort_keys=True).encode()).hexdigest()[:24]
+                  "core": rest.__version__, "build": rest.core_fingerprint()})
 
 
 def sampler_key(suite: Suite, sc: SamplerCase) -> str:
     """Fingerprint of a sampler check: the sampler, its parameters, domain, samples and seed."""
     definition = {"sampler": sc.name, "params": list(sc.params), "domain": sc.domain, "samples": sc.samples,
-                  "seed": suite.seed, "case_id": sc.case_id, "format": _FORMAT, "payload": _SAMPLER_PAYLOAD, "core": rest.__version__,
-                  "build": rest.core_fingerprint()}
+                  "seed": suite.seed, "case_id": sc.case_id, "format": _FORMAT, "payload": _SAMPLER_PAYLOAD,
+                  "core": rest.__version__, "build": rest.core_fingerprint()}
     if sc.adapter:  # a renderer's sampler: its library version is part of what is tested
         from harness.adapters.mitsuba.samplers import make_sampler
 
         definition.update(adapter=sc.adapter, spec=sc.spec, fingerprint=make_sampler(json.loads(sc.spec)).fingerprint())
-    return hashlib.sha256(json.dumps(definition, sort_keys=True).encode()).hexdigest()[:24]
+    return _hash(definition)
 
 
 def sampler_spec(sc: SamplerCase) -> str:
@@ -67,6 +78,29 @@ def sampler_spec(sc: SamplerCase) -> str:
                        "adapter": sc.adapter, "spec": json.loads(sc.spec) if sc.spec else None})
 
 
+def render_key(suite: Suite, fingerprint: dict[str, Any]) -> str:
+    """Fingerprint of a render case's images: the renderer's fingerprint and the suite seed."""
+    return _hash({"renderer": fingerprint, "seed": suite.seed, "format": _RENDER_FORMAT})
+
+
+def reference_key(suite: Suite, rc: RenderCase, fingerprint: dict[str, Any]) -> str:
+    """Fingerprint of a rendered reference: its renderer, budget, parts and the suite seed."""
+    return _hash({"reference": fingerprint, "spp": rc.reference_spp, "parts": rc.reference_parts,
+                  "seed": suite.seed, "format": _RENDER_FORMAT})
+
+
+def render_seed(unit: Unit) -> int:
+    """A render's seed (31 bits): independent streams per case, stream and replica."""
+    return int(hashlib.sha256(f"{unit.case_key}/{unit.stream}/{unit.replica}".encode()).hexdigest()[:8],
+               16) & 0x7FFFFFFF
+
+
+def core_case_id(case: Case, stream: int) -> int:
+    """The core's case_id field of an estimator stream: case position and purpose, disjoint for all."""
+    return (case.case_id << 8) | stream
+
+
+# --- budgets -----------------------------------------------------------------------------------
 def bias_budget(suite: Suite, case: Case, look: int = 0) -> int:
     """Contributions per batch of the bias test (at look ``look`` of a precision target)."""
     return (case.samples << look) // suite.batches
@@ -84,39 +118,72 @@ def convergence_budgets(suite: Suite, case: Case) -> list[int]:
     return [max(top >> (2 * k), 16) for k in range(4, -1, -1)]
 
 
+def chosen_budgets(measurements: tuple[str, ...], budgets: list[int] | tuple[int, ...]) -> list[tuple[int, int]]:
+    """(index, budget) of the convergence budgets the measurements need: all of them for a
+    convergence fit or the error against time, only the largest for efficiency alone."""
+    wanted = set(measurements)
+    if wanted & {"convergence", "error_vs_time"}:
+        return list(enumerate(budgets))
+    if "efficiency" in wanted:
+        return [(len(budgets) - 1, budgets[-1])]
+    return []
+
+
+# --- units -------------------------------------------------------------------------------------
 def _estimate_units(key: str, stream: int, budget: int, replica: int) -> list[Unit]:
     chunks = -(-budget // rest.CHUNK_SIZE)
     return [Unit(key, stream, budget, replica, c, min(c + UNIT_CHUNKS, chunks), "state")
             for c in range(0, chunks, UNIT_CHUNKS)]
 
 
+def estimator_units(suite: Suite, case: Case, look: int = 0) -> list[Unit]:
+    """An estimator case's units at look ``look`` of its precision target (0 without one)."""
+    key = case_key(suite, case)
+    wanted = set(case.measurements)
+    units: list[Unit] = []
+    if wanted & {"bias", "variance"}:
+        b, stream = bias_budget(suite, case, look), bias_stream(look)
+        for k in range(suite.batches):
+            units += _estimate_units(key, stream, b, k)
+        if "bias" in wanted:
+            units.append(Unit(key, stream, b, 0, 0, 0, "tail"))
+    for i, b in chosen_budgets(case.measurements, convergence_budgets(suite, case)):
+        for r in range(suite.replicas):
+            units += _estimate_units(key, 1 + i, b, r)
+    return units
+
+
+def sampler_units(suite: Suite, sc: SamplerCase) -> list[Unit]:
+    """One unit per measurement of a sampler check: it is cheap, and stored so a rerun skips it."""
+    key = sampler_key(suite, sc)
+    return [Unit(key, 0, sc.samples, 0, 0, 0, m) for m in sc.measurements]
+
+
+def render_units(rc: RenderCase, key: str) -> list[Unit]:
+    """A render case's replica renders: ``replicas`` at ``spp`` for bias and variance, and
+    ``replicas`` at each budget its other measurements need."""
+    units: list[Unit] = []
+    if set(rc.measurements) & {"bias", "variance"}:
+        units += [Unit(key, 0, rc.spp, r, 0, 0, RENDER) for r in range(rc.replicas)]
+    for i, b in chosen_budgets(rc.measurements, rc.budgets):
+        units += [Unit(key, 1 + i, b, r, 0, 0, RENDER) for r in range(rc.replicas)]
+    return units
+
+
+def reference_units(rc: RenderCase, ref_key: str) -> list[Unit]:
+    """The ``reference_parts`` independent renders of a rendered reference."""
+    per = rc.reference_spp // rc.reference_parts
+    return [Unit(ref_key, 0, per, k, 0, 0, RENDER) for k in range(rc.reference_parts)]
+
+
 def plan(suite: Suite, looks: dict[str, int] | None = None) -> dict[str, list[Unit]]:
-    """Units per case key, in a fixed order; ``looks`` gives the current look of cases with a
-    precision target (0 when absent)."""
+    """Units of the suite's estimator cases and sampler checks per case key, in a fixed order;
+    ``looks`` gives the current look of cases with a precision target (0 when absent).  Render
+    units need the renderers' fingerprints: :func:`render_units` plans them."""
     out: dict[str, list[Unit]] = {}
     for case in suite.cases:
         key = case_key(suite, case)
-        wanted = set(case.measurements)
-        units: list[Unit] = []
-        if wanted & {"bias", "variance"}:
-            look = (looks or {}).get(key, 0)
-            b, stream = bias_budget(suite, case, look), bias_stream(look)
-            for k in range(suite.batches):
-                units += _estimate_units(key, stream, b, k)
-            if "bias" in wanted:
-                units.append(Unit(key, stream, b, 0, 0, 0, "tail"))
-        budgets = convergence_budgets(suite, case)
-        if wanted & {"convergence", "error_vs_time"}:
-            chosen = list(enumerate(budgets))
-        elif "efficiency" in wanted:
-            chosen = [(len(budgets) - 1, budgets[-1])]
-        else:
-            chosen = []
-        for i, b in chosen:
-            for r in range(suite.replicas):
-                units += _estimate_units(key, 1 + i, b, r)
-        out[key] = units
-    for sc in suite.samplers:  # one unit per check: it is cheap, and stored so a rerun skips it
-        key = sampler_key(suite, sc)
-        out[key] = [Unit(key, 0, sc.samples, 0, 0, 0, m) for m in sc.measurements]
+        out[key] = estimator_units(suite, case, (looks or {}).get(key, 0))
+    for sc in suite.samplers:
+        out[sampler_key(suite, sc)] = sampler_units(suite, sc)
     return out

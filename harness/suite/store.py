@@ -22,6 +22,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from harness.suite.plan import Unit
+
 __all__ = ["Store", "load", "write_exr", "read_exr"]
 
 _SCHEMA = """
@@ -39,7 +41,7 @@ CREATE TABLE IF NOT EXISTS units (
     replica     INTEGER NOT NULL,
     chunk_begin INTEGER NOT NULL,
     chunk_end   INTEGER NOT NULL,
-    kind        TEXT NOT NULL,     -- 'state' (accumulator state) or 'tail' (largest deviations)
+    kind        TEXT NOT NULL,     -- 'state', 'tail', a sampler measurement or 'render'
     payload     TEXT NOT NULL,     -- JSON
     seconds     REAL NOT NULL,
     finished    REAL NOT NULL,
@@ -71,7 +73,7 @@ CREATE TABLE IF NOT EXISTS measurements (
 );
 """
 
-UnitKey = tuple[str, int, int, int, int, int, str]
+_UNIT_COLUMNS = "case_key, stream, budget, replica, chunk_begin, chunk_end, kind"
 
 
 class Store:
@@ -95,40 +97,37 @@ class Store:
         self.db.execute("INSERT OR IGNORE INTO cases VALUES (?, ?, ?, ?, ?)",
                         (case_key, suite, integrand, technique, json.dumps(definition, sort_keys=True)))
 
-    def stored_keys(self, case_keys: Iterable[str]) -> set[UnitKey]:
-        keys: set[UnitKey] = set()
+    def stored_keys(self, case_keys: Iterable[str]) -> set[Unit]:
+        """The stored units of these cases."""
+        keys: set[Unit] = set()
         for ck in set(case_keys):
-            rows = self.db.execute("SELECT case_key, stream, budget, replica, chunk_begin, chunk_end, kind FROM units "
-                                   "WHERE case_key = ?", (ck,))
-            keys.update(tuple(r) for r in rows)
+            rows = self.db.execute(f"SELECT {_UNIT_COLUMNS} FROM units WHERE case_key = ?", (ck,))
+            keys.update(Unit(*r) for r in rows)
         return keys
 
-    def put(self, key: UnitKey, payload: dict[str, Any], seconds: float) -> None:
+    def put(self, unit: Unit, payload: dict[str, Any], seconds: float) -> None:
         """Adds a unit's row to the open transaction (``commit`` makes it durable)."""
         if not self._open:
             self.db.execute("BEGIN")
             self._open = True
         self.db.execute("INSERT OR IGNORE INTO units VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                        (*key, json.dumps(payload), seconds, time.time()))
+                        (unit.case_key, unit.stream, unit.budget, unit.replica, unit.chunk_begin, unit.chunk_end,
+                         unit.kind, json.dumps(payload), seconds, time.time()))
 
     def commit(self) -> None:
         if self._open:
             self.db.execute("COMMIT")
             self._open = False
 
-    def payloads(self, case_key: str) -> dict[UnitKey, dict[str, Any]]:
-        rows = self.db.execute("SELECT case_key, stream, budget, replica, chunk_begin, chunk_end, kind, payload "
-                               "FROM units WHERE case_key = ?", (case_key,))
-        return {tuple(r[:7]): json.loads(r[7]) for r in rows}
+    def payloads(self, case_key: str) -> dict[Unit, dict[str, Any]]:
+        """The payload of each of the case's stored units."""
+        rows = self.db.execute(f"SELECT {_UNIT_COLUMNS}, payload FROM units WHERE case_key = ?", (case_key,))
+        return {Unit(*r[:7]): json.loads(r[7]) for r in rows}
 
-    def seconds(self, case_key: str) -> dict[UnitKey, float]:
+    def seconds(self, case_key: str) -> dict[Unit, float]:
         """Wall time (s) of each of the case's stored units."""
-        rows = self.db.execute("SELECT case_key, stream, budget, replica, chunk_begin, chunk_end, kind, seconds "
-                               "FROM units WHERE case_key = ?", (case_key,))
-        return {tuple(r[:7]): r[7] for r in rows}
-
-    def unit_count(self) -> int:
-        return self.db.execute("SELECT COUNT(*) FROM units").fetchone()[0]
+        rows = self.db.execute(f"SELECT {_UNIT_COLUMNS}, seconds FROM units WHERE case_key = ?", (case_key,))
+        return {Unit(*r[:7]): r[7] for r in rows}
 
     # --- images ----------------------------------------------------------------------------
     @property

@@ -17,7 +17,6 @@ from scipy import stats as sps
 from harness.adapters import image_faults, renderer
 from harness.stats.images import Reference, pixel_bias_test, relmse
 from harness.suite.run import run_suite
-from harness.suite.renders import judge_renders, render_failures
 from harness.suite.store import load
 from harness.suite.parse import SuiteError, load_suite
 
@@ -146,11 +145,11 @@ def test_suite_compares_integrators_and_caches_references(tmp_path, variant):
                                                       f"integrator=ptracer, variant={variant}"]
     db = tmp_path / "a.sqlite"
     summary = run_suite(suite, db)
-    rs = summary.renders
+    rs = summary["render"].results
     assert len(rs) == 5
-    verdicts = judge_renders(rs, suite.alpha)
+    verdicts = [v["bias"] for v in summary["render"].verdicts]
     assert verdicts == ["unbiased", "unbiased", "biased (expected)", "unbiased", "unbiased"], verdicts
-    assert render_failures(rs, suite.alpha) == [""] * 5
+    assert summary["render"].failures == ("",) * 5
     # exact scenes render no reference; the Cornell box's reference is rendered once for both
     # integrators (direct's reference is path tracing at depth 2, the same images) and cached
     refs = sorted((tmp_path / "references").glob("*.json"))
@@ -158,7 +157,8 @@ def test_suite_compares_integrators_and_caches_references(tmp_path, variant):
     assert rs[0].reference == "exact" and rs[3].reference == rs[4].reference != "exact"
     for r in (rs[0], rs[1], rs[3]):
         c = r.convergence
-        assert c.slope_interval[0] - 0.1 < -0.5 < c.slope_interval[1] + 0.1, c
+        lo, hi = c.confidence_interval()
+        assert lo - 0.1 < -0.5 < hi + 0.1, c
     df = load(db)
     assert {"bias", "variance", "convergence", "efficiency", "relmse", "error_vs_time",
             "equal_time_relmse"} <= set(df["measurement"])
@@ -195,10 +195,11 @@ def test_nan_pixels_are_reported_with_positions(tmp_path, monkeypatch):
     """)
     suite = load_suite(path)
     summary = run_suite(suite, tmp_path / "nan.sqlite")
-    r = summary.renders[0]
+    r = summary["render"].results[0]
     assert r.faults.nan == 4 and r.faults.examples["nan"][0] == (0, 2, 3)
-    assert judge_renders(summary.renders, suite.alpha)[0] == "invalid (4 bad pixels)"
-    assert "nan pixel" in render_failures(summary.renders, suite.alpha)[0]
+    assert summary["render"].verdicts[0]["bias"] == "invalid"
+    assert "invalid (4 bad pixels)" in summary["render"].failures[0]
+    assert "nan pixel" in summary["render"].failures[0]
     assert r.bias.excluded == 1
 
 
@@ -293,4 +294,4 @@ def test_interrupted_render_suite_resumes_without_rerendering(tmp_path, monkeypa
     assert resumed.units_run == resumed.units_planned - 5
     a, b = load(tmp_path / "clean.sqlite"), load(tmp_path / "resumed.sqlite")
     assert a[["measurement", "pvalue"]].equals(b[["measurement", "pvalue"]])
-    assert clean.renders[0].bias.pvalue == resumed.renders[0].bias.pvalue
+    assert clean["render"].results[0].bias.pvalue == resumed["render"].results[0].bias.pvalue

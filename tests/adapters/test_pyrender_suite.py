@@ -8,7 +8,6 @@ import textwrap
 import numpy as np
 import pytest
 
-from harness.suite.renders import judge_renders, render_failures
 from harness.suite.run import run_suite
 from harness.suite.store import load
 from harness.suite.parse import SuiteError, load_suite
@@ -51,20 +50,20 @@ def raster(tmp_path_factory):
 
 def test_rasterizer_estimators_are_unbiased_and_stratification_pays(raster):
     suite, tmp, summary = raster
-    rs = summary.renders
+    rs = summary["render"].results
     assert [r.case.label for r in rs][:3] == ["points=random, technique=antialias",
                                               "points=stratified, technique=antialias",
                                               "points=sobol, technique=antialias"]
-    assert judge_renders(rs, suite.alpha) == ["unbiased"] * 5
-    assert render_failures(rs, suite.alpha) == [""] * 5
+    assert [v["bias"] for v in summary["render"].verdicts] == ["unbiased"] * 5
+    assert summary["render"].failures == ("",) * 5
     assert all(r.faults.total == 0 for r in rs)
     random_aa, strat_aa, sobol_aa, random_sh, sobol_sh = rs
     # random points converge at spp^-1/2; stratified and Sobol' faster at edges (about -3/4:
     # only the strata an edge crosses vary), with the whole 95 % interval below -0.6
-    lo, hi = random_aa.convergence.slope_interval
+    lo, hi = random_aa.convergence.confidence_interval()
     assert lo - 0.05 < -0.5 < hi + 0.05
     for r in (strat_aa, sobol_aa, sobol_sh):
-        assert r.convergence.slope_interval[1] < -0.6, r.convergence
+        assert r.convergence.confidence_interval().high < -0.6, r.convergence
     df = load(tmp / "raster.sqlite")
     eff = df[df.measurement == "efficiency"].set_index("technique")
     # at equal frames and at equal time, Sobol' beats random by far more than the interval width
@@ -78,7 +77,7 @@ def test_one_cached_reference_per_estimand(raster):
     """Random, stratified and Sobol' estimate one image: they share one reference (Sobol'
     parts), rendered once and cached beside the database."""
     suite, tmp, summary = raster
-    rs = summary.renders
+    rs = summary["render"].results
     assert len({r.reference for r in rs[:3]}) == 1 and rs[3].reference == rs[4].reference != rs[0].reference
     metas = [json.loads(p.read_text()) for p in (tmp / "references").glob("*.json")]
     assert sorted(m["spp"] for m in metas) == [1024, 4096]
@@ -114,8 +113,8 @@ def test_a_planted_offset_bias_is_found(tmp_path, monkeypatch):
     """))
     suite = load_suite(path)
     summary = run_suite(suite, tmp_path / "shifted.sqlite")
-    b = summary.renders[0].bias
-    assert judge_renders(summary.renders, suite.alpha) == ["biased (expected)"]
+    b = summary["render"].results[0].bias
+    assert [v["bias"] for v in summary["render"].verdicts] == ["biased (expected)"]
     # a shift keeps the image's mean: the pixel test (at alpha / 2) is what finds it
     assert b.pvalue_pixels <= suite.alpha / 2 and b.pvalue_mean > suite.alpha
 
@@ -137,9 +136,10 @@ def test_nan_frames_are_counted_not_averaged(tmp_path, monkeypatch):
                     'replicas = 4\nmeasurements = ["bias"]\nreference_spp = 64\n')
     suite = load_suite(path)
     summary = run_suite(suite, tmp_path / "nan.sqlite")
-    r = summary.renders[0]
+    r = summary["render"].results[0]
     assert r.faults.nan == 4 and r.faults.examples["nan"][0] == (0, 7, 9)
-    assert judge_renders(summary.renders, suite.alpha) == ["invalid (4 bad pixels)"]
+    assert [v["bias"] for v in summary["render"].verdicts] == ["invalid"]
+    assert "invalid (4 bad pixels)" in summary["render"].failures[0]
     assert r.bias.excluded == 1
 
 
@@ -152,3 +152,62 @@ def test_suite_errors_name_the_key(tmp_path, line, key):
     path.write_text('[[render]]\nadapter = "pyrender"\n' + "\n".join(body.values()) + "\n")
     with pytest.raises(SuiteError, match=rf"bad\.toml:\d+: {key}: "):
         load_suite(path)
+
+
+DASK_SUITE = """\
+    [suite]
+    name = "dask-renders"
+
+    [[render]]
+    adapter = "pyrender"
+    scene = "edges"
+    technique = "antialias"
+    points = "random"
+    spp = 8
+    replicas = 4
+    budgets = [2, 4, 8]
+    reference_spp = 256
+
+    [[render]]
+    adapter = "mitsuba"
+    scene = "furnace"
+    integrator = "path"
+    variant = "scalar_rgb"
+    spp = 4
+    replicas = 4
+    budgets = [1, 2, 4]
+"""
+
+
+@pytest.mark.slow
+def test_renders_run_on_dask_with_the_images_of_a_local_run(tmp_path):
+    """Render units go through the same executor as every other unit: under --dask local the
+    renders run on worker processes (renderers rebuilt there from the suite's keys) and store
+    bitwise the same images, hence the same pixel-test figures, as a local run."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from harness.suite.store import Store
+
+    path = tmp_path / "d.toml"
+    path.write_text(textwrap.dedent(DASK_SUITE))
+    harness_cli = str(Path(sys.executable).with_name("harness"))
+    for name, extra in (("local", []), ("dask", ["--dask", "local", "--threads", "2"])):
+        r = subprocess.run([harness_cli, "run", str(path), "--db", str(tmp_path / name / "r.sqlite"), *extra],
+                           capture_output=True, text=True, timeout=900)
+        assert r.returncode == 0, r.stdout + r.stderr
+    stores = [Store(tmp_path / name / "r.sqlite") for name in ("local", "dask")]
+    try:
+        names = [sorted(n for (n,) in s.db.execute("SELECT name FROM images")) for s in stores]
+        assert names[0] == names[1] and len(names[0]) > 20
+        for n in names[0]:
+            assert np.array_equal(stores[0].image(n), stores[1].image(n)), n
+    finally:
+        for s in stores:
+            s.close()
+    measured = [load(tmp_path / name / "r.sqlite").set_index(["integrand", "measurement"]) for name in ("local", "dask")]
+    for key in [("pyrender:edges", "bias"), ("mitsuba:furnace", "bias"), ("pyrender:edges", "relmse")]:
+        a, b = measured[0].loc[key], measured[1].loc[key]
+        assert a["value"] == b["value"] and str(a["verdict"]) == str(b["verdict"]), key
+        assert np.array_equal([a["pvalue"]], [b["pvalue"]], equal_nan=True), key

@@ -12,8 +12,8 @@ import pytest
 from scipy import stats
 
 import reference_estimators as rest
-from harness.samplers import zoo
-from harness.samplers.check import SamplerTest, check_sampler, mcmc_crosscheck
+from harness.samplers import Domain, SamplerTest, as_domain, check_sampler, mcmc_crosscheck, zoo
+from harness.stats import ConfidenceInterval, Failure
 
 CORRECT = zoo.correct()
 WRONG = zoo.wrong()
@@ -27,7 +27,8 @@ def test_false_alarm_rate_over_200_seeds(s):
     t = SamplerTest(s.pdf, s.domain, sample_count=100_000, alpha=0.01)
     fails = [seed for seed in range(200) if not t.check(s.sample, seed=seed).passed]
     bound = stats.binom.isf(1e-3 / len(CORRECT), 200, 0.01)
-    assert len(fails) <= bound, f"{s.name}: {len(fails)} false alarms of 200 (bound {bound:.0f}), seeds {fails[:10]}"
+    assert len(fails) <= bound, (f"{s.name}: {len(fails)} false alarms of 200 (bound {bound:.0f}), "
+                                 f"seeds {fails[:10]}")
 
 
 @pytest.mark.slow
@@ -41,9 +42,11 @@ def test_every_mutant_is_caught_at_one_million_samples(s):
 def test_a_pdf_half_a_percent_too_large_fails_deterministically():
     s = WRONG[0]
     r = check_sampler(s.sample, s.pdf, s.domain, sample_count=10_000)
-    f = {x["check"]: x for x in r.failures}
-    assert not r.passed and "normalization" in f and "1.005000" in f["normalization"]["detail"]
+    f = {x.check: x for x in r.failures}
+    assert not r.passed and "normalization" in f and "1.005000" in f["normalization"].detail
     assert r.normalization[0] == pytest.approx(1.005, abs=1e-9)
+    lo, hi = r.confidence_interval()
+    assert lo == pytest.approx(1.005, abs=1e-9) and 0 <= hi - lo < 1e-6
 
 
 def test_points_outside_the_domain_and_bad_pdfs_are_reported_with_examples():
@@ -58,19 +61,19 @@ def test_points_outside_the_domain_and_bad_pdfs_are_reported_with_examples():
         return p
 
     r = check_sampler(sample, pdf, "hemisphere", sample_count=20_000)
-    f = {x["check"]: x for x in r.failures}
-    assert not r.passed and f["outside_domain"]["count"] == 10
-    assert f["outside_domain"]["examples"][0]["index"] == 0 and f["outside_domain"]["examples"][0]["point"][2] < 0
-    assert f["bad_pdf"]["count"] > 0 and math.isnan(f["bad_pdf"]["examples"][0]["value"])
-    assert "outside_domain: 10" in str(r)
+    f = {x.check: x for x in r.failures}
+    assert not r.passed and r.verdict == "failed" and f["outside_domain"].count == 10
+    assert f["outside_domain"].examples[0]["index"] == 0 and f["outside_domain"].examples[0]["point"][2] < 0
+    assert f["bad_pdf"].count > 0 and math.isnan(f["bad_pdf"].examples[0]["value"])
+    assert "outside_domain: 10" in str(r) and "failed deterministic checks: outside_domain, bad_pdf" in str(r)
 
 
 def test_samples_where_the_pdf_is_zero_are_reported():
     cone = rest.sampler("uniform_cone", cos_max=0.9)
     narrower = rest.sampler("uniform_cone", cos_max=0.91)
     r = check_sampler(lambda u: cone.sample(u)[0], narrower.pdf, "sphere", sample_count=20_000)
-    f = {x["check"]: x for x in r.failures}
-    assert not r.passed and f["zero_pdf"]["count"] > 1000 and f["zero_pdf"]["examples"]
+    f = {x.check: x for x in r.failures}
+    assert not r.passed and f["zero_pdf"].count > 1000 and f["zero_pdf"].examples
 
 
 def test_result_is_a_table_not_a_bare_bool():
@@ -79,11 +82,58 @@ def test_result_is_a_table_not_a_bare_bool():
     assert list(r.tests.columns) == ["test", "statistic", "df", "pvalue", "detects", "adjusted"]
     assert list(r.tests["test"]) == ["chi-square 16x32", "chi-square 64x128", "marginal s0 (128 bins)",
                                      "marginal s1 (256 bins)", "pdf moment"]
-    assert bool(r) == r.passed and r.residuals["fine"].shape == (64, 128) and "PASSED" in str(r)
+    assert r.passed and r.verdict == "passed" and "PASSED" in str(r)
+    assert r.residuals["fine"].shape == (64, 128)
+    assert not hasattr(type(r), "__bool__")
+    # the result family
+    assert r.n == 50_000 and r.alpha == 0.01 and math.isnan(r.statistic)
+    assert r.pvalue == r.tests["adjusted"].min() and r.failures == []
+    ci = r.confidence_interval(0.99)
+    assert isinstance(ci, ConfidenceInterval) and ci.low <= r.normalization[0] <= ci.high
+    with pytest.raises(ValueError, match=r"'confidence_level' must be in \(0, 1\)"):
+        r.confidence_interval(1.5)
+
+
+def test_payload_is_plain_json():
+    import json
+
+    s = WRONG[0]
+    r = check_sampler(s.sample, s.pdf, s.domain, sample_count=10_000)
+    payload = r.to_payload()
+    assert json.loads(json.dumps(payload)) == payload
+    assert list(payload) == ["passed", "pvalue", "tests", "failures", "normalization", "residuals",
+                             "marginals"]
+    assert payload["failures"] == [f.to_dict() for f in r.failures]
+    assert [Failure.from_dict(d) for d in payload["failures"]] == r.failures
+    assert payload["tests"][0]["test"] == "chi-square 16" and len(payload["residuals"]["fine"]) == 512
+
+
+def test_for_total_is_the_test_of_the_normalised_pdf():
+    """A pdf that integrates to 2: rejected as is, accepted as pdf / 2 without a new cubature."""
+    s = CORRECT[4]
+    twice = SamplerTest(lambda x: 2 * s.pdf(x), s.domain, sample_count=50_000)
+    assert not twice.check(s.sample, seed=1).passed
+    half = twice.for_total(2.0)
+    assert half.normalization == (twice.normalization[0] / 2, twice.normalization[1] / 2)
+    r = half.check(s.sample, seed=1)
+    assert r.passed, str(r)
+    with pytest.raises(ValueError, match="'total' must be a positive"):
+        twice.for_total(0.0)
+
+
+def test_domains_by_name():
+    assert as_domain("disk") == Domain("disk")
+    assert as_domain(("interval", -1, 2)) == Domain("interval", -1.0, 2.0)
+    d = Domain("hemisphere")
+    s = np.array([[0.3, 0.2], [0.9, 0.7]])
+    back, inside = d.to_params(d.to_points(s))
+    np.testing.assert_allclose(back, s)
+    assert inside.all()
 
 
 @pytest.mark.parametrize("kwargs, error, message", [
-    ({"domain": "cube"}, ValueError, r"'domain' must be one of \('interval', 'half_line', 'square', 'disk', 'hemisphere', 'sphere'\)"),
+    ({"domain": "cube"}, ValueError,
+     r"'domain' must be one of \('interval', 'half_line', 'square', 'disk', 'hemisphere', 'sphere'\)"),
     ({"domain": ("interval", 2, 1)}, ValueError, r"\('interval', a, b\) with a < b"),
     ({"sample_count": 10}, ValueError, r"'sample_count' must be at least 1000, got 10"),
     ({"alpha": 0.0}, ValueError, r"'alpha' must be in \(0, 1\)"),
@@ -96,7 +146,8 @@ def test_bad_arguments(kwargs, error, message):
 
 
 def test_wrong_point_shapes_are_named():
-    with pytest.raises(ValueError, match=r"'sample' must return points of shape \(5000, 3\) for a hemisphere"):
+    with pytest.raises(ValueError,
+                       match=r"'sample' must return points of shape \(5000, 3\) for a hemisphere"):
         check_sampler(lambda u: u, lambda x: np.ones(len(x)), "hemisphere", sample_count=5000)
 
 
@@ -120,16 +171,18 @@ def test_cli_check_sampler(tmp_path):
                    "import reference_estimators as rest\n"
                    "_s = rest.sampler('ggx', alpha=0.1)\n"
                    "def good():\n    return (lambda u: _s.sample(u)[0], _s.pdf, 'hemisphere')\n"
-                   "def bad():\n    return (lambda u: _s.sample(u)[0], lambda w: 1.01 * _s.pdf(w), 'hemisphere')\n")
+                   "def bad():\n"
+                   "    return (lambda u: _s.sample(u)[0], lambda w: 1.01 * _s.pdf(w), 'hemisphere')\n")
     harness = str(Path(sys.executable).with_name("harness"))
     env = {"PYTHONPATH": str(tmp_path)}
     import os
     env = {**os.environ, **env}
-    r = subprocess.run([harness, "check-sampler", "my_sampler:good", "--samples", "200000"], capture_output=True,
-                       text=True, env=env, timeout=300)
-    assert r.returncode == 0 and "PASSED" in r.stdout and "summary: 1 passed, 0 failed" in r.stdout, r.stdout + r.stderr
-    r = subprocess.run([harness, "check-sampler", "my_sampler:bad", "--samples", "200000"], capture_output=True,
-                       text=True, env=env, timeout=300)
+    r = subprocess.run([harness, "check-sampler", "my_sampler:good", "--samples", "200000"],
+                       capture_output=True, text=True, env=env, timeout=300)
+    assert r.returncode == 0 and "PASSED" in r.stdout, r.stdout + r.stderr
+    assert "summary: 1 passed, 0 failed" in r.stdout, r.stdout + r.stderr
+    r = subprocess.run([harness, "check-sampler", "my_sampler:bad", "--samples", "200000"],
+                       capture_output=True, text=True, env=env, timeout=300)
     assert r.returncode == 1 and "normalization" in r.stdout and "1.010000" in r.stdout
     r = subprocess.run([harness, "check-sampler", "my_sampler:nope"], capture_output=True, text=True, env=env)
     assert r.returncode == 2 and "cannot load 'my_sampler:nope'" in r.stderr

@@ -32,7 +32,6 @@ render first at each new budget, so wall times measure rendering, not compilatio
 from __future__ import annotations
 
 import hashlib
-import os
 import time
 from pathlib import Path
 from typing import Any
@@ -40,9 +39,7 @@ from typing import Any
 import numpy as np
 
 from harness.adapters.base import Render
-from harness.adapters.mitsuba.samplers import VARIANT_LOCK
-
-os.environ.setdefault("DRJIT_LIBLLVM_PATH", "/usr/lib/x86_64-linux-gnu/libLLVM-19.so")
+from harness.adapters.mitsuba.runtime import VARIANT_LOCK, activate
 
 __all__ = ["MitsubaRenderer", "make_renderer", "SCENES"]
 
@@ -84,7 +81,8 @@ def _scene_dict(name: str, width: int, height: int) -> dict[str, Any]:
                           "bsdf": {"type": "diffuse", "reflectance": rgb(0.6)}},
                 "ball": {"type": "sphere", "to_world": T().translate([0, 0.6, 0]).scale(0.6),
                          "bsdf": {"type": "roughconductor", "distribution": "ggx", "alpha": 0.1}},
-                "light": {"type": "rectangle", "to_world": T().translate([1, 3, 1]).rotate([1, 0, 0], 90).scale(0.3),
+                "light": {"type": "rectangle",
+                          "to_world": T().translate([1, 3, 1]).rotate([1, 0, 0], 90).scale(0.3),
                           "emitter": {"type": "area", "radiance": rgb(40.0)}}}
     d = mi.cornell_box()
     d["sensor"]["film"] = _film(width, height)
@@ -93,7 +91,8 @@ def _scene_dict(name: str, width: int, height: int) -> dict[str, Any]:
     if name == "media":
         d.pop("small-box")
         d.pop("large-box")
-        d["fog"] = {"type": "sphere", "to_world": T().translate([0, -0.4, 0]).scale(0.5), "bsdf": {"type": "null"},
+        d["fog"] = {"type": "sphere", "to_world": T().translate([0, -0.4, 0]).scale(0.5),
+                    "bsdf": {"type": "null"},
                     "interior": {"type": "homogeneous", "albedo": rgb(0.8), "sigma_t": 3.0}}
     return d
 
@@ -137,10 +136,11 @@ class MitsubaRenderer:
         if self._is_file:
             scene = {"file": str(Path(scene).resolve()),
                      "sha256": hashlib.sha256(Path(scene).read_bytes()).hexdigest()}
-        return {"adapter": "mitsuba", "mitsuba": mi.__version__, "scene": scene, "integrator": self.integrator_type,
-                "variant": self.variant, "max_depth": self.max_depth, "width": self.width, "height": self.height}
+        return {"adapter": "mitsuba", "mitsuba": mi.__version__, "scene": scene,
+                "integrator": self.integrator_type, "variant": self.variant, "max_depth": self.max_depth,
+                "width": self.width, "height": self.height}
 
-    def reference(self) -> "MitsubaRenderer":
+    def reference(self) -> MitsubaRenderer:
         """The renderer of this scene's reference: path tracing (volpath with media) at the
         same depth and variant."""
         ref = "volpath" if self.scene_name in _MEDIA_SCENES else "path"
@@ -154,9 +154,7 @@ class MitsubaRenderer:
 
     def _activate(self):
         """Sets this renderer's variant (process-global in Mitsuba) and loads the scene once."""
-        mi = _mi()
-        if mi.variant() != self.variant:
-            mi.set_variant(self.variant)
+        mi = activate(self.variant)
         if self._scene is None:
             if self._is_file:
                 self._scene = mi.load_file(self.scene_name)
@@ -173,12 +171,14 @@ def make_renderer(spec: dict[str, Any]) -> MitsubaRenderer:
     """A MitsubaRenderer from a suite table's keys; ``ValueError`` names a bad key."""
     unknown = set(spec) - _KEYS
     if unknown:
-        raise ValueError(f"'{sorted(unknown)[0]}': unknown key for adapter 'mitsuba'; expected one of {sorted(_KEYS)}")
+        raise ValueError(f"'{sorted(unknown)[0]}': unknown key for adapter 'mitsuba'; "
+                         f"expected one of {sorted(_KEYS)}")
     scene = spec.get("scene")
     if not isinstance(scene, str) or not scene:
-        raise ValueError("'scene': expected a built-in scene name " f"{list(SCENES)} or the path of an XML file")
+        raise ValueError(f"'scene': expected a built-in scene name {list(SCENES)} or the path of an XML file")
     if scene not in SCENES and not Path(scene).is_file():
-        raise ValueError(f"'scene': {scene!r} is neither a built-in scene {list(SCENES)} nor an existing file")
+        raise ValueError(f"'scene': {scene!r} is neither a built-in scene {list(SCENES)} "
+                         "nor an existing file")
     integrator = spec.get("integrator", "path")
     if not isinstance(integrator, str):
         raise ValueError(f"'integrator': expected a Mitsuba integrator name, got {integrator!r}")
@@ -189,11 +189,12 @@ def make_renderer(spec: dict[str, Any]) -> MitsubaRenderer:
     if not variant.endswith("rgb"):
         raise ValueError(f"'variant': expected an RGB variant (images are compared as RGB), got {variant!r}")
     max_depth = spec.get("max_depth")
-    if max_depth is not None and (isinstance(max_depth, bool) or not isinstance(max_depth, int) or max_depth < -1
-                                  or max_depth == 0):
+    if max_depth is not None and (isinstance(max_depth, bool) or not isinstance(max_depth, int)
+                                  or max_depth < -1 or max_depth == 0):
         raise ValueError(f"'max_depth': expected -1 (unlimited) or a positive integer, got {max_depth!r}")
     if integrator == "direct" and max_depth not in (None, 2):
-        raise ValueError("'max_depth': the direct integrator renders paths of 2 segments only; give 2 or leave it out")
+        raise ValueError("'max_depth': the direct integrator renders paths of 2 segments only; "
+                         "give 2 or leave it out")
     size = {}
     for k in ("width", "height"):
         v = spec.get(k, 32)

@@ -84,6 +84,7 @@ import reference_estimators as rest
 
 from harness.adapters.pyrender import scenes
 from harness.adapters.base import Render
+from harness.stats.validate import integer_in
 
 __all__ = ["make_renderer", "PyrenderRenderer", "TECHNIQUES", "POINTS", "PIXEL_FILTERS", "LIGHT_SHAPES",
            "SCENE_NAMES", "frame_offsets", "light_points"]
@@ -213,12 +214,6 @@ def _size(spec: Mapping[str, Any], key: str) -> int:
     return int(v)
 
 
-def _count(v: Any, name: str, lo: int, hi: int) -> int:
-    if isinstance(v, bool) or not isinstance(v, numbers.Integral) or not lo <= v <= hi:
-        raise ValueError(f"{name!r} must be an integer in [{lo}, {hi}], got {v!r}")
-    return int(v)
-
-
 # --- the renderer -------------------------------------------------------------------------------
 class PyrenderRenderer:
     """One validated configuration: scene, technique, point set, image size, filter, light.
@@ -324,8 +319,8 @@ class PyrenderRenderer:
         ``seconds``: generating the points plus drawing and averaging the frames (not the
         wait for another thread's frames, nor re-uploading this scene after another scene used
         the same context)."""
-        n = _count(spp, "spp", 1, MAX_SPP)
-        s = _count(seed, "seed", 0, MAX_SEED)
+        n = integer_in(spp, "spp", 1, MAX_SPP)
+        s = integer_in(seed, "seed", 0, MAX_SEED)
         t0 = time.perf_counter()
         places = self._placements(rest.points(n, self.dim, self.points, seed=s, case_id=0, replica=0))
         acc = np.zeros((self.height, self.width, 3), dtype=np.float64)

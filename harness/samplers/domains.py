@@ -1,0 +1,112 @@
+"""Sampling domains and their equal-measure parameterisations.
+
+Every domain is mapped onto the unit interval or square with a constant Jacobian (except the
+half line), so equal cells there are cells of equal measure:
+
+    interval [a, b]   s = (x - a) / (b - a)                  |D| = b - a
+    half_line [0,inf) s = x / (1 + x)                         dx/ds = 1 / (1 - s)^2 (not constant)
+    square [0, 1]^2   s = (x, y)                              |D| = 1
+    disk (unit)       s = (r^2, phi / 2 pi)                   |D| = pi
+    hemisphere (z>0)  s = (cos theta, phi / 2 pi)             |D| = 2 pi   (solid angle)
+    sphere            s = ((1 - cos theta) / 2, phi / 2 pi)   |D| = 4 pi
+
+A claimed density pdf(x) becomes q(s) = |D| pdf(x(s)) in parameter space (pdf(x(s)) dx/ds
+on the half line), the density the cubature integrates and the histograms are compared with.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["DOMAINS", "Domain", "as_domain"]
+
+DOMAINS = ("interval", "half_line", "square", "disk", "hemisphere", "sphere")
+
+
+@dataclass(frozen=True)
+class Domain:
+    """A sampling domain and its equal-measure parameterisation s in [0, 1]^k."""
+
+    kind: str
+    lo: float = 0.0
+    hi: float = 1.0
+
+    @property
+    def k(self) -> int:
+        """Dimension of the parameter space: 1 on the interval and half line, else 2."""
+        return 1 if self.kind in ("interval", "half_line") else 2
+
+    @property
+    def udim(self) -> int:
+        """Number of canonical uniforms a sampler of this domain takes by default."""
+        return self.k
+
+    @property
+    def point_dim(self) -> int:
+        """Components of a point: 1 (interval, half line), 2 (square, disk), 3 (unit vectors)."""
+        return {"interval": 1, "half_line": 1, "square": 2, "disk": 2, "hemisphere": 3,
+                "sphere": 3}[self.kind]
+
+    def jacobian(self, s: np.ndarray) -> np.ndarray | float:
+        """Measure of the domain per unit of parameter space at s (|D| where constant)."""
+        if self.kind == "half_line":
+            return 1.0 / (1.0 - s[:, 0]) ** 2
+        return {"interval": self.hi - self.lo, "square": 1.0, "disk": math.pi, "hemisphere": 2 * math.pi,
+                "sphere": 4 * math.pi}[self.kind]
+
+    def to_points(self, s: np.ndarray) -> np.ndarray:
+        """Points x(s) of parameters s (N, k): (N,) or (N, point_dim)."""
+        if self.kind == "interval":
+            return self.lo + (self.hi - self.lo) * s[:, 0]
+        if self.kind == "half_line":
+            return s[:, 0] / (1.0 - s[:, 0])
+        if self.kind == "square":
+            return s.copy()
+        phi = 2 * math.pi * s[:, 1]
+        if self.kind == "disk":
+            r = np.sqrt(s[:, 0])
+            return np.column_stack([r * np.cos(phi), r * np.sin(phi)])
+        z = s[:, 0] if self.kind == "hemisphere" else 1 - 2 * s[:, 0]
+        r = np.sqrt(np.maximum(0.0, 1 - z * z))
+        return np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
+
+    def to_params(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(s of shape (N, k), mask of points inside the domain).  Unit vectors may be off
+        by 1e-5 in squared norm (float32 renderers)."""
+        x = np.asarray(x, dtype=float)
+        if self.kind == "interval":
+            x = x.reshape(-1)
+            s = ((x - self.lo) / (self.hi - self.lo))[:, None]
+            return s, np.isfinite(x) & (x >= self.lo) & (x <= self.hi)
+        if self.kind == "half_line":
+            x = x.reshape(-1)
+            return (x / (1.0 + x))[:, None], np.isfinite(x) & (x >= 0)
+        if self.kind == "square":
+            return x.copy(), np.all(np.isfinite(x), axis=1) & np.all((x >= 0) & (x <= 1), axis=1)
+        phi = np.mod(np.arctan2(x[:, 1], x[:, 0]) / (2 * math.pi), 1.0)
+        if self.kind == "disk":
+            r2 = x[:, 0] ** 2 + x[:, 1] ** 2
+            return np.column_stack([r2, phi]), np.all(np.isfinite(x), axis=1) & (r2 <= 1 + 1e-12)
+        norm = np.einsum("ij,ij->i", x, x)
+        ok = np.all(np.isfinite(x), axis=1) & (np.abs(norm - 1) <= 1e-5)  # float32 unit vectors
+        z = np.clip(x[:, 2], -1, 1)
+        if self.kind == "hemisphere":
+            return np.column_stack([z, phi]), ok & (x[:, 2] >= -1e-12)
+        return np.column_stack([(1 - z) / 2, phi]), ok
+
+
+def as_domain(d: str | tuple | Domain) -> Domain:
+    """The :class:`Domain` a check's ``domain`` argument names: a Domain (returned as is), one
+    of :data:`DOMAINS` ("interval" is [0, 1]), or ("interval", a, b) with a < b.  Raises
+    ValueError naming the argument and the allowed values."""
+    if isinstance(d, Domain):
+        return d
+    if isinstance(d, tuple):
+        if len(d) == 3 and d[0] == "interval" and d[2] > d[1]:
+            return Domain("interval", float(d[1]), float(d[2]))
+        raise ValueError(f"'domain' must be one of {DOMAINS} or ('interval', a, b) with a < b, got {d!r}")
+    if d not in DOMAINS:
+        raise ValueError(f"'domain' must be one of {DOMAINS} or ('interval', a, b), got {d!r}")
+    return Domain(d)

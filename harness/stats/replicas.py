@@ -1,0 +1,396 @@
+"""Replicas and what they measure: R independent estimates of one case at one budget
+(:class:`Replicates`), the convergence rate of the RMSE over budgets (:class:`ConvergenceResult`),
+the efficiency 1/(V T) (:class:`Efficiency`) and error against run time.
+
+Every figure comes with its uncertainty and the number of estimates it came from.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+import reference_estimators as rest
+
+from harness.stats.merge import chan_merge
+from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
+from harness.stats.validate import count
+
+__all__ = ["Replicates", "replicate", "median_time", "ConvergenceResult", "convergence_rate",
+           "fit_convergence", "Efficiency", "efficiency", "efficiency_ratio", "error_vs_time"]
+
+
+def median_time(seconds: np.ndarray) -> tuple[float, float]:
+    """Wall time of one estimate (s) from R replicas' times: the median and its standard error
+    (1.2533 x 1.4826 MAD / sqrt(R): the median's efficiency against the mean of normal
+    times, times the MAD's consistency factor).  The median, because a replica that shared its
+    core with something else is an outlier of the machine, not of the technique."""
+    t = np.asarray(seconds, dtype=np.float64)
+    med = float(np.median(t))
+    mad = float(np.median(np.abs(t - med)))
+    return med, 1.2533 * 1.4826 * mad / math.sqrt(t.size)
+
+
+# --- replicas ----------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Replicates:
+    """R independent estimates of one case at one budget, with their wall times.
+
+    Their spread measures the error of any technique, stratified and Sobol' included;
+    for independent samples the pooled per-sample variance (``sample_variance``, from all
+    R * n contributions) measures it more precisely.
+    """
+
+    integrand: str
+    technique: str
+    n: int
+    reference: float
+    estimates: np.ndarray     # (R,)
+    seconds: np.ndarray       # (R,)
+    sample_variance: float    # pooled per-contribution variance (iid techniques), else NaN
+    sample_kurtosis: float
+    iid: bool
+    evaluations: int          # f evaluations per contribution
+
+    @classmethod
+    def from_estimates(cls, f: rest.Integrand, t: rest.Technique, n: int,
+                       ests: Sequence[rest.Estimate]) -> Replicates:
+        """Replicates from independent estimates of one case at budget n."""
+        bad = {k: v for e in ests for k, v in e.issues.items()}
+        if bad:
+            raise ValueError(f"{f.name}/{t.name}: contributions with faults {bad}; "
+                             f"first: {ests[0].examples[:3]}")
+        # pooled per-sample variance over all replicas (Chan's merge); kurtosis as the replicas' mean
+        tot, _, m2 = chan_merge((e.n, e.mean, e.variance) for e in ests)
+        var = m2 / (tot - 1)
+        kurt = float(np.mean([e.kurtosis for e in ests]))
+        return cls(f.name, t.name, int(n), f.reference, np.array([e.mean for e in ests]),
+                   np.array([e.seconds for e in ests]), var if t.iid else math.nan, kurt, t.iid,
+                   t.evaluations)
+
+    @property
+    def replicas(self) -> int:
+        return self.estimates.size
+
+    @property
+    def _scale(self) -> float:
+        """A power of two that brings the estimates near 1 (exact), so that squared errors of
+        estimates near 1e+-300 neither overflow nor underflow."""
+        big = max(abs(self.reference), float(np.max(np.abs(self.estimates))))
+        return math.ldexp(1.0, -math.frexp(big)[1]) if big > 0 else 1.0
+
+    @property
+    def scaled_errors(self) -> np.ndarray:
+        """(estimates - reference) times ``_scale``."""
+        sc = self._scale
+        return self.estimates * sc - self.reference * sc
+
+    @property
+    def mean(self) -> float:
+        return float(np.mean(self.estimates))
+
+    @property
+    def bias(self) -> tuple[float, float]:
+        """Mean error against the reference and its standard error over replicas."""
+        e, sc = self.scaled_errors, self._scale
+        return float(np.mean(e)) / sc, float(np.std(e, ddof=1) / math.sqrt(self.replicas)) / sc
+
+    @property
+    def rmse(self) -> float:
+        return float(math.sqrt(np.mean(self.scaled_errors ** 2))) / self._scale
+
+    def rmse_interval(self, confidence_level: float = 0.95) -> ConfidenceInterval:
+        """Interval for the RMSE from the chi-square law of R squared normal errors (exact
+        for normal, unbiased estimates; the bootstrap in ``convergence_rate`` does not need that)."""
+        check_confidence_level(confidence_level)
+        r = self.replicas
+        a = 1 - confidence_level
+        ss = float(np.sum(self.scaled_errors ** 2))
+        sc = self._scale
+        return ConfidenceInterval(math.sqrt(ss / stats.chi2.ppf(1 - a / 2, r)) / sc,
+                                  math.sqrt(ss / stats.chi2.ppf(a / 2, r)) / sc)
+
+    @property
+    def log10_estimator_variance(self) -> tuple[float, float]:
+        """log10 V[F] of one estimate, and the relative standard error of V[F]: from the
+        pooled per-sample variance (iid: V = sigma^2 / n, relative error
+        sqrt((kurtosis - 1) / (R n))) or from the replicas' spread (relative error
+        sqrt(2 / (R - 1)), normal estimates).  In log10 so that 1e+-600 survives."""
+        sc = self._scale
+        if self.iid and math.isfinite(self.sample_variance):
+            v = self.sample_variance  # already pooled; may overflow for huge contributions
+            if math.isfinite(v) and v > 0:
+                rel = math.sqrt(max(self.sample_kurtosis - 1, 0.0) / (self.replicas * self.n))
+                return math.log10(v) - math.log10(self.n), rel
+        vs = float(np.var(self.estimates * sc, ddof=1))
+        lv = math.log10(vs) - 2 * math.log10(sc) if vs > 0 else -math.inf
+        return lv, math.sqrt(2 / (self.replicas - 1))
+
+    @property
+    def time(self) -> tuple[float, float]:
+        """Wall time of one estimate (s) and its standard error: :func:`median_time`."""
+        return median_time(self.seconds)
+
+
+def replicate(integrand: str | rest.Integrand, technique: str | rest.Technique, n: int, replicas: int, *,
+              seed: int = 0, case_id: int = 0, threads: int | None = None) -> Replicates:
+    """``replicas`` independent estimates with n contributions each (replica r uses the
+    streams of (seed, case_id, r, chunk): independent randomisations of any point set)."""
+    f = rest.integrand(integrand)
+    t = rest.technique(f, technique)
+    r = count(replicas, "replicas")
+    if r < 2:
+        raise ValueError(f"'replicas' must be >= 2 to measure a spread, got {replicas}")
+    ests = [rest.integrate(f, t, n, seed=seed, case_id=case_id, replica=k, threads=threads) for k in range(r)]
+    return Replicates.from_estimates(f, t, n, ests)
+
+
+# --- convergence rate ------------------------------------------------------------------------
+@dataclass(frozen=True)
+class ConvergenceResult:
+    """RMSE against the exact reference at geometric budgets, and the fitted log-log slope;
+    a member of the result family (:mod:`harness.stats.results`).
+
+    H0: the RMSE falls at least as fast as n^(``expected`` + ``tolerance``), i.e. slope <=
+    expected + tolerance.  ``verdict`` is "slower than expected" when the whole two-sided
+    ``confidence_level`` bootstrap interval of the slope lies above that bound, else "as
+    expected": a one-sided percentile-bootstrap test at level ``alpha`` = (1 -
+    ``confidence_level``) / 2 (0.025 at the default 95 %).  ``pvalue`` is the one-sided p of
+    the same H0 by the normal approximation with the bootstrap standard error (``statistic``
+    its z), for judging many cases at once with holm(); the two agree except where the
+    bootstrap slopes are skewed.  ``n`` counts the replica estimates over all budgets; there are
+    no deterministic ``failures`` (faulty contributions stop :meth:`Replicates.from_estimates`).
+    """
+
+    integrand: str
+    technique: str
+    table: pd.DataFrame       # n, rmse, rmse_lo, rmse_hi, seconds, replicas
+    slope: float
+    slope_se: float           # standard deviation of the bootstrap slopes
+    bootstrap_slopes: np.ndarray
+    confidence_level: float
+    expected: float
+    tolerance: float
+    failures: list[Failure] = field(default_factory=list)
+
+    @property
+    def alpha(self) -> float:
+        return (1 - self.confidence_level) / 2
+
+    @property
+    def n(self) -> int:
+        return int(self.table["replicas"].sum())
+
+    @property
+    def verdict(self) -> str:
+        low = self.confidence_interval(self.confidence_level).low
+        return "slower than expected" if low > self.expected + self.tolerance else "as expected"
+
+    @property
+    def passed(self) -> bool:
+        return self.verdict == "as expected"
+
+    @property
+    def statistic(self) -> float:
+        """z = (slope - expected - tolerance) / slope_se; NaN where the bootstrap has no spread."""
+        if not self.slope_se > 0:
+            return math.nan
+        return (self.slope - self.expected - self.tolerance) / self.slope_se
+
+    @property
+    def pvalue(self) -> float:
+        """One-sided p-value of H0 "slope <= expected + tolerance" (normal approximation with
+        the bootstrap standard error): small when the error falls measurably too slowly.  For
+        many cases at once, correct these with holm()."""
+        if not self.slope_se > 0:
+            return 1.0 if self.slope <= self.expected + self.tolerance else 0.0
+        return float(stats.norm.sf((self.slope - self.expected - self.tolerance) / self.slope_se))
+
+    def confidence_interval(self, confidence_level: float = 0.95) -> ConfidenceInterval:
+        """Percentile-bootstrap interval of the slope (resampling replicas within each budget)."""
+        return _percentile_interval(self.bootstrap_slopes, confidence_level)
+
+    def __str__(self) -> str:
+        lo, hi = self.confidence_interval(self.confidence_level)
+        return (f"{self.verdict}: {self.integrand}/{self.technique}: RMSE ~ n^{self.slope:+.3f} "
+                f"({100 * self.confidence_level:g} % CI [{lo:+.3f}, {hi:+.3f}]), "
+                f"expected {self.expected:+.2f} or faster (tolerance {self.tolerance:g}), "
+                f"one-sided p = {self.pvalue:.3g}, {self.n} replicas over {len(self.table)} budgets")
+
+
+def _percentile_interval(boot: np.ndarray, confidence_level: float) -> ConfidenceInterval:
+    check_confidence_level(confidence_level)
+    a = 1 - confidence_level
+    return ConfidenceInterval(float(np.quantile(boot, a / 2)), float(np.quantile(boot, 1 - a / 2)))
+
+
+def convergence_rate(integrand: str | rest.Integrand, technique: str | rest.Technique, budgets: Sequence[int],
+                     replicas: int = 32, *, seed: int = 0, case_id: int = 0, expected: float = -0.5,
+                     tolerance: float = 0.05, confidence_level: float = 0.95, bootstrap: int = 400,
+                     threads: int | None = None) -> ConvergenceResult:
+    """Fit log RMSE = a + slope log n by least squares over ``budgets`` (replicas each).
+
+    The slope's interval comes from a bootstrap over replicas within each budget (percentile,
+    ``bootstrap`` resamples from a generator seeded by ``seed``), so it needs no normality.
+    Budgets should span at least a factor 16.  Zero-variance estimators give RMSE at the
+    rounding level and a slope near 0; compare with ``expected`` accordingly.
+    """
+    b = sorted({count(x, "budgets") for x in budgets})
+    if len(b) < 3:
+        raise ValueError(f"'budgets' needs at least 3 distinct sizes, got {list(budgets)!r}")
+    reps = [replicate(integrand, technique, n, replicas, seed=seed, case_id=case_id + 7919 * i,
+                      threads=threads) for i, n in enumerate(b)]
+    return fit_convergence(reps, expected=expected, tolerance=tolerance, confidence_level=confidence_level,
+                           bootstrap=bootstrap, seed=seed)
+
+
+def fit_convergence(reps: Sequence[Replicates], *, expected: float = -0.5, tolerance: float = 0.05,
+                    confidence_level: float = 0.95, bootstrap: int = 400, seed: int = 0) -> ConvergenceResult:
+    """The slope fit of convergence_rate, from replicates at increasing budgets."""
+    check_confidence_level(confidence_level)
+    sc = min(r._scale for r in reps)  # one power-of-two scale for all budgets: the slope does not change
+    errors = [r.estimates * sc - r.reference * sc for r in reps]
+    x = np.log([r.n for r in reps])
+    x = x - x.mean()
+    floor = np.finfo(float).tiny
+
+    def slopes(sq: np.ndarray) -> np.ndarray:
+        """Least-squares slopes of log RMSE on log n, one per row of mean squared errors."""
+        y = 0.5 * np.log(np.maximum(sq, floor * floor))
+        return (y - y.mean(axis=-1, keepdims=True)) @ x / (x @ x)
+
+    slope = float(slopes(np.array([np.mean(e * e) for e in errors])))
+    rng = np.random.default_rng(seed)
+    # all bootstrap resamples at once: (bootstrap, budgets) mean squared errors
+    boot_sq = np.stack([np.mean(e[rng.integers(0, e.size, (bootstrap, e.size))] ** 2, axis=1)
+                        for e in errors], axis=1)
+    boot = slopes(boot_sq)
+    rows = []
+    for r in reps:
+        lo, hi = r.rmse_interval(confidence_level)
+        rows.append({"n": r.n, "rmse": r.rmse, "rmse_lo": lo, "rmse_hi": hi, "seconds": r.time[0],
+                     "replicas": r.replicas})
+    return ConvergenceResult(reps[0].integrand, reps[0].technique, pd.DataFrame(rows), slope,
+                             float(np.std(boot, ddof=1)), boot, confidence_level, expected, tolerance)
+
+
+# --- efficiency ----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Efficiency:
+    """1 / (V[F] T[F]) (background eq. 5) of one estimate F at ``budget`` samples, with a
+    confidence interval; a member of the result family (:mod:`harness.stats.results`).
+
+    V from :attr:`Replicates.log10_estimator_variance`, T the median wall time of one estimate;
+    their relative errors are combined on the log scale (independent, delta method).  Kept
+    as log10, since 1/(V T) of an integrand near 1e300 is about 1e-590.  For techniques
+    converging faster than n^-1/2 the efficiency grows with the budget: it belongs to ``budget``.
+
+    An estimate, not a test: there is no null hypothesis, so ``pvalue``, ``statistic`` and
+    ``alpha`` are NaN and ``passed`` is always True.  ``verdict`` says whether it could be
+    measured: "measured" (finite value and standard error), "zero variance" (V = 0: the
+    efficiency is unbounded, ``log10_value`` inf) or "unmeasurable" (no positive time or
+    error).  ``n`` = ``budget`` x ``replicas``, the samples the figure comes from.
+    """
+
+    technique: str
+    log10_value: float
+    log_se: float             # standard error of the natural log of the value
+    budget: int               # samples (or spp) per estimate
+    replicas: int
+    log10_variance: float
+    seconds: float
+    failures: list[Failure] = field(default_factory=list)
+
+    @property
+    def value(self) -> float:
+        le = self.log10_value
+        return math.inf if le > 308 else (0.0 if le < -323 else 10.0**le)
+
+    @property
+    def n(self) -> int:
+        return self.budget * self.replicas
+
+    @property
+    def verdict(self) -> str:
+        if self.log10_value == math.inf:
+            return "zero variance"
+        finite = math.isfinite(self.log10_value) and math.isfinite(self.log_se)
+        return "measured" if finite else "unmeasurable"
+
+    @property
+    def passed(self) -> bool:
+        return True
+
+    @property
+    def pvalue(self) -> float:
+        return math.nan
+
+    @property
+    def statistic(self) -> float:
+        return math.nan
+
+    @property
+    def alpha(self) -> float:
+        return math.nan
+
+    def confidence_interval(self, confidence_level: float = 0.95) -> ConfidenceInterval:
+        """Normal interval of the log of the value, mapped back: value x exp(+-z log_se)."""
+        check_confidence_level(confidence_level)
+        z = stats.norm.ppf(0.5 + confidence_level / 2)
+        return ConfidenceInterval(float(self.value * math.exp(-z * self.log_se)),
+                                  float(self.value * math.exp(z * self.log_se)))
+
+    def __str__(self) -> str:
+        lo, hi = self.confidence_interval()
+        return (f"{self.verdict}: efficiency 1/(V T) of {self.technique} = 10^{self.log10_value:.4g} "
+                f"(95 % CI [{lo:.4g}, {hi:.4g}]) at {self.budget} samples per estimate, "
+                f"{self.replicas} replicas, V = 10^{self.log10_variance:.4g}, T = {self.seconds:.3g} s")
+
+
+def efficiency(r: Replicates) -> Efficiency:
+    """The efficiency of one estimate at the replicates' budget (see :class:`Efficiency`)."""
+    lv, v_rel = r.log10_estimator_variance
+    t, t_se = r.time
+    if not (t > 0) or lv == -math.inf:
+        return Efficiency(r.technique, math.inf if lv == -math.inf else math.nan, math.nan, r.n, r.replicas,
+                          lv, t)
+    return Efficiency(r.technique, -lv - math.log10(t), math.hypot(v_rel, t_se / t), r.n, r.replicas, lv, t)
+
+
+def efficiency_ratio(a: Efficiency, b: Efficiency,
+                     confidence_level: float = 0.95) -> tuple[float, ConfidenceInterval]:
+    """eff(a) / eff(b) with its interval (independent measurements, log-scale delta method);
+    NaN where either is not finite."""
+    check_confidence_level(confidence_level)
+    if not (math.isfinite(a.log10_value) and math.isfinite(b.log10_value)):
+        return math.nan, ConfidenceInterval(math.nan, math.nan)
+    ratio = 10.0 ** (a.log10_value - b.log10_value)
+    se = math.hypot(a.log_se, b.log_se)
+    z = stats.norm.ppf(0.5 + confidence_level / 2)
+    return ratio, ConfidenceInterval(float(ratio * math.exp(-z * se)), float(ratio * math.exp(z * se)))
+
+
+# --- error against time ----------------------------------------------------------------------
+def error_vs_time(integrand: str | rest.Integrand, techniques: Sequence[str | rest.Technique],
+                  budgets: Sequence[int], replicas: int = 16, *, seed: int = 0,
+                  threads: int | None = None, confidence_level: float = 0.95) -> pd.DataFrame:
+    """RMSE against the exact reference and mean wall time, per technique and budget.
+
+    Columns: technique, n, rmse, rmse_lo, rmse_hi (chi-square interval), seconds (median per
+    estimate), seconds_se, replicas.  Plot rmse against seconds on log-log axes to see which
+    technique reaches a given error first.
+    """
+    rows = []
+    f = rest.integrand(integrand)
+    for i, t in enumerate(techniques):
+        for j, n in enumerate(budgets):
+            r = replicate(f, t, n, replicas, seed=seed, case_id=1000 * i + j, threads=threads)
+            lo, hi = r.rmse_interval(confidence_level)
+            secs, secs_se = r.time
+            rows.append({"technique": r.technique, "n": r.n, "rmse": r.rmse, "rmse_lo": lo, "rmse_hi": hi,
+                         "seconds": secs, "seconds_se": secs_se, "replicas": r.replicas})
+    return pd.DataFrame(rows)

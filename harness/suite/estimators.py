@@ -1,0 +1,390 @@
+"""Estimator cases of a suite (``[[case]]``: a catalogue integrand x technique), as a case kind.
+
+Per case, as its measurements ask: a bias verdict (check_technique's test on independent
+batches, Holm-corrected across the suite's estimator cases at its family-wise alpha) and the
+per-sample variance from the same batches; a convergence slope of the RMSE over geometric
+budgets with a bootstrap interval; the efficiency 1/(V T) as a ratio against uniform Monte
+Carlo on the same integrand; and RMSE against wall time.  A case with a precision target
+doubles its bias test's samples (a new "look") until its interval is narrow enough.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import pandas as pd
+from scipy import stats as sps
+
+import reference_estimators as rest
+
+from harness import stats
+from harness.suite.execute import JobResult
+from harness.suite.kind import Outcome
+from harness.suite.plan import (Unit, bias_budget, bias_stream, case_key, convergence_budgets, core_case_id,
+                                estimator_units)
+from harness.suite.parse import Case, Suite
+from harness.suite.store import Store
+from harness.suite.verdicts import family_rejections
+
+__all__ = ["EstimateJob", "CaseResult", "EstimatorKind", "results_table", "format_table"]
+
+
+@dataclass(frozen=True)
+class EstimateJob:
+    """A unit of an estimator case: the accumulator state of its chunk range ("state"), or the
+    largest deviations above and below the median of the estimate's contributions ("tail",
+    for the tail-index test)."""
+
+    unit: Unit
+    integrand: str
+    technique: str
+    seed: int
+    core_case: int
+    serial: bool = False
+
+    def run(self) -> JobResult:
+        u = self.unit
+        f = rest.integrand(self.integrand)
+        t = rest.technique(f, self.technique)
+        start = time.perf_counter()
+        if u.kind == "state":
+            payload = rest.integrate_chunks(f, t, u.budget, u.chunk_begin, u.chunk_end, seed=self.seed,
+                                            case_id=self.core_case, replica=u.replica, threads=1)
+        else:
+            tails = stats.TailSample.for_count(u.budget)
+            tails.add(rest.contributions(f, t, u.budget, seed=self.seed, case_id=self.core_case,
+                                         replica=u.replica, threads=1))
+            payload = {"center": tails.center, "upper": tails.upper.tolist(), "lower": tails.lower.tolist()}
+        return JobResult(u, payload, time.perf_counter() - start)
+
+
+@dataclass(frozen=True)
+class CaseResult:
+    case: Case
+    technique: rest.Technique
+    key: str
+    bias: stats.UnbiasedResult | None
+    convergence: stats.ConvergenceResult | None  # None if not asked for or zero variance
+    efficiency: stats.Efficiency | None
+    variance: tuple[float, float, int] | None    # per-contribution variance, its std. error, n
+    error_vs_time: pd.DataFrame | None
+    look: int = 0                                # precision targets: the look the bias test stopped at
+
+    @property
+    def target_half_width(self) -> float:
+        """Half-width of the bias test's interval at level 1 - alpha / looks (targets only)."""
+        b = self.bias
+        if b is None or not math.isfinite(b.stderr):
+            return math.nan
+        return float(sps.t.ppf(1 - b.alpha / (2 * self.case.looks), b.df) * b.stderr)
+
+
+class EstimatorKind:
+    """The suite's ``[[case]]`` tables."""
+
+    name = "estimator"
+
+    def __init__(self, suite: Suite):
+        self.suite = suite
+        self.case_of = {case_key(suite, c): c for c in suite.cases}
+        self.looks = {k: 0 for k, c in self.case_of.items() if c.target is not None}
+
+    def names(self) -> list[str]:
+        return [f"{c.integrand}/{c.technique}#{c.case_id}" for c in self.suite.cases]
+
+    def register(self, store: Store) -> None:
+        for key, c in self.case_of.items():
+            store.add_case(key, self.suite.name, c.integrand, c.technique,
+                           {"seed": self.suite.seed, "case_id": c.case_id, "samples": c.samples})
+
+    def plan(self, store: Store) -> list[EstimateJob]:
+        jobs = []
+        for key, c in self.case_of.items():
+            for u in estimator_units(self.suite, c, self.looks.get(key, 0)):
+                jobs.append(EstimateJob(u, c.integrand, c.technique, self.suite.seed, core_case_id(c, u.stream)))
+        return jobs
+
+    def advance(self, store: Store) -> bool:
+        """Moves each case with an unreached precision target to its next look."""
+        grown = False
+        for key, look in self.looks.items():
+            c = self.case_of[key]
+            r = _measure(self.suite, c, store.payloads(key), look)
+            if look + 1 < c.looks and (r.bias is None or not r.target_half_width <= c.target):
+                self.looks[key] = look + 1
+                grown = True
+        return grown
+
+    def outcome(self, store: Store) -> Outcome:
+        suite = self.suite
+        results = [_measure(suite, c, store.payloads(k), self.looks.get(k, 0)) for k, c in self.case_of.items()]
+        table = results_table(results, suite.alpha)
+        verdicts = [{"bias": v, "convergence": cv} for v, cv in zip(table.get("verdict", ()),
+                                                                   table.get("convergence", ()))]
+        failures = [_failure(r, v, suite.alpha, len(results)) for r, v in zip(results, verdicts)]
+        text = (format_table(table, suite.alpha) + f"\nt: Student t of {suite.batches} batch means against the "
+                "exact value; RMSE slope: log-log fit over budgets (expected -0.5 for Monte Carlo); 1/(V·T): "
+                "efficiency (background eq. 5) against uniform MC on the same integrand." if results else "")
+        return Outcome(self.name, "cases", tuple(self.names()), tuple(results), tuple(verdicts), tuple(failures),
+                       tuple(_rows(suite, results, table)), table, text)
+
+
+# --- measuring -----------------------------------------------------------------------------------
+def _states_by_estimate(payloads: dict[Unit, dict]) -> dict[tuple[int, int, int], list[dict]]:
+    """State payloads grouped by (stream, budget, replica), in chunk order."""
+    groups: dict[tuple[int, int, int], list[tuple[int, dict]]] = {}
+    for u, p in payloads.items():
+        if u.kind == "state":
+            groups.setdefault((u.stream, u.budget, u.replica), []).append((u.chunk_begin, p))
+    return {g: [p for _, p in sorted(v, key=lambda x: x[0])] for g, v in groups.items()}
+
+
+def _measure(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int = 0) -> CaseResult:
+    f = rest.integrand(case.integrand)
+    t = rest.technique(f, case.technique)
+    key = case_key(suite, case)
+    wanted = set(case.measurements)
+    states = _states_by_estimate(payloads)
+
+    def estimate(stream: int, budget: int, replica: int) -> rest.Estimate:
+        return rest.estimate_from_states(f, t, states[(stream, budget, replica)])
+
+    bias = variance = conv = eff = evt = None
+    if wanted & {"bias", "variance"}:
+        b, stream = bias_budget(suite, case, look), bias_stream(look)
+        batches = [estimate(stream, b, k) for k in range(suite.batches)]
+        faults = {k: v for e in batches for k, v in e.issues.items()}
+        if "bias" in wanted:
+            tail = next(p for u, p in payloads.items() if u.kind == "tail" and u.stream == stream)
+            tails = stats.TailSample.from_tops(tail["upper"], tail["lower"])
+            if faults:
+                bias = stats.UnbiasedResult.invalid(faults, next(e for e in batches if e.issues).examples,
+                                                    reference=f.reference, n=b * suite.batches, alpha=suite.alpha,
+                                                    batches=suite.batches)
+            else:
+                bias = stats.judge_batches(batches, tails, f.reference, suite.alpha, iid=t.iid)
+            if case.looks > 1 and bias.verdict != "invalid":
+                # alpha spent over the looks a target may take (Bonferroni: any dependence, any
+                # stopping rule): the final look's p-value times the number of looks
+                p = min(1.0, bias.pvalue * case.looks)
+                verdict = "consistent" if p >= suite.alpha else ("inconclusive" if bias.heavy_tail else "biased")
+                bias = dataclasses.replace(bias, pvalue=p, verdict=verdict)
+        if "variance" in wanted and not faults and t.iid:
+            reps = stats.Replicates.from_estimates(f, t, b, batches)
+            rel = math.sqrt(max(reps.sample_kurtosis - 1, 0.0) / (reps.replicas * b))
+            variance = (reps.sample_variance, reps.sample_variance * rel, reps.replicas * b)
+    budgets = convergence_budgets(suite, case)
+    reps_by_budget = {}
+    for i, b in enumerate(budgets):
+        if (1 + i, b, 0) in states:
+            reps_by_budget[b] = stats.Replicates.from_estimates(
+                f, t, b, [estimate(1 + i, b, r) for r in range(suite.replicas)])
+    if reps_by_budget:
+        top = reps_by_budget[max(reps_by_budget)]
+        if top.rmse > 0 and "efficiency" in wanted:
+            eff = stats.efficiency(top)
+        if "convergence" in wanted and len(reps_by_budget) >= 3 and top.rmse > 0:
+            conv = stats.fit_convergence(list(reps_by_budget.values()), seed=suite.seed)
+        if "error_vs_time" in wanted:
+            evt = pd.DataFrame([{"n": r.n, "rmse": r.rmse, "rmse_lo": r.rmse_interval()[0],
+                                 "rmse_hi": r.rmse_interval()[1], "seconds": r.time[0], "seconds_se": r.time[1],
+                                 "replicas": r.replicas} for r in reps_by_budget.values()])
+    return CaseResult(case, t, key, bias, conv, eff, variance, evt, look)
+
+
+# --- verdicts --------------------------------------------------------------------------------------
+def _judge_convergence(results: list[CaseResult], alpha: float) -> list[str]:
+    """Convergence verdict per case, Holm over the suite's judged cases at family-wise
+    alpha: 'as expected', 'slower than expected', or 'not judged' where no rate is promised
+    (infinite variance, heavy tails or skewed batches seen by the bias test: pre-asymptotic)
+    or the technique is biased on purpose (its error stops falling at the bias)."""
+    judged = [r.convergence is not None and not r.technique.biased and r.technique.finite_variance is not False
+              and not (r.bias is not None and r.bias.flags) for r in results]
+    # cases not judged enter the family with p = 1 (they count in Holm's m)
+    rejected, _ = family_rejections([r.convergence.pvalue if ok else 1.0 for r, ok in zip(results, judged)], alpha)
+    out = []
+    for r, ok, rej in zip(results, judged, rejected):
+        if r.convergence is None:
+            out.append("not measured")
+        elif not ok:
+            out.append("not judged")
+        else:
+            out.append("slower than expected" if rej else "as expected")
+    return out
+
+
+def _judge_bias(results: list[CaseResult], alpha: float) -> list[str]:
+    """Verdict per case with Holm's correction over the suite's bias tests (family-wise
+    alpha): 'unbiased', 'biased', 'biased (expected)', 'bias missed', 'inconclusive',
+    'invalid', 'not measured'."""
+    # cases without a valid test enter the family with p = 1 (they count in Holm's m)
+    rejected, _ = family_rejections([r.bias.pvalue if r.bias is not None and r.bias.verdict != "invalid" else 1.0
+                                  for r in results], alpha)
+    out = []
+    for r, rej in zip(results, rejected):
+        if r.bias is None:
+            out.append("not measured")
+        elif r.bias.verdict == "invalid":
+            out.append("invalid")
+        elif rej and r.bias.heavy_tail:
+            out.append("inconclusive")
+        elif rej:
+            out.append("biased (expected)" if r.technique.biased else "biased")
+        else:
+            out.append("bias missed" if r.technique.biased else "unbiased")
+    return out
+
+
+def _failure(r: CaseResult, verdicts: dict[str, str], alpha: float, family: int) -> str:
+    """Why a case fails a CI run ("" if it passes), with the figures a reader needs."""
+    problems = []
+    b = r.bias
+    if b is not None and verdicts["bias"] in ("biased", "bias missed", "invalid"):
+        head = (f"bias: estimate {b.estimate:.10g} ± {b.stderr:.3g} (n = {b.n}), exact {b.reference:.10g}, "
+                f"t = {b.statistic:+.2f}, p = {b.pvalue:.3g}, family-wise alpha = {alpha} "
+                f"(Holm over {family} cases)")
+        if math.isfinite(b.stderr):
+            lo, hi = b.confidence_interval(1 - alpha)
+            head += f", {100 * (1 - alpha):g} % CI [{lo:.10g}, {hi:.10g}]"
+        expected = "biased (deliberately)" if r.technique.biased else "unbiased"
+        problems.append(f"{head}\n  verdict: {verdicts['bias']}; expected: {expected}"
+                        + "".join(f"\n  {failure}" for failure in b.failures)
+                        + (f"\n  flags: {'; '.join(b.flags)}" if b.flags else ""))
+    c = r.convergence
+    if verdicts["convergence"] == "slower than expected":
+        problems.append(f"convergence: {c}; one-sided p = {c.pvalue:.3g}, family-wise alpha = {alpha} "
+                        f"(Holm)\n{c.table.to_string(index=False)}")
+    return "\n".join(problems)
+
+
+# --- rows and tables --------------------------------------------------------------------------------
+def _rows(suite: Suite, results: list[CaseResult], table: pd.DataFrame) -> list[dict[str, Any]]:
+    """One row per case and measurement, for the store (and harness.load)."""
+    rows = []
+    for r, row in zip(results, table.to_dict("records")):
+        base = {"case_key": r.key, "suite": suite.name, "integrand": r.case.integrand, "technique": r.case.technique,
+                "alpha": suite.alpha}
+        if r.bias is not None:
+            b = r.bias
+            lo, hi = b.confidence_interval(0.95) if math.isfinite(b.stderr) else (math.nan, math.nan)
+            rows.append({**base, "measurement": "bias", "value": b.estimate - b.reference, "lo": lo - b.reference,
+                         "hi": hi - b.reference, "n": b.n, "pvalue": b.pvalue, "verdict": row["verdict"],
+                         "detail": {"estimate": b.estimate, "stderr": b.stderr, "t": b.statistic,
+                                    "flags": list(b.flags),
+                                    "counts": stats.failure_counts(b.failures)}})
+        if r.case.target is not None and r.bias is not None:
+            hw = r.target_half_width
+            rows.append({**base, "measurement": "target_half_width", "value": hw, "n": r.bias.n,
+                         "verdict": "reached" if hw <= r.case.target else "not reached",
+                         "detail": {"target": r.case.target, "look": r.look + 1, "looks": r.case.looks}})
+        if r.variance is not None:
+            v, se, n = r.variance
+            rows.append({**base, "measurement": "variance", "value": v, "lo": v - 1.96 * se, "hi": v + 1.96 * se,
+                         "n": n})
+        if r.convergence is not None:
+            c = r.convergence
+            lo, hi = c.confidence_interval()
+            rows.append({**base, "measurement": "convergence_slope", "value": c.slope, "lo": lo, "hi": hi,
+                         "n": c.n, "pvalue": c.pvalue,
+                         "verdict": row["convergence"],
+                         "detail": {"expected": c.expected, "table": c.table.to_dict("list")}})
+        if r.efficiency is not None:
+            e = r.efficiency
+            z = 1.96 * e.log_se / math.log(10)
+            rows.append({**base, "measurement": "log10_efficiency", "value": e.log10_value, "lo": e.log10_value - z,
+                         "hi": e.log10_value + z, "n": e.n, "detail": {"seconds": e.seconds}})
+            rows.append({**base, "measurement": "efficiency_ratio", "value": row["efficiency_ratio"],
+                         "lo": row["ratio_lo"], "hi": row["ratio_hi"], "n": e.n,
+                         "detail": {"baseline": row["efficiency_baseline"]}})
+        if r.error_vs_time is not None:
+            top = r.error_vs_time.iloc[-1]
+            rows.append({**base, "measurement": "rmse", "value": top["rmse"], "lo": top["rmse_lo"],
+                         "hi": top["rmse_hi"], "n": int(top["n"]),
+                         "detail": {"error_vs_time": r.error_vs_time.to_dict("list")}})
+    return rows
+
+
+def results_table(results: list[CaseResult], alpha: float) -> pd.DataFrame:
+    """One row per case: the figures with their uncertainty and n, and the verdicts."""
+    # baseline per integrand: uniform MC where the suite has it, else the integrand's first case
+    baseline: dict[str, CaseResult] = {}
+    for r in results:
+        current = baseline.get(r.case.integrand)
+        if r.efficiency and (current is None or (r.case.technique == "uniform" != current.case.technique)):
+            baseline[r.case.integrand] = r
+    rows = []
+    nan = math.nan
+    for r, verdict, cverdict in zip(results, _judge_bias(results, alpha), _judge_convergence(results, alpha)):
+        b, c, e = r.bias, r.convergence, r.efficiency
+        ratio, (lo, hi) = (nan, (nan, nan))
+        base = baseline.get(r.case.integrand)
+        if e is not None and base is not None:
+            ratio, (lo, hi) = stats.efficiency_ratio(e, base.efficiency)
+        notes = _notes(r)
+        if base is not None and base.case.technique != "uniform":
+            notes += f"{'; ' if notes else ''}baseline {base.case.technique}"
+        rows.append({
+            "integrand": r.case.integrand, "technique": r.case.technique, "n": b.n if b else r.case.samples,
+            "estimate": b.estimate if b else nan, "stderr": b.stderr if b else nan,
+            "exact": rest.integrand(r.case.integrand).reference,
+            "z": b.statistic if b else nan, "pvalue": b.pvalue if b else nan, "verdict": verdict,
+            "slope": c.slope if c else nan,
+            "slope_lo": c.confidence_interval().low if c else nan,
+            "slope_hi": c.confidence_interval().high if c else nan,
+            "convergence": cverdict, "slope_pvalue": c.pvalue if c else nan,
+            "log10_efficiency": e.log10_value if e else nan,
+            "efficiency_baseline": base.case.technique if base else "",
+            "efficiency_ratio": ratio, "ratio_lo": lo, "ratio_hi": hi,
+            "seconds_per_estimate": e.seconds if e else nan,
+            "notes": notes,
+        })
+    return pd.DataFrame(rows)
+
+
+def _notes(r: CaseResult) -> str:
+    notes = list(r.bias.flags) if r.bias else []
+    if r.bias and r.bias.failures:
+        notes.append(f"faults: {stats.failure_counts(r.bias.failures)}")
+    if r.technique.finite_variance is False:
+        notes.append("infinite variance (analytic)")
+    if r.bias and r.bias.stderr == 0:
+        notes.append("zero variance")
+    if r.case.target is not None:
+        hw = r.target_half_width
+        reached = hw <= r.case.target
+        notes.append(f"target ±{r.case.target:g} {'reached' if reached else 'NOT reached'} at "
+                     f"n = {r.bias.n if r.bias else 0} (±{hw:.3g}, look {r.look + 1} of {r.case.looks}, "
+                     f"alpha/{r.case.looks} per look)")
+    return "; ".join(notes)
+
+
+def format_table(df: pd.DataFrame, alpha: float) -> str:
+    """The table as aligned text."""
+    def interval(v, lo, hi, fmt):
+        return "—" if not math.isfinite(v) else f"{v:{fmt}} [{lo:{fmt}}, {hi:{fmt}}]"
+
+    columns = {
+        "integrand": (df["integrand"], "<"),
+        "technique": (df["technique"], "<"),
+        "n": (df["n"].map(lambda n: f"{n:.0e}" if n >= 10**5 else str(n)), ">"),
+        "estimate ± stderr": ([f"{m:.9g} ± {s:.2g}" for m, s in zip(df["estimate"], df["stderr"])], ">"),
+        "exact": (df["exact"].map(lambda v: f"{v:.9g}"), ">"),
+        "t": (df["z"].map(lambda z: f"{z:+.2f}" if math.isfinite(z) else str(z)), ">"),
+        "p": (df["pvalue"].map(lambda p: f"{p:.2g}"), ">"),
+        f"bias (Holm, α={alpha:g})": (df["verdict"], "<"),
+        "RMSE slope [95% CI]": ([interval(v, lo, hi, "+.2f") + (" slower!" if cv == "slower than expected" else "")
+                                 for v, lo, hi, cv in zip(df["slope"], df["slope_lo"], df["slope_hi"],
+                                                          df["convergence"])], "<"),
+        "1/(V·T) vs baseline [95% CI]": ([interval(v, lo, hi, ".3g") for v, lo, hi in
+                                         zip(df["efficiency_ratio"], df["ratio_lo"], df["ratio_hi"])], "<"),
+        "notes": (df["notes"], "<"),
+    }
+    cells = {k: [str(v) for v in vals] for k, (vals, _) in columns.items()}
+    width = {k: max(len(k), *(len(v) for v in cells[k])) for k in cells}
+    lines = ["  ".join(f"{k:{a}{width[k]}}" for k, (_, a) in columns.items()).rstrip()]
+    for i in range(len(df)):
+        lines.append("  ".join(f"{cells[k][i]:{a}{width[k]}}" for k, (_, a) in columns.items()).rstrip())
+    return "\n".join(lines)

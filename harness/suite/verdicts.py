@@ -1,0 +1,43 @@
+"""The verdict vocabulary and the family-wise judging every kind of case shares.
+
+A stored verdict is one word or phrase from this vocabulary, whatever kind of case it
+belongs to; its figures (counts, p-values, positions) live beside it in the row's detail.
+
+* bias tests: "unbiased", "biased", "biased (expected)" (a technique biased on purpose, found
+  so), "bias missed" (a planted bias the test did not find), "inconclusive" (heavy tails: no
+  level can be claimed), "invalid" (NaN, infinite or negative values: nothing is averaged);
+* convergence: "as expected", "slower than expected", "not judged" (no rate is promised);
+* sampler checks: "passed", "failed";
+* precision targets: "reached", "not reached".
+
+A CI run fails on any verdict in ``FAILING``.  Within a family of tests of one kind (the bias
+tests of a suite's estimator cases, their convergence fits, its sampler checks, its render
+bias tests, their convergence fits) the p-values are judged together by Holm's step-down at the
+suite's family-wise alpha (:func:`family_rejections`).
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from harness.stats import holm
+
+__all__ = ["FAILING", "PASSING", "family_rejections"]
+
+FAILING = frozenset({"biased", "bias missed", "invalid", "slower than expected", "failed"})
+PASSING = frozenset({"unbiased", "biased (expected)", "consistent", "as expected", "passed", "reached"})
+
+
+def family_rejections(pvalues: Sequence[float | None], alpha: float) -> tuple[list[bool | None],
+                                                                             list[float | None]]:
+    """Holm's step-down over the tests of one family at family-wise level ``alpha``: for each
+    entry, whether its null hypothesis is rejected and its adjusted p-value (None where the
+    entry is None, i.e. not tested).  Holds the family-wise error rate for any dependence
+    between the tests."""
+    tested = [i for i, p in enumerate(pvalues) if p is not None]
+    rejected: list[bool | None] = [None] * len(pvalues)
+    adjusted: list[float | None] = [None] * len(pvalues)
+    if tested:
+        rej, adj = holm([pvalues[i] for i in tested], alpha)
+        for i, r, a in zip(tested, rej, adj):
+            rejected[i], adjusted[i] = bool(r), float(a)
+    return rejected, adjusted

@@ -1,0 +1,317 @@
+"""The suite parser (harness.suite.parse): what a valid suite of each kind turns into, its
+defaults, and the message of every mistake (``file:line: key: what was expected``).
+
+Deterministic: no random numbers.  Only the two Mitsuba tests load Mitsuba (a [[render]] or
+adapter [[sampler]] table is validated by building its renderer or sampler)."""
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import reference_estimators as rest
+from harness.suite.parse import MEASUREMENTS, SuiteError, load_suite
+
+CASE = '[[case]]\nintegrand = "gaussian"\ntechniques = "uniform"\n'
+HEAD = '[suite]\nname = "t"\nsamples = 1000\nbatches = 8\n\n'   # the next table starts on line 6
+
+
+def write(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "suite.toml"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+# --- valid suites ----------------------------------------------------------------------------------
+def test_a_minimal_case_suite_takes_every_default(tmp_path):
+    suite = load_suite(write(tmp_path, CASE))
+    assert (suite.name, suite.seed, suite.samples, suite.threads) == ("suite", 0, 1_000_000, None)
+    assert (suite.alpha, suite.batches, suite.replicas, suite.budgets) == (0.01, 64, 32, None)
+    assert suite.samplers == () and suite.renders == ()
+    (case,) = suite.cases
+    assert (case.integrand, case.technique, case.samples) == ("gaussian", "uniform", 1_000_000)
+    assert case.case_id == 0
+    assert case.measurements == MEASUREMENTS
+    assert MEASUREMENTS == ("bias", "variance", "convergence", "efficiency", "error_vs_time")
+    assert (case.target, case.max_samples, case.looks) == (None, None, 1)
+
+
+def test_all_integrands_and_techniques_expand_to_the_catalogue_in_order(tmp_path):
+    suite = load_suite(write(tmp_path, '[[case]]\nintegrand = "all"\n'))
+    expected = [(f.name, t) for f in rest.catalogue() for t in rest.techniques(f.name)]
+    assert [(c.integrand, c.technique) for c in suite.cases] == expected
+    assert [c.case_id for c in suite.cases] == list(range(len(expected)))
+
+
+def test_suite_and_case_settings_override_the_defaults(tmp_path):
+    text = ('[suite]\nname = "mine"\nseed = 7\nsamples = 4096\nthreads = 0\nalpha = 0.05\nbatches = 16\n'
+            'replicas = 4\nbudgets = [4096, 64, 256, 64]\nmeasurements = ["variance", "bias", "variance"]\n\n'
+            '[[case]]\nintegrand = "step"\ntechniques = ["rejection", "uniform"]\nsamples = 2048\n'
+            'measurements = ["efficiency"]\n\n[[case]]\nintegrand = "peak"\ntechniques = "uniform"\n')
+    suite = load_suite(write(tmp_path, text))
+    assert (suite.name, suite.seed, suite.samples) == ("mine", 7, 4096)
+    assert (suite.threads, suite.alpha) == (None, 0.05)   # threads = 0: all cores
+    assert (suite.batches, suite.replicas, suite.budgets) == (16, 4, (64, 256, 4096))  # sorted, deduplicated
+    assert [(c.technique, c.samples, c.measurements, c.case_id) for c in suite.cases] == [
+        ("rejection", 2048, ("efficiency",), 0), ("uniform", 2048, ("efficiency",), 1),
+        ("uniform", 4096, ("variance", "bias"), 2)]  # the suite's list, duplicates dropped, order kept
+
+
+def test_a_precision_target_gives_one_look_per_doubling_up_to_max_samples(tmp_path):
+    text = HEAD + '[[case]]\nintegrand = "gaussian"\ntarget = 1e-3\nmax_samples = {}\n'
+    for max_samples, looks in ((1000, 1), (7999, 3), (8000, 4)):   # 1000, 2000, 4000 (, 8000)
+        case = load_suite(write(tmp_path, text.format(max_samples))).cases[0]
+        assert (case.target, case.max_samples, case.looks) == (1e-3, max_samples, looks)
+
+
+def test_a_sampler_suite_needs_no_case_and_numbers_samplers_after_the_cases(tmp_path):
+    text = (CASE + '[[sampler]]\nname = "exponential"\n\n[[sampler]]\nname = "trimmed_logistic"\n'
+            'params = { s = 0.001, mu = 0.3 }\ndomain = "interval"\nsamples = 5000\n'
+            'measurements = ["mcmc"]\n')
+    suite = load_suite(write(tmp_path, text))
+    first, second = suite.samplers
+    assert (first.name, first.params, first.domain) == ("exponential", (), "half_line")   # the registry's
+    assert (first.samples, first.measurements, first.case_id) == (1_000_000, ("chi_square",), 1)
+    assert (first.adapter, first.label) == (None, "exponential")
+    assert (second.params, second.domain, second.samples, second.measurements, second.case_id) == (
+        (("mu", 0.3), ("s", 0.001)), "interval", 5000, ("mcmc",), 2)
+    assert second.label == "trimmed_logistic(mu=0.3, s=0.001)"
+    alone = load_suite(write(tmp_path, '[[sampler]]\nname = "ggx"\nparams = { alpha = 0.1 }\n'))
+    assert alone.cases == () and alone.samplers[0].case_id == 0
+
+
+def test_a_suite_of_core_cases_and_samplers_imports_no_renderer(tmp_path):
+    path = write(tmp_path, CASE + '[[sampler]]\nname = "exponential"\n')
+    code = ("import sys; from harness.suite.parse import load_suite; load_suite(sys.argv[1]); "
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in "
+            "('mitsuba', 'drjit', 'pyrender', 'OpenGL', 'OpenImageIO')))")
+    r = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True, timeout=120,
+                       check=False)
+    assert r.returncode == 0 and r.stdout.strip() == "[]", r.stdout + r.stderr
+
+
+def test_a_mitsuba_render_table_makes_one_case_per_list_element_with_defaults(tmp_path):
+    text = '[[render]]\nadapter = "mitsuba"\nscene = "furnace"\nintegrator = ["path", "ptracer"]\n'
+    suite = load_suite(write(tmp_path, text))
+    assert suite.cases == () and suite.samplers == ()
+    path, ptracer = suite.renders
+    assert path.spec == (("integrator", "path"), ("scene", "furnace"))
+    assert ptracer.spec == (("integrator", "ptracer"), ("scene", "furnace"))
+    assert (path.case_id, ptracer.case_id) == (0, 1)   # render cases are numbered on their own
+    assert (path.scene, path.label) == ("mitsuba:furnace", "integrator=path")
+    # spp 64; budgets spp/64, spp/16, spp/4, spp; reference 64 x the largest budget in 8 parts
+    assert (path.spp, path.replicas, path.budgets) == (64, 16, (1, 4, 16, 64))
+    assert (path.reference_spp, path.reference_parts, path.expect) == (4096, 8, "unbiased")
+    assert path.measurements == MEASUREMENTS
+
+
+def test_a_mitsuba_sampler_table_is_labelled_and_keeps_its_spec(tmp_path):
+    text = '[[sampler]]\nadapter = "mitsuba"\nplugin = { type = "diffuse" }\nvariant = "scalar_rgb"\n'
+    (sc,) = load_suite(write(tmp_path, text)).samplers
+    assert (sc.adapter, sc.domain, sc.samples, sc.measurements) == ("mitsuba", "hemisphere", 1_000_000,
+                                                                    ("chi_square", "weight"))
+    assert sc.spec == '{"plugin": {"type": "diffuse"}, "variant": "scalar_rgb"}'
+    assert sc.label.startswith("mitsuba:diffuse") and sc.label.endswith("[scalar_rgb]")
+
+
+# --- mistakes ----------------------------------------------------------------------------------
+# (file text, line or None, key or None, fragment of what was expected)
+MISTAKES = {
+    # unknown tables and keys
+    "unknown table": (
+        '[suites]\nname = "x"\n',
+        1, "suites", "unknown table 'suites'; expected [suite], [[case]], [[sampler]] and [[render]] tables"),
+    "unknown suite key": (
+        '[suite]\nsample = 10\n\n' + CASE,
+        2, "sample", "unknown key 'sample'; expected one of: name, seed, samples, threads, alpha"),
+    "unknown case key": (
+        HEAD + CASE + 'colour = "red"\n',
+        9, "colour", ("unknown key 'colour'; expected one of: "
+            "integrand, techniques, samples, measurements, target, max_samples")),
+    "unknown sampler key": (
+        HEAD + '[[sampler]]\nname = "ggx"\nsize = 3\n',
+        8, "size", "unknown key 'size'"),
+    "unknown adapter key": (
+        HEAD + '[[render]]\nadapter = "mitsuba"\nscenery = "furnace"\n',
+        8, "scenery", "unknown key for adapter 'mitsuba'; expected one of"),
+    "no table": (
+        '[suite]\nsamples = 1000\n',
+        None, "case", "expected at least one [[case]], [[sampler]] or [[render]] table"),
+    "no integrand": (
+        HEAD + '[[case]]\ntechniques = "all"\n',
+        6, None, "missing key 'integrand' (a catalogue name or \"all\")"),
+    # wrong types
+    "str for int": (
+        '[suite]\nsamples = "many"\n\n' + CASE,
+        2, "samples", "expected int, got str 'many'"),
+    "bool for int": (
+        '[suite]\nseed = true\n\n' + CASE,
+        2, "seed", "expected int, got bool True"),
+    "str for float": (
+        '[suite]\nalpha = "0.01"\n\n' + CASE,
+        2, "alpha", "expected int or float, got str '0.01'"),
+    "int for str": (
+        HEAD + '[[case]]\nintegrand = 3\n',
+        7, "integrand", "expected str, got int 3"),
+    "int for techniques": (
+        HEAD + '[[case]]\nintegrand = "gaussian"\ntechniques = 3\n',
+        8, "techniques", "expected str or list, got int 3"),
+    "str for list": (
+        HEAD + CASE + 'measurements = "bias"\n',
+        9, "measurements", "expected list, got str 'bias'"),
+    "str for params": (
+        HEAD + '[[sampler]]\nname = "ggx"\nparams = "alpha"\n',
+        8, "params", "expected dict, got str 'alpha'"),
+    # measurement names
+    "unknown measurement": (
+        '[suite]\nmeasurements = ["bais"]\n\n' + CASE,
+        2, "measurements", ("unknown measurement 'bais'; expected some of: bias, variance, convergence, "
+            "efficiency, error_vs_time")),
+    "sampler check in suite": (
+        '[suite]\nmeasurements = ["mcmc"]\n\n' + CASE,
+        2, "measurements", ("unknown measurement 'mcmc'; expected some of: bias, variance, convergence, "
+            "efficiency, error_vs_time (sampler checks go in [[sampler]] tables)")),
+    "no measurement": (
+        HEAD + CASE + 'measurements = []\n',
+        9, "measurements", "expected at least one measurement"),
+    "unknown sampler measurement": (
+        HEAD + '[[sampler]]\nname = "ggx"\nmeasurements = ["bias"]\n',
+        8, "measurements", ("unknown sampler measurement 'bias'; expected some of: "
+            "chi_square, mcmc, weight")),
+    "weight of a catalogue sampler": (
+        HEAD + '[[sampler]]\nname = "ggx"\nmeasurements = ["weight"]\n',
+        8, "measurements", "'weight' (sample weight == eval/pdf) applies to renderer samplers"),
+    "render measurement": (
+        HEAD + '[[render]]\nadapter = "mitsuba"\nmeasurements = ["chi_square"]\n',
+        8, "measurements", "unknown measurement 'chi_square'"),
+    # counts and budgets
+    "zero samples": (
+        '[suite]\nsamples = 0\n\n' + CASE,
+        2, "samples", "expected a budget > 0 samples, got 0"),
+    "negative case samples": (
+        HEAD + CASE + '\n[[case]]\nintegrand = "step"\nsamples = -3\n',
+        12, "samples", "expected a budget > 0 samples, got -3"),
+    "fewer samples than batches": (
+        HEAD + CASE + 'samples = 7\n',
+        9, "samples", "expected at least batches = 8 samples, got 7"),
+    "negative seed": (
+        '[suite]\nseed = -1\n\n' + CASE,
+        2, "seed", "expected an integer >= 0, got -1"),
+    "negative threads": (
+        '[suite]\nthreads = -2\n\n' + CASE,
+        2, "threads", "expected an integer >= 0 (0: all cores), got -2"),
+    "alpha out of range": (
+        '[suite]\nalpha = 0\n\n' + CASE,
+        2, "alpha", "expected a false-alarm rate in (0, 1), got 0"),
+    "too few batches": (
+        '[suite]\nbatches = 7\n\n' + CASE,
+        2, "batches", "expected an integer in [8, samples = 1000000], got 7"),
+    "more batches than samples": (
+        '[suite]\nsamples = 100\nbatches = 101\n\n' + CASE,
+        3, "batches", "expected an integer in [8, samples = 100], got 101"),
+    "one replica": (
+        '[suite]\nreplicas = 1\n\n' + CASE,
+        2, "replicas", "expected at least 2 replicas, got 1"),
+    "two budgets": (
+        '[suite]\nbudgets = [64, 256]\n\n' + CASE,
+        2, "budgets", "expected at least 3 positive integer budgets, got [64, 256]"),
+    "zero budget": (
+        '[suite]\nbudgets = [64, 0, 256]\n\n' + CASE,
+        2, "budgets", "expected at least 3 positive integer budgets, got [64, 0, 256]"),
+    "too few sampler samples": (
+        HEAD + '[[sampler]]\nname = "ggx"\nsamples = 999\n',
+        8, "samples", "expected at least 1000 samples, got 999"),
+    "zero spp": (
+        HEAD + '[[render]]\nadapter = "mitsuba"\nspp = 0\n',
+        8, "spp", "expected a budget > 0 samples, got 0"),
+    "too few render replicas": (
+        HEAD + '[[render]]\nadapter = "mitsuba"\nreplicas = 3\n',
+        8, "replicas", "expected at least 4 replicas, got 3"),
+    "too few distinct render budgets": (
+        HEAD + '[[render]]\nadapter = "mitsuba"\nspp = 1\n',
+        8, "spp", ("expected at least 3 distinct budgets for bias, variance, convergence, "
+            "efficiency, error_vs_time, got [1] (give budgets)")),
+    "one reference part": (
+        HEAD + '[[render]]\nadapter = "mitsuba"\nreference_parts = 1\n',
+        8, "reference_parts", "expected at least 2 independent parts, got 1"),
+    "reference spp not a multiple": (
+        HEAD + '[[render]]\nadapter = "mitsuba"\nreference_spp = 100\n' 'reference_parts = 8\n',
+        8, "reference_spp", "expected a multiple of reference_parts = 8, got 100"),
+    # names that are not in a registry
+    "unknown integrand": (
+        HEAD + '[[case]]\nintegrand = "gausian"\n',
+        7, "integrand", "unknown integrand 'gausian'; the catalogue has: gaussian, polynomial"),
+    "unknown technique": (
+        HEAD + '[[case]]\nintegrand = "gaussian"\ntechniques = ["uniform", "mis"]\n',
+        8, "techniques", ("unknown technique 'mis' for integrand 'gaussian'; expected one of: "
+            "uniform, uniform/stratified")),
+    "unknown technique (one name)": (
+        HEAD + '[[case]]\nintegrand = "step"\ntechniques = "nope"\n',
+        8, "techniques", "unknown technique 'nope' for integrand 'step'"),
+    "unknown sampler": (
+        HEAD + '[[sampler]]\nname = "gxx"\n',
+        7, "name", "unknown sampler 'gxx'; expected one of: exponential, linear"),
+    "tabulated sampler": (
+        HEAD + '[[sampler]]\nname = "piecewise_constant_1d"\n',
+        7, "name", "sampler 'piecewise_constant_1d' needs a table of values: test it from Python"),
+    "bad sampler parameter": (
+        HEAD + '[[sampler]]\nname = "cosine_hemisphere"\nparams = { foo = 1 }\n',
+        8, "params", "sampler 'cosine_hemisphere' has no parameter 'foo'"),
+    "unknown domain": (
+        HEAD + '[[sampler]]\nname = "ggx"\ndomain = "torus"\n',
+        8, "domain", "expected one of: interval, half_line, square, disk, hemisphere, sphere, got 'torus'"),
+    "unknown adapter": (
+        HEAD + '[[render]]\nadapter = "blender"\n',
+        7, "adapter", "expected one of: mitsuba, pyrender, got 'blender'"),
+    "unknown scene": (
+        HEAD + '[[render]]\nadapter = "mitsuba"\nscene = "nosuch"\n',
+        8, "scene", "'nosuch' is neither a built-in scene"),
+    "unknown expectation": (
+        HEAD + '[[render]]\nadapter = "mitsuba"\nexpect = "maybe"\n',
+        8, "expect", "expected \"unbiased\" or \"biased\", got 'maybe'"),
+    "sampler of another adapter": (
+        HEAD + '[[sampler]]\nadapter = "pyrender"\n',
+        7, "adapter", ("expected \"mitsuba\" (samplers of other adapters are not supported), "
+            "got 'pyrender'")),
+    # precision targets
+    "target without max_samples": (
+        HEAD + CASE + 'target = 1e-3\n',
+        9, "target", "a target needs max_samples, the most samples to try"),
+    "max_samples without target": (
+        HEAD + CASE + 'max_samples = 4000\n',
+        9, "max_samples", "max_samples only applies with a target"),
+    "max_samples below samples": (
+        HEAD + CASE + 'target = 1e-3\nmax_samples = 10\n',
+        10, "max_samples", "expected at least samples = 1000, got 10"),
+    "unreachable target": (
+        HEAD + CASE + 'target = 0.0\nmax_samples = 4000\n',
+        9, "target", "no budget can reach a half-width of 0: it must be > 0 and above the rounding floor"),
+}
+
+
+@pytest.mark.parametrize("text, line, key, fragment", MISTAKES.values(), ids=MISTAKES.keys())
+def test_each_mistake_names_file_line_key_and_what_was_expected(tmp_path, text, line, key, fragment):
+    path = write(tmp_path, text)
+    where = f"{path}:{line}: " if line else f"{path}: "
+    with pytest.raises(SuiteError, match="^" + re.escape(where + (f"{key}: " if key else "")) + ".*"
+                       + re.escape(fragment)):
+        load_suite(path)
+
+
+def test_a_toml_syntax_error_names_the_file_and_the_line(tmp_path):
+    path = write(tmp_path, '[suite]\nsamples = = 3\n')
+    with pytest.raises(SuiteError, match="^" + re.escape(f"{path}: not valid TOML: ") + ".*line 2"):
+        load_suite(path)
+
+
+def test_a_missing_file_names_the_path_and_why(tmp_path):
+    path = tmp_path / "nope.toml"
+    with pytest.raises(SuiteError, match="^" + re.escape(f"{path}: cannot read suite file: No such file")):
+        load_suite(path)
+
+
+def test_suite_errors_are_value_errors():
+    assert issubclass(SuiteError, ValueError)  # callers that catch ValueError see them too
