@@ -17,9 +17,10 @@ from pathlib import Path
 import numpy as np
 
 import reference_estimators as rest
+
+from harness.suite.parse import load_suite
 from harness.suite.plan import BIAS_STREAM, bias_budget, core_case_id
 from harness.suite.run import run_suite
-from harness.suite.parse import load_suite
 
 SUITE = """
 [suite]

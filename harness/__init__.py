@@ -16,8 +16,14 @@ Every check returns a result of one family (``verdict``, ``passed``, ``pvalue``,
 (suite files, plan, execution, storage, the runner) and ``harness.adapters`` (renderers).
 """
 from harness.samplers import SamplerCheck, check_sampler, mcmc_crosscheck
-from harness.stats import (ConfidenceInterval, ConvergenceResult, Efficiency, Failure, UnbiasedResult,
-                           check_unbiased)
+from harness.stats import (
+    ConfidenceInterval,
+    ConvergenceResult,
+    Efficiency,
+    Failure,
+    UnbiasedResult,
+    check_unbiased,
+)
 from harness.stats.images import ImageBias
 from harness.suite.kind import Outcome
 from harness.suite.parse import Case, Suite, SuiteError, load_suite

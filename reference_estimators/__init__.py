@@ -35,4 +35,4 @@ def core_fingerprint() -> str:
 
 
 _FINGERPRINT: str | None = None
-__all__ = [*_api_all, "Estimate", "ERROR_ISSUES", "CHUNK_SIZE", "core_fingerprint"]
+__all__ = [*_api_all, "Estimate", "ERROR_ISSUES", "CHUNK_SIZE", "core_fingerprint", "kernels", "sampling"]

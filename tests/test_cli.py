@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 import reference_estimators as rest
+
 from harness import SuiteError, load_suite
 
 HARNESS = str(Path(sys.executable).with_name("harness"))
@@ -22,13 +23,13 @@ def test_main_job_prints_every_case_of_the_default_suite(root, tmp_path):
     assert r.returncode == 0, r.stdout + r.stderr
     suite = load_suite(root / "suites" / "default.toml")
     lines = r.stdout.splitlines()
-    header = next(l for l in lines if l.startswith("integrand"))
+    header = next(line for line in lines if line.startswith("integrand"))
     for col in ("technique", "n", "estimate ± stderr", "exact", "t", "p", "bias (Holm, α=0.01)", "RMSE slope [95% CI]",
                 "1/(V·T) vs baseline [95% CI]", "notes"):
         assert col in header, col
     rows = {}
     for case in suite.cases:
-        match = [l for l in lines if l.split()[:2] == [case.integrand, case.technique]]
+        match = [line for line in lines if line.split()[:2] == [case.integrand, case.technique]]
         assert match, case
         rows[(case.integrand, case.technique)] = match[0]
     total = len(suite.cases) + len(suite.samplers) + len(suite.renders)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import reference_estimators as rest
+
 from harness import testing
 
 GAUSS = rest.integrand("gaussian").reference

@@ -23,9 +23,16 @@ import reference_estimators as rest
 from harness import stats
 from harness.suite.execute import JobResult
 from harness.suite.kind import Outcome
-from harness.suite.plan import (Unit, bias_budget, bias_stream, case_key, convergence_budgets, core_case_id,
-                                estimator_units)
 from harness.suite.parse import Case, Suite
+from harness.suite.plan import (
+    Unit,
+    bias_budget,
+    bias_stream,
+    case_key,
+    convergence_budgets,
+    core_case_id,
+    estimator_units,
+)
 from harness.suite.store import Store
 from harness.suite.verdicts import family_rejections
 

@@ -463,11 +463,11 @@ class _Locator:
             name, index = (table, 0) if isinstance(table, str) else table
             header = re.compile(r"^\s*\[\[\s*%s\s*\]\]" % re.escape(name) if not isinstance(table, str)
                                 else r"^\s*\[\s*%s\s*\]" % re.escape(name))
-            starts = [i for i, l in enumerate(self.lines) if header.match(l)]
+            starts = [i for i, line in enumerate(self.lines) if header.match(line)]
             if index >= len(starts):
                 return None
             start = starts[index]
-            nxt = [i for i, l in enumerate(self.lines) if i > start and re.match(r"^\s*\[", l)]
+            nxt = [i for i, line in enumerate(self.lines) if i > start and re.match(r"^\s*\[", line)]
             end = nxt[0] if nxt else len(self.lines)
             if key is None:
                 return start + 1

@@ -12,6 +12,7 @@ import pytest
 from scipy import stats
 
 import reference_estimators as rest
+
 from harness.samplers import Domain, SamplerTest, as_domain, check_sampler, mcmc_crosscheck, zoo
 from harness.stats import ConfidenceInterval, Failure
 

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import reference_estimators as rest
+
 from harness import stats
 from harness.stats import images
 from harness.stats.results import ConfidenceInterval, Failure

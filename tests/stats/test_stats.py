@@ -10,6 +10,7 @@ import pytest
 from scipy import stats
 
 import reference_estimators as rest
+
 from harness import stats as hs
 from harness.stats import zoo as calibration
 

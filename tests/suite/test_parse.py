@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 import reference_estimators as rest
+
 from harness.suite.parse import MEASUREMENTS, SuiteError, load_suite
 
 CASE = '[[case]]\nintegrand = "gaussian"\ntechniques = "uniform"\n'

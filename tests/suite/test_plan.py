@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 import reference_estimators as rest
+
 from harness.suite.parse import Suite, load_suite
 from harness.suite.plan import (
     UNIT_CHUNKS,

@@ -16,8 +16,8 @@ import pytest
 from scipy import stats
 
 import harness
-from harness.suite.run import run_suite
 from harness.suite.parse import load_suite
+from harness.suite.run import run_suite
 
 HARNESS = str(Path(sys.executable).with_name("harness"))
 

@@ -82,8 +82,8 @@ from pyrender.shader_program import ShaderProgramCache
 
 import reference_estimators as rest
 
-from harness.adapters.pyrender import scenes
 from harness.adapters.base import Render
+from harness.adapters.pyrender import scenes
 from harness.stats.validate import integer_in
 
 __all__ = ["make_renderer", "PyrenderRenderer", "TECHNIQUES", "POINTS", "PIXEL_FILTERS", "LIGHT_SHAPES",
