@@ -41,9 +41,10 @@ def direct(suite, threads: int) -> float:
     for case in suite.cases:
         b = bias_budget(suite, case)
         core_case = core_case_id(case, BIAS_STREAM)
-        ests = [rest.integrate(case.integrand, case.technique, b, seed=suite.seed, case_id=core_case, replica=k,
-                               threads=threads) for k in range(suite.batches)]
-        y = rest.contributions(case.integrand, case.technique, b, seed=suite.seed, case_id=core_case, threads=threads)
+        ests = [rest.integrate(case.integrand, case.technique, b, seed=suite.seed, case_id=core_case,
+                               replica=k, threads=threads) for k in range(suite.batches)]
+        y = rest.contributions(case.integrand, case.technique, b, seed=suite.seed, case_id=core_case,
+                               threads=threads)
         keep = int(math.sqrt(b))
         c = np.median(y)
         np.partition(y - c, y.size - keep - 1), np.partition(c - y, y.size - keep - 1)
@@ -52,7 +53,8 @@ def direct(suite, threads: int) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--threads", type=int, default=2)
     args = parser.parse_args()
@@ -80,8 +82,8 @@ def main() -> None:
                        check=True, capture_output=True)
         t_command = time.perf_counter() - t0
 
-    print(f"suite: {len(suite.cases)} cases, {total:.1e} samples, bias measurement ({suite.batches} batches), "
-          f"{args.threads} threads\n")
+    print(f"suite: {len(suite.cases)} cases, {total:.1e} samples, "
+          f"bias measurement ({suite.batches} batches), {args.threads} threads\n")
     print(f"{'run':>4} {'direct core calls [s]':>22} {'harness runner [s]':>19} {'overhead':>9}")
     for i, (d, r) in enumerate(rows):
         print(f"{i:>4} {d:22.3f} {r:19.3f} {100 * (r / d - 1):8.1f}%")

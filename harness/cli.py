@@ -1,4 +1,5 @@
-"""Command line: ``harness run SUITE``, ``harness report``, ``harness show --db PATH`` and ``harness list``."""
+"""Command line: ``harness run SUITE``, ``harness report``, ``harness show --db PATH`` \
+and ``harness list``."""
 from __future__ import annotations
 
 import argparse
@@ -20,25 +21,29 @@ def main(argv: list[str] | None = None) -> int:
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="run a suite file and print the table of estimates")
     run.add_argument("suite", help="suite file (TOML), e.g. suites/default.toml")
-    run.add_argument("--threads", type=int, default=None, help="threads (default: the suite's, else all cores)")
+    run.add_argument("--threads", type=int, default=None,
+                     help="threads (default: the suite's, else all cores)")
     run.add_argument("--csv", metavar="PATH", help="also write the table as CSV")
     run.add_argument("--db", metavar="PATH", help="results database (default: results/<suite name>.sqlite)")
-    run.add_argument("--dask", metavar="ADDRESS", help="run on a Dask scheduler at ADDRESS, or 'local' for a LocalCluster")
+    run.add_argument("--dask", metavar="ADDRESS",
+                     help="run on a Dask scheduler at ADDRESS, or 'local' for a LocalCluster")
     show = sub.add_parser("show", help="print the measurements stored in a results database")
     show.add_argument("--db", metavar="PATH", required=True)
     show.add_argument("--suite", help="only this suite")
-    rep = sub.add_parser("report", help="write the stored results as one self-contained HTML page (or CSV, Markdown)")
+    rep = sub.add_parser("report",
+                         help="write the stored results as one self-contained HTML page (or CSV, Markdown)")
     rep.add_argument("--db", metavar="PATH", default="results/default.sqlite",
                      help="results database (default: results/default.sqlite)")
-    rep.add_argument("-o", "--output", metavar="PATH", help="output file (default: the database path with .html, "
-                                                           ".csv or .md)")
+    rep.add_argument("-o", "--output", metavar="PATH", help="output file (default: the database path with "
+                                                           ".html, .csv or .md)")
     rep.add_argument("--format", choices=["html", "csv", "markdown"], default="html")
     rep.add_argument("--suite", help="only this suite")
     sub.add_parser("list", help="list the catalogue's integrands, techniques and samplers")
     chk = sub.add_parser("check-sampler", help="test a sampler against its pdf (chi-square and friends)")
-    chk.add_argument("target", help="module:attribute, an object with sample(u) and pdf(x), or a function returning "
-                                    "one (or a (sample, pdf[, domain]) tuple)")
-    chk.add_argument("--domain", help="interval, square, disk, hemisphere, sphere (unless the target gives one)")
+    chk.add_argument("target", help="module:attribute, an object with sample(u) and pdf(x), or a function "
+                                    "returning one (or a (sample, pdf[, domain]) tuple)")
+    chk.add_argument("--domain",
+                     help="interval, square, disk, hemisphere, sphere (unless the target gives one)")
     chk.add_argument("--samples", type=int, default=1_000_000)
     chk.add_argument("--seed", type=int, default=0)
     chk.add_argument("--alpha", type=float, default=0.01)
@@ -124,7 +129,8 @@ def _check_sampler(args) -> int:
         print("harness: say --domain (interval, square, disk, hemisphere, sphere)", file=sys.stderr)
         return 2
     try:
-        result = check_sampler(sample, pdf, domain, sample_count=args.samples, seed=args.seed, alpha=args.alpha)
+        result = check_sampler(sample, pdf, domain, sample_count=args.samples, seed=args.seed,
+                               alpha=args.alpha)
     except ValueError as e:
         print(f"harness: {e}", file=sys.stderr)
         return 2
@@ -133,7 +139,8 @@ def _check_sampler(args) -> int:
     ok = result.passed
     if args.mcmc:
         m = mcmc_crosscheck(sample, pdf, domain, seed=args.seed, alpha=args.alpha)
-        print(f"\nMCMC cross-check (emcee): {'PASSED' if m.passed else 'FAILED'}, Holm-adjusted p = {m.pvalue:.3g}")
+        print(f"\nMCMC cross-check (emcee): {'PASSED' if m.passed else 'FAILED'}, "
+              f"Holm-adjusted p = {m.pvalue:.3g}")
         print(m.tests.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
         ok = ok and m.passed
     print(f"summary: {int(ok)} passed, {int(not ok)} failed")
@@ -161,7 +168,8 @@ def _show(db: str, suite: str | None) -> int:
     if df.empty:
         print(f"no measurements in {db}")
         return 0
-    cols = ["suite", "integrand", "technique", "measurement", "value", "lo", "hi", "n", "pvalue", "alpha", "verdict"]
+    cols = ["suite", "integrand", "technique", "measurement", "value", "lo", "hi", "n", "pvalue", "alpha",
+            "verdict"]
     print(df[cols].to_string(index=False, float_format=lambda v: f"{v:.6g}"))
     return 0
 
@@ -169,7 +177,8 @@ def _show(db: str, suite: str | None) -> int:
 def _list() -> int:
     print("integrands (exact reference; techniques):")
     for f in rest.catalogue():
-        print(f"  {f.name:<14} {f.domain:<10} d={f.dim:<3} I={f.reference:<24.17g} {', '.join(rest.techniques(f))}")
+        print(f"  {f.name:<14} {f.domain:<10} d={f.dim:<3} I={f.reference:<24.17g} "
+              f"{', '.join(rest.techniques(f))}")
         print(f"  {'':<14} {f.description}")
     print("\nsamplers:")
     for s in rest.samplers():

@@ -19,7 +19,8 @@ from harness.suite.run import RunSummary, kinds_of, run_suite
 
 def pytest_addoption(parser: pytest.Parser) -> None:
     group = parser.getgroup("harness")
-    group.addoption("--harness-db", default=None, help="results database for suite files (default: in the pytest cache)")
+    group.addoption("--harness-db", default=None,
+                    help="results database for suite files (default: in the pytest cache)")
     group.addoption("--harness-threads", type=int, default=None, help="threads for suite files")
 
 

@@ -62,7 +62,8 @@ class Sampler:
         """Canonical uniforms that map to x; NaN rows for points outside the support."""
         return self._core.invert(_points(x, self.dim, "x"))
 
-    def draw(self, n: int, *, seed: int = 0, threads: int | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
+    def draw(self, n: int, *, seed: int = 0,
+             threads: int | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
         """n points, their pdf values and diagnostics (candidates, bound violations with
         examples), from the chunked PCG32 streams: identical for any thread count."""
         x, p, diag = self._core.draw(_count(n, "n"), _seed(seed), 0, 0, _threads(threads))
@@ -215,8 +216,8 @@ def integrate(f: str | Integrand, t: str | Technique, n: int, *, seed: int = 0, 
     """
     fi = integrand(f)
     ti = technique(fi, t)
-    raw = _core.integrate(fi, ti, _count(n, "n"), _seed(seed), _seed(case_id, "case_id"), _seed(replica, "replica"),
-                          _threads(threads), bool(higher_moments))
+    raw = _core.integrate(fi, ti, _count(n, "n"), _seed(seed), _seed(case_id, "case_id"),
+                          _seed(replica, "replica"), _threads(threads), bool(higher_moments))
     return Estimate.from_core(raw, integrand=fi.name, technique=ti.name, reference=fi.reference,
                               nonnegative=fi.nonnegative, iid=ti.iid)
 
@@ -275,8 +276,8 @@ def estimate_from_states(f: str | Integrand, t: str | Technique, states: list[di
                               nonnegative=fi.nonnegative, iid=ti.iid)
 
 
-def contributions(f: str | Integrand, t: str | Technique, n: int, *, seed: int = 0, threads: int | None = None,
-                  case_id: int = 0, replica: int = 0) -> np.ndarray:
+def contributions(f: str | Integrand, t: str | Technique, n: int, *, seed: int = 0,
+                  threads: int | None = None, case_id: int = 0, replica: int = 0) -> np.ndarray:
     """The n per-sample contributions Y that ``integrate`` with the same arguments averages
     (samples it would exclude for a bad pdf or a point outside the domain are NaN)."""
     fi = integrand(f)
@@ -302,7 +303,8 @@ def estimate_from_samples(f: str | Integrand, points: Any, pdf: Any, *, sampler:
     fi = integrand(f)
     x = _points(points, fi.dim, "points")
     p = np.ascontiguousarray(pdf, dtype=np.float64)
-    raw = _core.estimate_from_samples(fi, x, p, None if sampler is None else _core_sampler(sampler), _threads(threads))
+    raw = _core.estimate_from_samples(fi, x, p, None if sampler is None else _core_sampler(sampler),
+                                      _threads(threads))
     return Estimate.from_core(raw, integrand=fi.name, technique="importance:given", reference=fi.reference,
                               nonnegative=fi.nonnegative)
 

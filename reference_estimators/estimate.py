@@ -107,7 +107,8 @@ class Estimate:
         err = self.total_error
         if math.isnan(err):
             return math.nan  # no error estimate (non-independent contributions): use replicas
-        return (self.mean - ref) / err if err > 0 else (0.0 if self.mean == ref else math.copysign(math.inf, self.mean - ref))
+        return (self.mean - ref) / err if err > 0 else (0.0 if self.mean == ref
+                                                        else math.copysign(math.inf, self.mean - ref))
 
     @property
     def variance_rel_error(self) -> float:

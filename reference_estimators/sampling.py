@@ -34,8 +34,10 @@ def _triple(name: str, defaults: dict[str, float], udim: int, dim: int) -> dict[
     ps = ", ".join(f"{k}={v:g}" for k, v in defaults.items()) or "no parameters"
     docs = {
         f"sample_{name}": (sample, f"Points {shape(dim)} from canonical uniforms u {shape(udim)} ({ps})."),
-        f"{name}_pdf": (pdf, f"Density of the {name} sampler at points {shape(dim)}; 0 outside its support ({ps})."),
-        f"invert_{name}": (invert, f"Canonical uniforms {shape(udim)} that map to points; NaN outside the support ({ps})."),
+        f"{name}_pdf": (pdf, f"Density of the {name} sampler at points {shape(dim)}; "
+                             f"0 outside its support ({ps})."),
+        f"invert_{name}": (invert, f"Canonical uniforms {shape(udim)} that map to points; "
+                                   f"NaN outside the support ({ps})."),
     }
     out = {}
     for fname, (fn, doc) in docs.items():

@@ -15,7 +15,8 @@ from reports.data import Results, load_results
 from reports.html import render_html
 from reports.tables import to_csv, to_markdown, wide_table
 
-__all__ = ["FORMATS", "Results", "load_results", "render_html", "to_csv", "to_markdown", "wide_table", "write_report"]
+__all__ = ["FORMATS", "Results", "load_results", "render_html", "to_csv", "to_markdown", "wide_table",
+           "write_report"]
 
 FORMATS = {"html": ".html", "csv": ".csv", "markdown": ".md"}
 

@@ -94,7 +94,8 @@ def _points(detail: dict[str, Any]) -> tuple[pd.DataFrame, str] | None:
     df["seconds"] = t.get("seconds", nan)
     df["seconds_se"] = t.get("seconds_se", nan)
     df["replicas"] = t.get("replicas", nan)
-    label = detail["error"] if isinstance(detail.get("error"), str) else {"rmse": "RMSE", "relmse": "relMSE"}.get(name, name)
+    label = (detail["error"] if isinstance(detail.get("error"), str)
+             else {"rmse": "RMSE", "relmse": "relMSE"}.get(name, name))
     return df.astype(float), label
 
 
@@ -136,7 +137,8 @@ def integrand_curves(results: Results) -> dict[tuple[str, str], Group]:
                     pts["seconds"] = np.asarray(evt["seconds"], float)
                     pts["seconds_se"] = np.asarray(evt.get("seconds_se", [math.nan] * len(pts)), float)
                 curves.append(Curve(tech, pts, conv["value"], conv["lo"], conv["hi"],
-                                    float(conv["detail"].get("expected", -0.5)), str(conv["verdict"] or ""), error))
+                                    float(conv["detail"].get("expected", -0.5)), str(conv["verdict"] or ""),
+                                    error))
             eff = rows.get("efficiency_ratio") or (rows.get("efficiency") if "baseline" in
                                                    (rows.get("efficiency") or {}).get("detail", {}) else None)
             if eff is not None and eff["value"] is not None and math.isfinite(eff["value"]):
@@ -236,7 +238,8 @@ def integrand_figure(group: Group) -> bytes:
             _convergence_panel(lay.axes(0.7, bottom, a_w, _PLOT_H), curves, color, unit[0])
             _time_panel(lay.axes(0.7 + a_w + 0.75, bottom, split - 0.7 - a_w - 0.75, _PLOT_H), curves, color,
                         unit[1])
-            lay.fig.legend(*_legend(curves, color), loc="lower left", bbox_to_anchor=(0.5 / _WIDTH, 0.04 / height),
+            lay.fig.legend(*_legend(curves, color), loc="lower left",
+                           bbox_to_anchor=(0.5 / _WIDTH, 0.04 / height),
                            ncol=ncol, frameon=False, handlelength=2.0, columnspacing=1.8, borderaxespad=0)
         if ratios:
             left = (8.6 if curves else 0.3) + 0.3 + label_w
@@ -249,7 +252,8 @@ def _legend(curves: list[Curve], color: dict[str, Any]) -> tuple[list, list[str]
 
     handles, labels = [], []
     for i, c in enumerate(curves):
-        handles.append(Line2D([], [], color=color[c.technique], marker=_MARKERS[i % len(_MARKERS)], markersize=4))
+        handles.append(Line2D([], [], color=color[c.technique], marker=_MARKERS[i % len(_MARKERS)],
+                              markersize=4))
         if math.isfinite(c.slope):
             s = f"slope {c.slope:+.2f} [{c.slope_lo:+.2f}, {c.slope_hi:+.2f}]".replace("-", "−")
         else:
@@ -267,8 +271,8 @@ def _convergence_panel(ax, curves: list[Curve], color: dict[str, Any], xlabel: s
             continue
         col, mk = color[c.technique], _MARKERS[i % len(_MARKERS)]
         yerr = np.vstack([p["err"] - p["lo"], p["hi"] - p["err"]])
-        ax.errorbar(p["n"], p["err"], yerr=np.where(np.isfinite(yerr), yerr, 0), fmt=mk, color=col, markersize=3.5,
-                    capsize=2, elinewidth=0.8, lw=0)
+        ax.errorbar(p["n"], p["err"], yerr=np.where(np.isfinite(yerr), yerr, 0), fmt=mk, color=col,
+                    markersize=3.5, capsize=2, elinewidth=0.8, lw=0)
         if math.isfinite(c.slope) and len(p) >= 2:
             # the least-squares line passes through the mean of log n and log error
             x0, y0 = np.mean(np.log(p["n"])), np.mean(np.log(p["err"]))
@@ -281,8 +285,10 @@ def _convergence_panel(ax, curves: list[Curve], color: dict[str, Any], xlabel: s
             x0, y0 = np.mean(np.log(first["n"])), np.mean(np.log(first["err"])) + math.log(3)
             xs = np.array([min(d["n"].min() for d in drawn), max(d["n"].max() for d in drawn)])
             ax.plot(xs, np.exp(y0 + e * (np.log(xs) - x0)), color="0.35", lw=1, ls=(0, (4, 3)))
-            ax.annotate(f"expected rate, slope {e:+g}".replace("-", "−"), (xs[0], np.exp(y0 + e * (np.log(xs[0]) - x0))),
-                        xytext=(2, 4), textcoords="offset points", ha="left", va="bottom", fontsize=7.5, color="0.3")
+            ax.annotate(f"expected rate, slope {e:+g}".replace("-", "−"),
+                        (xs[0], np.exp(y0 + e * (np.log(xs[0]) - x0))),
+                        xytext=(2, 4), textcoords="offset points", ha="left", va="bottom", fontsize=7.5,
+                        color="0.3")
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel(xlabel)
@@ -380,7 +386,8 @@ def sampler_figure(domain: str, detail: dict[str, Any], n: int) -> bytes | None:
             if np.isnan(res[g]).all():
                 ax.text(0.5, 0.5, "every cell pooled:\nexpectation < 5 per cell", ha="center", va="center",
                         transform=ax.transAxes, fontsize=8, color="0.3")
-            ax.set_title(f"{g} grid {shape.replace('x', '×')}\n{_stat_text(_test(tests, f'chi-square {shape}'))}",
+            ax.set_title(f"{g} grid {shape.replace('x', '×')}\n"
+                         f"{_stat_text(_test(tests, f'chi-square {shape}'))}",
                          loc="left", fontsize=8)
         if image is not None:
             cax = lay.axes(7.25, bottom, 0.12, plot_h)
@@ -389,9 +396,9 @@ def sampler_figure(domain: str, detail: dict[str, Any], n: int) -> bytes | None:
         width = (_WIDTH - 0.25 - x0 - 0.7 * (len(marg) - 1)) / max(len(marg), 1)
         for j, (axis, m) in enumerate(sorted(marg.items())):
             _marginal(lay, x0 + j * (width + 0.7), bottom, width, plot_h, axis, m, labels, tests)
-        lay.fig.text(0.65 / _WIDTH, 0.06 / height, f"n = {n:,} samples.  Residuals (o − e)/σ per cell, colour "
-                     "clipped at ±4; grey (or 0): cells with expectation < 5, pooled in the statistic.  s: the "
-                     "domain's equal-measure coordinates.",
+        lay.fig.text(0.65 / _WIDTH, 0.06 / height, f"n = {n:,} samples.  Residuals (o − e)/σ per cell, "
+                     "colour clipped at ±4; grey (or 0): cells with expectation < 5, pooled in the "
+                     "statistic.  s: the domain's equal-measure coordinates.",
                      fontsize=7.5, color="0.35")
         return _png(lay.fig)
 
@@ -416,8 +423,8 @@ def _marginal(lay: _Layout, left: float, bottom: float, width: float, height: fl
         _log_ticks(top)
     top.set_ylabel("density")
     top.legend(loc="best", frameon=False, fontsize=7)
-    top.set_title(f"marginal {axis} ({bins} bins shown)\n{_stat_text(_test(tests, f'marginal {axis}'))}", loc="left",
-                  fontsize=8)
+    top.set_title(f"marginal {axis} ({bins} bins shown)\n{_stat_text(_test(tests, f'marginal {axis}'))}",
+                  loc="left", fontsize=8)
     top.tick_params(labelbottom=False)
     with np.errstate(invalid="ignore", divide="ignore"):
         z = np.clip(np.where(exp >= 5, (obs - exp) / np.sqrt(exp), 0.0), -5, 5)

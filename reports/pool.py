@@ -26,7 +26,8 @@ def _call(job: tuple[Callable[..., T], tuple[Any, ...]]) -> T:
     return fn(*args)
 
 
-def draw_all(jobs: Sequence[tuple[Callable[..., T], tuple[Any, ...]]], *, workers: int | None = None) -> list[T]:
+def draw_all(jobs: Sequence[tuple[Callable[..., T], tuple[Any, ...]]], *,
+             workers: int | None = None) -> list[T]:
     """``[fn(*args) for fn, args in jobs]``, in order, on up to ``workers`` processes
     (default: the CPUs this process may use, at most 8).  ``fn`` must be a module-level function."""
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)

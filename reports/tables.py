@@ -19,8 +19,9 @@ import pandas as pd
 from harness.suite.verdicts import FAILING, PASSING
 from reports.data import SAMPLER_PREFIX, Results
 
-__all__ = ["Cell", "Column", "value_of", "wide_table", "summary_columns", "sampler_columns", "render_rows", "to_markdown",
-           "to_csv", "BAD", "GOOD", "HIDDEN", "verdict_class", "fmt_num", "fmt_p", "p_equals", "fmt_n", "fmt_interval"]
+__all__ = ["Cell", "Column", "value_of", "wide_table", "summary_columns", "sampler_columns", "render_rows",
+           "to_markdown", "to_csv", "BAD", "GOOD", "HIDDEN", "verdict_class", "fmt_num", "fmt_p", "p_equals",
+           "fmt_n", "fmt_interval"]
 
 # measurements in display order; others follow alphabetically
 ORDER = ("bias", "variance", "convergence_slope", "convergence", "efficiency_ratio", "efficiency",
@@ -30,18 +31,22 @@ ORDER = ("bias", "variance", "convergence_slope", "convergence", "efficiency_rat
 HIDDEN = {"variance", "log10_efficiency", "error_vs_time", "rmse"}
 LABELS = {
     "bias": ("bias [95% CI]", "estimate − exact value, 95 % interval from the batch means; n = samples"),
-    "convergence_slope": ("RMSE slope [95% CI]", "log-log slope of RMSE against samples per estimate, bootstrap "
-                                                 "95 % interval; n = replicas over all budgets"),
+    "convergence_slope": ("RMSE slope [95% CI]", "log-log slope of RMSE against samples per estimate, "
+                                                 "bootstrap 95 % interval; n = replicas over all budgets"),
     "convergence": ("error slope [95% CI]", "log-log slope of the error against the budget, 95 % interval"),
-    "efficiency_ratio": ("1/(V·T) vs baseline [95% CI]", "efficiency 1/(variance × time) as a ratio against the "
-                                                         "baseline technique, 95 % interval; n = samples"),
+    "efficiency_ratio": ("1/(V·T) vs baseline [95% CI]", "efficiency 1/(variance × time) as a ratio "
+                                                         "against the baseline technique, 95 % interval; "
+                                                         "n = samples"),
     "efficiency": ("efficiency vs baseline [95% CI]", "efficiency ratio against the baseline configuration "
                                                       "(1/(relMSE × time) for renders), 95 % interval"),
-    "rmse": ("RMSE [95% CI]", "root-mean-square error at the largest budget, 95 % interval; n = samples per estimate"),
-    "relmse": ("relMSE [95% CI]", "relative mean squared error of the image at the largest budget, 95 % interval; "
-                                  "n = replicas"),
-    "equal_time_relmse": ("relMSE at equal time", "relMSE interpolated to a common render time; n = replicas"),
-    "target_half_width": ("CI half-width", "half-width of the bias test's interval against its precision target"),
+    "rmse": ("RMSE [95% CI]", "root-mean-square error at the largest budget, 95 % interval; "
+                              "n = samples per estimate"),
+    "relmse": ("relMSE [95% CI]", "relative mean squared error of the image at the largest budget, "
+                                  "95 % interval; n = replicas"),
+    "equal_time_relmse": ("relMSE at equal time", "relMSE interpolated to a common render time; "
+                                                  "n = replicas"),
+    "target_half_width": ("CI half-width", "half-width of the bias test's interval "
+                                           "against its precision target"),
 }
 # a CI failure, and a missed precision target (shown as bad, though a run does not fail on it)
 BAD = FAILING | {"not reached"}
@@ -98,7 +103,8 @@ def wide_table(m: pd.DataFrame) -> pd.DataFrame:
     rows: dict[str, dict[str, Any]] = {}
     for r in m.itertuples(index=False):
         row = rows.setdefault(r.case_key, {"suite": r.suite, "kind": r.kind, "integrand": r.integrand,
-                                           "technique": r.technique, "case_key": r.case_key, "alpha": r.alpha})
+                                           "technique": r.technique, "case_key": r.case_key,
+                                           "alpha": r.alpha})
         k = r.measurement
         row.update({k: r.value, f"{k}_lo": r.lo, f"{k}_hi": r.hi, f"{k}_n": r.n, f"{k}_pvalue": r.pvalue,
                     f"{k}_verdict": r.verdict})
@@ -164,17 +170,20 @@ def _value_column(k: str) -> Column:
             notes.append(f"expected {fmt_num(row[f'{k}_expected'], '+.2f')}")
         if value_of(row, f"{k}_baseline") is not None:
             notes.append(f"vs {row[f'{k}_baseline']}")
-        return Cell(fmt_interval(value_of(row, k), value_of(row, f"{k}_lo"), value_of(row, f"{k}_hi"), fmt), ", ".join(notes))
+        return Cell(fmt_interval(value_of(row, k), value_of(row, f"{k}_lo"), value_of(row, f"{k}_hi"), fmt),
+                    ", ".join(notes))
     return Column(header, title, cell, numeric=True)
 
 
 def summary_columns(wide: pd.DataFrame) -> list[Column]:
     """The summary table's columns for the cases in ``wide`` (a wide_table of one kind of case)."""
     cols = [Column("integrand", "integrand or scene", lambda r: Cell(str(r["integrand"]))),
-            Column("technique", "estimator technique or renderer configuration", lambda r: Cell(str(r["technique"])))]
+            Column("technique", "estimator technique or renderer configuration",
+                   lambda r: Cell(str(r["technique"])))]
     if "estimate" in wide:
         cols.append(Column("estimate ± s.e.", "the bias test's estimate and its standard error; n = samples",
-                           lambda r: Cell(f"{fmt_num(value_of(r, 'estimate'), '.9g')} ± {fmt_num(value_of(r, 'stderr'), '.2g')}"
+                           lambda r: Cell(f"{fmt_num(value_of(r, 'estimate'), '.9g')} ± "
+                                          f"{fmt_num(value_of(r, 'stderr'), '.2g')}"
                                           if value_of(r, "estimate") is not None else "—"),
                            numeric=True))
     present = [c for c in wide.columns if f"{c}_lo" in wide or f"{c}_verdict" in wide or f"{c}_n" in wide]
@@ -183,16 +192,18 @@ def summary_columns(wide: pd.DataFrame) -> list[Column]:
             continue
         cols.append(_value_column(k))
         if f"{k}_verdict" in wide:
-            cols.append(Column("verdict (p)", f"verdict of the {k} test, Holm-corrected across the suite at its α; "
-                                              "p-value before the correction",
+            cols.append(Column("verdict (p)", f"verdict of the {k} test, Holm-corrected across the suite "
+                                              "at its α; p-value before the correction",
                                lambda r, k=k: Cell(str(value_of(r, f"{k}_verdict") or "—"),
                                                    p_equals(value_of(r, f"{k}_pvalue"))
                                                    if value_of(r, f"{k}_pvalue") is not None else "",
                                                    verdict=str(value_of(r, f"{k}_verdict") or ""))))
         elif f"{k}_pvalue" in wide:
-            cols.append(Column("p", f"p-value of the {k} test", lambda r, k=k: Cell(fmt_p(value_of(r, f"{k}_pvalue"))),
+            cols.append(Column("p", f"p-value of the {k} test",
+                               lambda r, k=k: Cell(fmt_p(value_of(r, f"{k}_pvalue"))),
                                numeric=True))
-    cols.append(Column("α", "the suite's family-wise false-alarm rate (Holm)", lambda r: Cell(fmt_num(value_of(r, "alpha"), "g")),
+    cols.append(Column("α", "the suite's family-wise false-alarm rate (Holm)",
+                       lambda r: Cell(fmt_num(value_of(r, "alpha"), "g")),
                        numeric=True))
     if "flags" in wide:
         cols.append(Column("notes", "warnings of the bias test: heavy tails, skewed batches, faults",
@@ -207,21 +218,28 @@ def sampler_columns() -> list[Column]:
         return Cell("—" if not _finite(v[0]) else f"{v[0]:.6f} ± {v[1]:.1e}")
 
     def failures(r: dict[str, Any]) -> Cell:
-        return Cell("; ".join(f"{f['check']}: {f['count']}" for f in r["detail"].get("failures", [])) or "none")
+        return Cell("; ".join(f"{f['check']}: {f['count']}" for f in r["detail"].get("failures", []))
+                    or "none")
 
     return [
-        Column("sampler", "catalogue sampler and parameters", lambda r: Cell(r["integrand"][len(SAMPLER_PREFIX):])),
+        Column("sampler", "catalogue sampler and parameters",
+               lambda r: Cell(r["integrand"][len(SAMPLER_PREFIX):])),
         Column("domain", "sampling domain", lambda r: Cell(str(r["technique"]))),
         Column("check", "chi_square: cubature-based tests; mcmc: two-sample tests against emcee draws",
                lambda r: Cell(str(r["measurement"]))),
         Column("n", "samples drawn", lambda r: Cell(fmt_n(r["n"])), numeric=True),
-        Column("p", "smallest Holm-adjusted p-value of the check's sub-tests", lambda r: Cell(fmt_p(r["pvalue"])),
+        Column("p", "smallest Holm-adjusted p-value of the check's sub-tests",
+               lambda r: Cell(fmt_p(r["pvalue"])),
                numeric=True),
-        Column("verdict", "Holm across the suite's sampler checks at its α; deterministic failures always fail",
+        Column("verdict", "Holm across the suite's sampler checks at its α; "
+                          "deterministic failures always fail",
                lambda r: Cell(str(r["verdict"] or "—"), verdict=str(r["verdict"] or ""))),
-        Column("α", "the suite's family-wise false-alarm rate", lambda r: Cell(fmt_num(r["alpha"], "g")), numeric=True),
-        Column("∫ pdf", "integral of the claimed pdf over the domain (cubature) ± its error bound", norm, numeric=True),
-        Column("deterministic failures", "points outside the domain, zero/NaN/negative pdf, normalisation", failures),
+        Column("α", "the suite's family-wise false-alarm rate", lambda r: Cell(fmt_num(r["alpha"], "g")),
+               numeric=True),
+        Column("∫ pdf", "integral of the claimed pdf over the domain (cubature) ± its error bound", norm,
+               numeric=True),
+        Column("deterministic failures", "points outside the domain, zero/NaN/negative pdf, normalisation",
+               failures),
     ]
 
 

@@ -24,8 +24,8 @@ def test_main_job_prints_every_case_of_the_default_suite(root, tmp_path):
     suite = load_suite(root / "suites" / "default.toml")
     lines = r.stdout.splitlines()
     header = next(line for line in lines if line.startswith("integrand"))
-    for col in ("technique", "n", "estimate ± stderr", "exact", "t", "p", "bias (Holm, α=0.01)", "RMSE slope [95% CI]",
-                "1/(V·T) vs baseline [95% CI]", "notes"):
+    for col in ("technique", "n", "estimate ± stderr", "exact", "t", "p", "bias (Holm, α=0.01)",
+                "RMSE slope [95% CI]", "1/(V·T) vs baseline [95% CI]", "notes"):
         assert col in header, col
     rows = {}
     for case in suite.cases:
@@ -56,8 +56,9 @@ def test_csv_output(tmp_path):
     import pandas as pd
 
     df = pd.read_csv(out)
-    assert {"integrand", "technique", "n", "estimate", "stderr", "exact", "z", "pvalue", "verdict", "slope", "slope_lo",
-            "slope_hi", "log10_efficiency", "efficiency_ratio", "ratio_lo", "ratio_hi", "notes"} <= set(df)
+    assert {"integrand", "technique", "n", "estimate", "stderr", "exact", "z", "pvalue", "verdict", "slope",
+            "slope_lo", "slope_hi", "log10_efficiency", "efficiency_ratio", "ratio_lo", "ratio_hi",
+            "notes"} <= set(df)
     assert list(df["technique"]) == ["uniform", "uniform/stratified", "clamped:uniform(0.9)"]
     assert list(df["verdict"]) == ["unbiased", "unbiased", "biased (expected)"]
     assert df["n"].tolist() == [65536] * 3
@@ -88,38 +89,46 @@ BAD_SUITES = [
     (GOOD_HEAD + '[[case]]\nintegrand = "gausian"\n', 6, "integrand", "unknown integrand 'gausian'"),
     (GOOD_HEAD + '[[case]]\nintegrand = "gaussian"\ntechniques = ["uniform", "mis"]\n', 7, "techniques",
      "unknown technique 'mis' for integrand 'gaussian'"),
-    ('[suite]\nsamples = 0\n\n[[case]]\nintegrand = "gaussian"\n', 2, "samples", "expected a budget > 0 samples, got 0"),
-    (GOOD_HEAD + '[[case]]\nintegrand = "gaussian"\n\n[[case]]\nintegrand = "step"\nsamples = -3\n', 10, "samples",
+    ('[suite]\nsamples = 0\n\n[[case]]\nintegrand = "gaussian"\n', 2, "samples",
+     "expected a budget > 0 samples, got 0"),
+    (GOOD_HEAD + '[[case]]\nintegrand = "gaussian"\n\n'
+     '[[case]]\nintegrand = "step"\nsamples = -3\n', 10, "samples",
      "expected a budget > 0 samples, got -3"),
-    ('[suite]\nsamples = "many"\n\n[[case]]\nintegrand = "gaussian"\n', 2, "samples", "expected int, got str 'many'"),
+    ('[suite]\nsamples = "many"\n\n[[case]]\nintegrand = "gaussian"\n', 2, "samples",
+     "expected int, got str 'many'"),
     (GOOD_HEAD + '[[case]]\nintegrand = 3\n', 6, "integrand", "expected str, got int 3"),
     ('[suite]\nseed = -1\n[[case]]\nintegrand = "gaussian"\n', 2, "seed", "expected an integer >= 0"),
     ('[suites]\nname = "x"\n', 1, "suites", "unknown table 'suites'"),
     (GOOD_HEAD, None, "case", "expected at least one [[case]], [[sampler]] or [[render]] table"),
-    (GOOD_HEAD + '[[sampler]]\nname = "gxx"\n', 6, "name", "unknown sampler 'gxx'; expected one of: exponential"),
+    (GOOD_HEAD + '[[sampler]]\nname = "gxx"\n', 6, "name",
+     "unknown sampler 'gxx'; expected one of: exponential"),
     (GOOD_HEAD + '[[sampler]]\nname = "ggx"\nparams = { alpha = -1 }\n', 7, "params",
      "sampler 'ggx': parameter 'alpha' must be > 0, got -1"),
-    (GOOD_HEAD + '[[sampler]]\nname = "ggx"\ndomain = "torus"\n', 7, "domain", "expected one of: interval, half_line"),
+    (GOOD_HEAD + '[[sampler]]\nname = "ggx"\ndomain = "torus"\n', 7, "domain",
+     "expected one of: interval, half_line"),
     (GOOD_HEAD + '[[sampler]]\nname = "ggx"\nmeasurements = ["bias"]\n', 7, "measurements",
      "unknown sampler measurement 'bias'; expected some of: chi_square, mcmc"),
     (GOOD_HEAD + '[[sampler]]\nname = "piecewise_constant_2d"\n', 6, "name", "needs a table of values"),
     (GOOD_HEAD + '[[case]]\ntechniques = "all"\n', 5, None, "missing key 'integrand'"),
     ('[suite]\nsamples = 1000\nmeasurements = ["bias", "chi_square"]\n[[case]]\nintegrand = "gaussian"\n', 3,
-     "measurements", "unknown measurement 'chi_square'; expected some of: bias, variance, convergence, efficiency, "
-     "error_vs_time (sampler checks go in [[sampler]] tables)"),
-    (GOOD_HEAD + '[[case]]\nintegrand = "gaussian"\nmeasurements = []\n', 7, "measurements", "expected at least one"),
+     "measurements", "unknown measurement 'chi_square'; expected some of: bias, variance, convergence, "
+     "efficiency, error_vs_time (sampler checks go in [[sampler]] tables)"),
+    (GOOD_HEAD + '[[case]]\nintegrand = "gaussian"\nmeasurements = []\n', 7, "measurements",
+     "expected at least one"),
     ('[suite]\nsamples = 1000\nalpha = 1.5\n[[case]]\nintegrand = "gaussian"\n', 3, "alpha",
      "expected a false-alarm rate in (0, 1), got 1.5"),
     ('[suite]\nsamples = 1000\nbudgets = [100, 0, 10]\n[[case]]\nintegrand = "gaussian"\n', 3, "budgets",
      "expected at least 3 positive integer budgets"),
     ('[suite]\nsamples = 1000\nbatches = 4\n[[case]]\nintegrand = "gaussian"\n', 3, "batches",
      "expected an integer in [8, samples = 1000], got 4"),
-    (GOOD_HEAD + '[[case]]\nintegrand = "gaussian"\nsamples = 10\n', 7, "samples", "expected at least batches = 64 samples"),
+    (GOOD_HEAD + '[[case]]\nintegrand = "gaussian"\nsamples = 10\n', 7, "samples",
+     "expected at least batches = 64 samples"),
     (GOOD_HEAD + '[[case]]\nintegrand = "offset"\ntarget = 1e-10\nmax_samples = 5000\n', 7, "target",
      "no budget can reach a half-width of 1e-10: it must be > 0 and above the rounding floor 3.55e-07"),
     (GOOD_HEAD + '[[case]]\nintegrand = "gaussian"\ntarget = 0.0\nmax_samples = 5000\n', 7, "target",
      "no budget can reach a half-width of 0"),
-    (GOOD_HEAD + '[[case]]\nintegrand = "gaussian"\ntarget = 1e-3\n', 7, "target", "a target needs max_samples"),
+    (GOOD_HEAD + '[[case]]\nintegrand = "gaussian"\ntarget = 1e-3\n', 7, "target",
+     "a target needs max_samples"),
     (GOOD_HEAD + '[[case]]\nintegrand = "gaussian"\ntarget = 1e-3\nmax_samples = 10\n', 8, "max_samples",
      "expected at least samples = 1000, got 10"),
     (GOOD_HEAD + '[[case]]\nintegrand = "gaussian"\nmax_samples = 10000\n', 7, "max_samples",

@@ -81,7 +81,8 @@ def image_faults(image: np.ndarray, *, max_examples: int = 8) -> ImageFaults:
         setattr(faults, kind, count)
         if count:
             rows, cols = np.nonzero(mask)
-            faults.examples[kind] = [(int(r), int(c)) for r, c in zip(rows[:max_examples], cols[:max_examples])]
+            faults.examples[kind] = [(int(r), int(c))
+                                     for r, c in zip(rows[:max_examples], cols[:max_examples])]
     return faults
 
 

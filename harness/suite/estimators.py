@@ -111,7 +111,8 @@ class EstimatorKind:
         jobs = []
         for key, c in self.case_of.items():
             for u in estimator_units(self.suite, c, self.looks.get(key, 0)):
-                jobs.append(EstimateJob(u, c.integrand, c.technique, self.suite.seed, core_case_id(c, u.stream)))
+                jobs.append(EstimateJob(u, c.integrand, c.technique, self.suite.seed,
+                                        core_case_id(c, u.stream)))
         return jobs
 
     def advance(self, store: Store) -> bool:
@@ -127,16 +128,18 @@ class EstimatorKind:
 
     def outcome(self, store: Store) -> Outcome:
         suite = self.suite
-        results = [_measure(suite, c, store.payloads(k), self.looks.get(k, 0)) for k, c in self.case_of.items()]
+        results = [_measure(suite, c, store.payloads(k), self.looks.get(k, 0))
+                   for k, c in self.case_of.items()]
         table = results_table(results, suite.alpha)
         verdicts = [{"bias": v, "convergence": cv} for v, cv in zip(table.get("verdict", ()),
                                                                    table.get("convergence", ()))]
         failures = [_failure(r, v, suite.alpha, len(results)) for r, v in zip(results, verdicts)]
-        text = (format_table(table, suite.alpha) + f"\nt: Student t of {suite.batches} batch means against the "
-                "exact value; RMSE slope: log-log fit over budgets (expected -0.5 for Monte Carlo); 1/(V·T): "
-                "efficiency (background eq. 5) against uniform MC on the same integrand." if results else "")
-        return Outcome(self.name, "cases", tuple(self.names()), tuple(results), tuple(verdicts), tuple(failures),
-                       tuple(_rows(suite, results, table)), table, text)
+        text = (format_table(table, suite.alpha) + f"\nt: Student t of {suite.batches} batch means against "
+                "the exact value; RMSE slope: log-log fit over budgets (expected -0.5 for Monte Carlo); "
+                "1/(V·T): efficiency (background eq. 5) against uniform MC on the same integrand."
+                if results else "")
+        return Outcome(self.name, "cases", tuple(self.names()), tuple(results), tuple(verdicts),
+                       tuple(failures), tuple(_rows(suite, results, table)), table, text)
 
 
 # --- measuring -----------------------------------------------------------------------------------
@@ -168,8 +171,9 @@ def _measure(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int = 0
             tail = next(p for u, p in payloads.items() if u.kind == "tail" and u.stream == stream)
             tails = stats.TailSample.from_tops(tail["upper"], tail["lower"])
             if faults:
-                bias = stats.UnbiasedResult.invalid(faults, next(e for e in batches if e.issues).examples,
-                                                    reference=f.reference, n=b * suite.batches, alpha=suite.alpha,
+                first = next(e for e in batches if e.issues)
+                bias = stats.UnbiasedResult.invalid(faults, first.examples, reference=f.reference,
+                                                    n=b * suite.batches, alpha=suite.alpha,
                                                     batches=suite.batches)
             else:
                 bias = stats.judge_batches(batches, tails, f.reference, suite.alpha, iid=t.iid)
@@ -177,7 +181,8 @@ def _measure(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int = 0
                 # alpha spent over the looks a target may take (Bonferroni: any dependence, any
                 # stopping rule): the final look's p-value times the number of looks
                 p = min(1.0, bias.pvalue * case.looks)
-                verdict = "consistent" if p >= suite.alpha else ("inconclusive" if bias.heavy_tail else "biased")
+                verdict = ("consistent" if p >= suite.alpha else
+                           "inconclusive" if bias.heavy_tail else "biased")
                 bias = dataclasses.replace(bias, pvalue=p, verdict=verdict)
         if "variance" in wanted and not faults and t.iid:
             reps = stats.Replicates.from_estimates(f, t, b, batches)
@@ -197,8 +202,9 @@ def _measure(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int = 0
             conv = stats.fit_convergence(list(reps_by_budget.values()), seed=suite.seed)
         if "error_vs_time" in wanted:
             evt = pd.DataFrame([{"n": r.n, "rmse": r.rmse, "rmse_lo": r.rmse_interval()[0],
-                                 "rmse_hi": r.rmse_interval()[1], "seconds": r.time[0], "seconds_se": r.time[1],
-                                 "replicas": r.replicas} for r in reps_by_budget.values()])
+                                 "rmse_hi": r.rmse_interval()[1], "seconds": r.time[0],
+                                 "seconds_se": r.time[1], "replicas": r.replicas}
+                                for r in reps_by_budget.values()])
     return CaseResult(case, t, key, bias, conv, eff, variance, evt, look)
 
 
@@ -208,10 +214,12 @@ def _judge_convergence(results: list[CaseResult], alpha: float) -> list[str]:
     alpha: 'as expected', 'slower than expected', or 'not judged' where no rate is promised
     (infinite variance, heavy tails or skewed batches seen by the bias test: pre-asymptotic)
     or the technique is biased on purpose (its error stops falling at the bias)."""
-    judged = [r.convergence is not None and not r.technique.biased and r.technique.finite_variance is not False
-              and not (r.bias is not None and r.bias.flags) for r in results]
+    judged = [r.convergence is not None and not r.technique.biased
+              and r.technique.finite_variance is not False and not (r.bias is not None and r.bias.flags)
+              for r in results]
     # cases not judged enter the family with p = 1 (they count in Holm's m)
-    rejected, _ = family_rejections([r.convergence.pvalue if ok else 1.0 for r, ok in zip(results, judged)], alpha)
+    rejected, _ = family_rejections([r.convergence.pvalue if ok else 1.0 for r, ok in zip(results, judged)],
+                                    alpha)
     out = []
     for r, ok, rej in zip(results, judged, rejected):
         if r.convergence is None:
@@ -228,8 +236,8 @@ def _judge_bias(results: list[CaseResult], alpha: float) -> list[str]:
     alpha): 'unbiased', 'biased', 'biased (expected)', 'bias missed', 'inconclusive',
     'invalid', 'not measured'."""
     # cases without a valid test enter the family with p = 1 (they count in Holm's m)
-    rejected, _ = family_rejections([r.bias.pvalue if r.bias is not None and r.bias.verdict != "invalid" else 1.0
-                                  for r in results], alpha)
+    rejected, _ = family_rejections([r.bias.pvalue if r.bias is not None and r.bias.verdict != "invalid"
+                                     else 1.0 for r in results], alpha)
     out = []
     for r, rej in zip(results, rejected):
         if r.bias is None:
@@ -272,13 +280,14 @@ def _rows(suite: Suite, results: list[CaseResult], table: pd.DataFrame) -> list[
     """One row per case and measurement, for the store (and harness.load)."""
     rows = []
     for r, row in zip(results, table.to_dict("records")):
-        base = {"case_key": r.key, "suite": suite.name, "integrand": r.case.integrand, "technique": r.case.technique,
-                "alpha": suite.alpha}
+        base = {"case_key": r.key, "suite": suite.name, "integrand": r.case.integrand,
+                "technique": r.case.technique, "alpha": suite.alpha}
         if r.bias is not None:
             b = r.bias
             lo, hi = b.confidence_interval(0.95) if math.isfinite(b.stderr) else (math.nan, math.nan)
-            rows.append({**base, "measurement": "bias", "value": b.estimate - b.reference, "lo": lo - b.reference,
-                         "hi": hi - b.reference, "n": b.n, "pvalue": b.pvalue, "verdict": row["verdict"],
+            rows.append({**base, "measurement": "bias", "value": b.estimate - b.reference,
+                         "lo": lo - b.reference, "hi": hi - b.reference, "n": b.n, "pvalue": b.pvalue,
+                         "verdict": row["verdict"],
                          "detail": {"estimate": b.estimate, "stderr": b.stderr, "t": b.statistic,
                                     "flags": list(b.flags),
                                     "counts": stats.failure_counts(b.failures)}})
@@ -289,8 +298,8 @@ def _rows(suite: Suite, results: list[CaseResult], table: pd.DataFrame) -> list[
                          "detail": {"target": r.case.target, "look": r.look + 1, "looks": r.case.looks}})
         if r.variance is not None:
             v, se, n = r.variance
-            rows.append({**base, "measurement": "variance", "value": v, "lo": v - 1.96 * se, "hi": v + 1.96 * se,
-                         "n": n})
+            rows.append({**base, "measurement": "variance", "value": v, "lo": v - 1.96 * se,
+                         "hi": v + 1.96 * se, "n": n})
         if r.convergence is not None:
             c = r.convergence
             lo, hi = c.confidence_interval()
@@ -301,8 +310,9 @@ def _rows(suite: Suite, results: list[CaseResult], table: pd.DataFrame) -> list[
         if r.efficiency is not None:
             e = r.efficiency
             z = 1.96 * e.log_se / math.log(10)
-            rows.append({**base, "measurement": "log10_efficiency", "value": e.log10_value, "lo": e.log10_value - z,
-                         "hi": e.log10_value + z, "n": e.n, "detail": {"seconds": e.seconds}})
+            rows.append({**base, "measurement": "log10_efficiency", "value": e.log10_value,
+                         "lo": e.log10_value - z, "hi": e.log10_value + z, "n": e.n,
+                         "detail": {"seconds": e.seconds}})
             rows.append({**base, "measurement": "efficiency_ratio", "value": row["efficiency_ratio"],
                          "lo": row["ratio_lo"], "hi": row["ratio_hi"], "n": e.n,
                          "detail": {"baseline": row["efficiency_baseline"]}})
@@ -382,7 +392,8 @@ def format_table(df: pd.DataFrame, alpha: float) -> str:
         "t": (df["z"].map(lambda z: f"{z:+.2f}" if math.isfinite(z) else str(z)), ">"),
         "p": (df["pvalue"].map(lambda p: f"{p:.2g}"), ">"),
         f"bias (Holm, α={alpha:g})": (df["verdict"], "<"),
-        "RMSE slope [95% CI]": ([interval(v, lo, hi, "+.2f") + (" slower!" if cv == "slower than expected" else "")
+        "RMSE slope [95% CI]": ([interval(v, lo, hi, "+.2f")
+                                 + (" slower!" if cv == "slower than expected" else "")
                                  for v, lo, hi, cv in zip(df["slope"], df["slope_lo"], df["slope_hi"],
                                                           df["convergence"])], "<"),
         "1/(V·T) vs baseline [95% CI]": ([interval(v, lo, hi, ".3g") for v, lo, hi in

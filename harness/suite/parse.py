@@ -97,7 +97,8 @@ class SamplerCase:
     def label(self) -> str:
         if self.adapter:
             return f"{self.adapter}:{self.name}"
-        return self.name + ("(" + ", ".join(f"{k}={v:g}" for k, v in self.params) + ")" if self.params else "")
+        return self.name + ("(" + ", ".join(f"{k}={v:g}" for k, v in self.params) + ")"
+                            if self.params else "")
 
 
 @dataclass(frozen=True)
@@ -173,8 +174,8 @@ _RENDER_KEYS = {"adapter": str, "spp": int, "replicas": int, "budgets": list, "r
 _SUITE_KEYS = {"name": str, "seed": int, "samples": int, "threads": int, "alpha": float, "batches": int,
                "replicas": int, "budgets": list, "measurements": list}
 _SAMPLER_KEYS = {"name": str, "params": dict, "domain": str, "samples": int, "measurements": list}
-_CASE_KEYS = {"integrand": str, "techniques": (str, list), "samples": int, "measurements": list, "target": float,
-              "max_samples": int}
+_CASE_KEYS = {"integrand": str, "techniques": (str, list), "samples": int, "measurements": list,
+              "target": float, "max_samples": int}
 
 
 def load_suite(path: str | Path) -> Suite:
@@ -192,8 +193,8 @@ def load_suite(path: str | Path) -> Suite:
 
     for key in data:
         if key not in ("suite", "case", "sampler", "render"):
-            raise SuiteError(where.at(None, key, f"unknown table {key!r}; expected [suite], [[case]], [[sampler]] "
-                                      "and [[render]] tables"))
+            raise SuiteError(where.at(None, key, f"unknown table {key!r}; expected [suite], [[case]], "
+                                      "[[sampler]] and [[render]] tables"))
     head = data.get("suite", {})
     if not isinstance(head, dict):
         raise SuiteError(where.at(None, "suite", "expected a [suite] table"))
@@ -205,27 +206,32 @@ def load_suite(path: str | Path) -> Suite:
         raise SuiteError(where.at("suite", "seed", f"expected an integer >= 0, got {seed}"))
     threads = head.get("threads")
     if threads is not None and threads < 0:
-        raise SuiteError(where.at("suite", "threads", f"expected an integer >= 0 (0: all cores), got {threads}"))
+        raise SuiteError(where.at("suite", "threads",
+                                  f"expected an integer >= 0 (0: all cores), got {threads}"))
     alpha = head.get("alpha", 0.01)
     if not 0 < alpha < 1:
         raise SuiteError(where.at("suite", "alpha", f"expected a false-alarm rate in (0, 1), got {alpha}"))
     batches = head.get("batches", 64)
     if not 8 <= batches <= samples:
-        raise SuiteError(where.at("suite", "batches", f"expected an integer in [8, samples = {samples}], got {batches}"))
+        raise SuiteError(where.at("suite", "batches",
+                                  f"expected an integer in [8, samples = {samples}], got {batches}"))
     replicas = head.get("replicas", 32)
     if replicas < 2:
         raise SuiteError(where.at("suite", "replicas", f"expected at least 2 replicas, got {replicas}"))
     budgets = head.get("budgets")
     if budgets is not None:
         if len(budgets) < 3 or any(isinstance(b, bool) or not isinstance(b, int) or b <= 0 for b in budgets):
-            raise SuiteError(where.at("suite", "budgets", f"expected at least 3 positive integer budgets, got {budgets}"))
+            raise SuiteError(where.at("suite", "budgets",
+                                      f"expected at least 3 positive integer budgets, got {budgets}"))
         budgets = tuple(sorted(set(budgets)))
 
     measurements = _measurements(head.get("measurements", list(MEASUREMENTS)), where, "suite")
 
     raw_cases = data.get("case", [])
-    if not isinstance(raw_cases, list) or (not raw_cases and not data.get("sampler") and not data.get("render")):
-        raise SuiteError(where.at(None, "case", "expected at least one [[case]], [[sampler]] or [[render]] table"))
+    if not isinstance(raw_cases, list) or (not raw_cases and not data.get("sampler")
+                                           and not data.get("render")):
+        raise SuiteError(where.at(None, "case",
+                                  "expected at least one [[case]], [[sampler]] or [[render]] table"))
     cases: list[Case] = []
     for i, c in enumerate(raw_cases):
         table = ("case", i)
@@ -233,7 +239,8 @@ def load_suite(path: str | Path) -> Suite:
         if "integrand" not in c:
             raise SuiteError(where.at(table, None, "missing key 'integrand' (a catalogue name or \"all\")"))
         names = [f.name for f in rest.catalogue()] if c["integrand"] == "all" else [c["integrand"]]
-        case_measurements = _measurements(c["measurements"], where, table) if "measurements" in c else measurements
+        case_measurements = (_measurements(c["measurements"], where, table) if "measurements" in c
+                             else measurements)
         case_samples = c.get("samples", samples)
         _positive(case_samples, where, table, "samples")
         if case_samples < batches:
@@ -258,11 +265,12 @@ def load_suite(path: str | Path) -> Suite:
                 cases.append(Case(name, t, case_samples, len(cases), case_measurements, target, max_samples))
     samplers = _samplers(data.get("sampler", []), samples, len(cases), where)
     renders = _renders(data.get("render", []), measurements, where)
-    return Suite(head.get("name", path.stem), path, seed, samples, threads or None, tuple(cases), float(alpha),
-                 batches, replicas, budgets, samplers, renders)
+    return Suite(head.get("name", path.stem), path, seed, samples, threads or None, tuple(cases),
+                 float(alpha), batches, replicas, budgets, samplers, renders)
 
 
-def _renders(raw: list[dict[str, Any]], measurements: tuple[str, ...], where: "_Locator") -> tuple[RenderCase, ...]:
+def _renders(raw: list[dict[str, Any]], measurements: tuple[str, ...],
+             where: "_Locator") -> tuple[RenderCase, ...]:
     """[[render]] tables: runner keys (_RENDER_KEYS) plus the adapter's own keys; a list value
     of an adapter key makes one case per element (cross product over such keys)."""
     import itertools
@@ -276,7 +284,8 @@ def _renders(raw: list[dict[str, Any]], measurements: tuple[str, ...], where: "_
         _check_keys(runner_keys, _RENDER_KEYS, where, table)
         adapter = c.get("adapter")
         if adapter not in ADAPTERS:
-            raise SuiteError(where.at(table, "adapter", f"expected one of: {', '.join(ADAPTERS)}, got {adapter!r}"))
+            raise SuiteError(where.at(table, "adapter",
+                                      f"expected one of: {', '.join(ADAPTERS)}, got {adapter!r}"))
         spp = c.get("spp", 64)
         _positive(spp, where, table, "spp")
         replicas = c.get("replicas", 16)
@@ -288,19 +297,22 @@ def _renders(raw: list[dict[str, Any]], measurements: tuple[str, ...], where: "_
             raise SuiteError(where.at(table, "budgets", f"expected positive integer budgets, got {budgets}"))
         if len(set(budgets)) < 3 and set(ms) & {"convergence", "error_vs_time", "efficiency"}:
             key = "budgets" if "budgets" in c else "spp"
-            raise SuiteError(where.at(table, key, f"expected at least 3 distinct budgets for {', '.join(ms)}, got "
-                                      f"{sorted(set(budgets))}" + ("" if "budgets" in c else " (give budgets)")))
+            raise SuiteError(where.at(table, key, f"expected at least 3 distinct budgets for "
+                                      f"{', '.join(ms)}, got {sorted(set(budgets))}"
+                                      + ("" if "budgets" in c else " (give budgets)")))
         budgets = tuple(sorted(set(budgets)))
         parts = c.get("reference_parts", 8)
         if parts < 2:
-            raise SuiteError(where.at(table, "reference_parts", f"expected at least 2 independent parts, got {parts}"))
+            raise SuiteError(where.at(table, "reference_parts",
+                                      f"expected at least 2 independent parts, got {parts}"))
         ref_spp = c.get("reference_spp", 64 * max(budgets[-1], spp))
         if ref_spp < parts or ref_spp % parts:
-            raise SuiteError(where.at(table, "reference_spp", f"expected a multiple of reference_parts = {parts}, "
-                                      f"got {ref_spp}"))
+            raise SuiteError(where.at(table, "reference_spp", f"expected a multiple of reference_parts = "
+                                      f"{parts}, got {ref_spp}"))
         expect = c.get("expect", "unbiased")
         if expect not in ("unbiased", "biased"):
-            raise SuiteError(where.at(table, "expect", f"expected \"unbiased\" or \"biased\", got {expect!r}"))
+            raise SuiteError(where.at(table, "expect",
+                                      f"expected \"unbiased\" or \"biased\", got {expect!r}"))
         spec = {k: v for k, v in c.items() if k not in _RENDER_KEYS}
         axes = [k for k, v in spec.items() if isinstance(v, list)]
         for values in itertools.product(*(spec[k] for k in axes)):
@@ -313,12 +325,13 @@ def _renders(raw: list[dict[str, Any]], measurements: tuple[str, ...], where: "_
                 if key is not None and msg.startswith(f"'{key}'"):
                     msg = msg[len(key) + 2:].lstrip(": ")
                 raise SuiteError(where.at(table, key, msg)) from None
-            out.append(RenderCase(adapter, tuple(sorted(one.items())), len(out), spp, replicas, budgets, ref_spp,
-                                  parts, ms, expect))
+            out.append(RenderCase(adapter, tuple(sorted(one.items())), len(out), spp, replicas, budgets,
+                                  ref_spp, parts, ms, expect))
     return tuple(out)
 
 
-def _samplers(raw: list[dict[str, Any]], samples: int, first_id: int, where: "_Locator") -> tuple[SamplerCase, ...]:
+def _samplers(raw: list[dict[str, Any]], samples: int, first_id: int,
+              where: "_Locator") -> tuple[SamplerCase, ...]:
     from harness.samplers import DOMAINS
 
     out = []
@@ -331,9 +344,11 @@ def _samplers(raw: list[dict[str, Any]], samples: int, first_id: int, where: "_L
         _check_keys(c, _SAMPLER_KEYS, where, table)
         name = c.get("name")
         if name not in registry:
-            raise SuiteError(where.at(table, "name", f"unknown sampler {name!r}; expected one of: {', '.join(registry)}"))
+            raise SuiteError(where.at(table, "name", f"unknown sampler {name!r}; expected one of: "
+                                      f"{', '.join(registry)}"))
         if registry[name]["needs_table"]:
-            raise SuiteError(where.at(table, "name", f"sampler {name!r} needs a table of values: test it from Python"))
+            raise SuiteError(where.at(table, "name",
+                                      f"sampler {name!r} needs a table of values: test it from Python"))
         params = c.get("params", {})
         try:
             rest.sampler(name, **params)
@@ -341,36 +356,39 @@ def _samplers(raw: list[dict[str, Any]], samples: int, first_id: int, where: "_L
             raise SuiteError(where.at(table, "params", str(e))) from None
         domain = c.get("domain", registry[name]["domain"])
         if domain not in DOMAINS:
-            raise SuiteError(where.at(table, "domain", f"expected one of: {', '.join(DOMAINS)}, got {domain!r}"))
+            raise SuiteError(where.at(table, "domain",
+                                      f"expected one of: {', '.join(DOMAINS)}, got {domain!r}"))
         n = c.get("samples", samples)
         if n < 1000:
             raise SuiteError(where.at(table, "samples", f"expected at least 1000 samples, got {n}"))
         ms = c.get("measurements", ["chi_square"])
         for m in ms:
             if m == "weight":
-                raise SuiteError(where.at(table, "measurements", "'weight' (sample weight == eval/pdf) applies to "
+                raise SuiteError(where.at(table, "measurements",
+                                          "'weight' (sample weight == eval/pdf) applies to "
                                           "renderer samplers ([[sampler]] with adapter = \"mitsuba\")"))
             if m not in SAMPLER_MEASUREMENTS:
-                raise SuiteError(where.at(table, "measurements", f"unknown sampler measurement {m!r}; expected some of: "
-                                          f"{', '.join(SAMPLER_MEASUREMENTS)}"))
+                raise SuiteError(where.at(table, "measurements", f"unknown sampler measurement {m!r}; "
+                                          f"expected some of: {', '.join(SAMPLER_MEASUREMENTS)}"))
         out.append(SamplerCase(name, tuple(sorted((k, float(v)) for k, v in params.items())), domain, n,
                                first_id + i, tuple(dict.fromkeys(ms)) or ("chi_square",)))
     return tuple(out)
 
 
-_ADAPTER_SAMPLER_KEYS = {"adapter": str, "plugin": dict, "wi": (int, float, list), "variant": str, "samples": int,
-                         "measurements": list}
+_ADAPTER_SAMPLER_KEYS = {"adapter": str, "plugin": dict, "wi": (int, float, list), "variant": str,
+                         "samples": int, "measurements": list}
 
 
-def _adapter_sampler(c: dict[str, Any], samples: int, case_id: int, where: "_Locator", table: Any) -> SamplerCase:
+def _adapter_sampler(c: dict[str, Any], samples: int, case_id: int, where: "_Locator",
+                     table: Any) -> SamplerCase:
     """A renderer's sampler (a Mitsuba BSDF, microfacet distribution or environment map):
     chi-square with failed samples accounted for, and the weight == eval/pdf check."""
     import json
 
     _check_keys(c, _ADAPTER_SAMPLER_KEYS, where, table)
     if c["adapter"] != "mitsuba":
-        raise SuiteError(where.at(table, "adapter", f"expected \"mitsuba\" (samplers of other adapters are not "
-                                  f"supported), got {c['adapter']!r}"))
+        raise SuiteError(where.at(table, "adapter", f"expected \"mitsuba\" (samplers of other adapters are "
+                                  f"not supported), got {c['adapter']!r}"))
     from harness.adapters.mitsuba.samplers import make_sampler
 
     spec = {k: c[k] for k in ("plugin", "wi", "variant") if k in c}
@@ -385,13 +403,15 @@ def _adapter_sampler(c: dict[str, Any], samples: int, case_id: int, where: "_Loc
     ms = c.get("measurements", ["chi_square"] + (["weight"] if s.kind != "microfacet" else []))
     for m in ms:
         if m not in ("chi_square", "weight"):
-            raise SuiteError(where.at(table, "measurements", f"expected some of: chi_square, weight for a renderer's "
-                                      f"sampler (it may fail to produce samples, which MCMC cannot use), got {m!r}"))
+            raise SuiteError(where.at(table, "measurements",
+                                      f"expected some of: chi_square, weight for a renderer's sampler (it "
+                                      f"may fail to produce samples, which MCMC cannot use), got {m!r}"))
     if "weight" in ms and s.kind == "microfacet":
-        raise SuiteError(where.at(table, "measurements", "a microfacet distribution returns no weight to check"))
+        raise SuiteError(where.at(table, "measurements",
+                                  "a microfacet distribution returns no weight to check"))
     label = s.name if spec.get("variant", "llvm_ad_rgb") == "llvm_ad_rgb" else f"{s.name} [{spec['variant']}]"
-    return SamplerCase(label, (), s.domain, n, case_id, tuple(dict.fromkeys(ms)) or ("chi_square",), "mitsuba",
-                       json.dumps(spec, sort_keys=True))
+    return SamplerCase(label, (), s.domain, n, case_id, tuple(dict.fromkeys(ms)) or ("chi_square",),
+                       "mitsuba", json.dumps(spec, sort_keys=True))
 
 
 def _named_key(message: str, keys: Any) -> str | None:
@@ -410,7 +430,8 @@ def _check_keys(table: dict[str, Any], spec: dict[str, Any], where: "_Locator", 
             raise SuiteError(where.at(name, key, f"expected {kinds}, got {type(value).__name__} {value!r}"))
 
 
-def _target(c: dict[str, Any], samples: int, f: Any, where: "_Locator", table: Any) -> tuple[float | None, int | None]:
+def _target(c: dict[str, Any], samples: int, f: Any, where: "_Locator",
+            table: Any) -> tuple[float | None, int | None]:
     """A precision target: the half-width of the bias test's interval at which to stop doubling
     the samples, and the most samples to try."""
     if "target" not in c:
@@ -420,12 +441,14 @@ def _target(c: dict[str, Any], samples: int, f: Any, where: "_Locator", table: A
     target = float(c["target"])
     floor = 16 * 2.0**-52 * abs(f.reference)
     if not target > floor:
-        raise SuiteError(where.at(table, "target", f"no budget can reach a half-width of {target:g}: it must be > 0 "
+        raise SuiteError(where.at(table, "target",
+                                  f"no budget can reach a half-width of {target:g}: it must be > 0 "
                                   f"and above the rounding floor {floor:.3g} of integrand {f.name!r}"))
     if "max_samples" not in c:
         raise SuiteError(where.at(table, "target", "a target needs max_samples, the most samples to try"))
     if c["max_samples"] < samples:
-        raise SuiteError(where.at(table, "max_samples", f"expected at least samples = {samples}, got {c['max_samples']}"))
+        raise SuiteError(where.at(table, "max_samples",
+                                  f"expected at least samples = {samples}, got {c['max_samples']}"))
     return target, c["max_samples"]
 
 

@@ -23,8 +23,9 @@ import reference_estimators as rest
 from harness.suite.parse import Case, RenderCase, SamplerCase, Suite
 
 __all__ = ["UNIT_CHUNKS", "BIAS_STREAM", "Unit", "case_key", "sampler_key", "sampler_spec", "render_key",
-           "reference_key", "render_seed", "core_case_id", "bias_budget", "bias_stream", "convergence_budgets",
-           "chosen_budgets", "estimator_units", "sampler_units", "render_units", "reference_units", "plan"]
+           "reference_key", "render_seed", "core_case_id", "bias_budget", "bias_stream",
+           "convergence_budgets", "chosen_budgets", "estimator_units", "sampler_units", "render_units",
+           "reference_units", "plan"]
 
 UNIT_CHUNKS = 32                     # core chunks (of 65 536 samples) per stored unit
 BIAS_STREAM = 0                      # stream 0: the bias test's batches; 1 + i: convergence budget i;
@@ -68,7 +69,8 @@ def sampler_key(suite: Suite, sc: SamplerCase) -> str:
     if sc.adapter:  # a renderer's sampler: its library version is part of what is tested
         from harness.adapters.mitsuba.samplers import make_sampler
 
-        definition.update(adapter=sc.adapter, spec=sc.spec, fingerprint=make_sampler(json.loads(sc.spec)).fingerprint())
+        fingerprint = make_sampler(json.loads(sc.spec)).fingerprint()
+        definition.update(adapter=sc.adapter, spec=sc.spec, fingerprint=fingerprint)
     return _hash(definition)
 
 
@@ -111,14 +113,16 @@ def bias_stream(look: int) -> int:
 
 
 def convergence_budgets(suite: Suite, case: Case) -> list[int]:
-    """The suite's budgets, or five geometric ones from samples/1024 to samples/16."""
+    """The suite's budgets, or five geometric ones (factor 4) from samples/4096 to samples/16
+    (at least 16 and 64)."""
     if suite.budgets:
         return list(suite.budgets)
     top = max(case.samples // 16, 64)
     return [max(top >> (2 * k), 16) for k in range(4, -1, -1)]
 
 
-def chosen_budgets(measurements: tuple[str, ...], budgets: list[int] | tuple[int, ...]) -> list[tuple[int, int]]:
+def chosen_budgets(measurements: tuple[str, ...],
+                   budgets: list[int] | tuple[int, ...]) -> list[tuple[int, int]]:
     """(index, budget) of the convergence budgets the measurements need: all of them for a
     convergence fit or the error against time, only the largest for efficiency alone."""
     wanted = set(measurements)

@@ -31,8 +31,9 @@ def judge(results: list[RenderResult], alpha: float) -> list[dict[str, str]]:
     spp^-1/2 (one-sided, Holm over the cases expected unbiased), "not judged" for cases biased on
     purpose, "not measured")."""
     bias_rej, _ = family_rejections([r.bias.pvalue if r.bias is not None else None for r in results], alpha)
-    conv_rej, _ = family_rejections([r.convergence.pvalue if r.convergence is not None and r.case.expect == "unbiased"
-                                     else None for r in results], alpha)
+    conv_rej, _ = family_rejections([r.convergence.pvalue
+                                     if r.convergence is not None and r.case.expect == "unbiased" else None
+                                     for r in results], alpha)
     out = []
     for r, rej, crej in zip(results, bias_rej, conv_rej):
         if r.faults.total:
@@ -65,20 +66,20 @@ def failures(results: list[RenderResult], verdicts: list[dict[str, str]], alpha:
             verdict = f"invalid ({r.faults.total} bad pixels)" if v["bias"] == "invalid" else v["bias"]
             text = f"bias: {verdict}; expected {what}"
             if b is not None:
-                text += (f"; p = {b.pvalue:.3g} (pixels {b.pvalue_pixels:.3g}, image mean {b.pvalue_mean:.3g}) at "
-                         f"family-wise alpha {alpha} (Holm over {len(results)} configurations), {b.replicas} "
-                         f"replicas x {b.spp} spp, {b.tested} pixel-channels tested; worst pixel (row, col, "
-                         f"channel) {b.worst_pixel} t = {b.worst_t:+.2f}; image-mean bias {b.bias_mean:+.3g} ± "
-                         f"{b.bias_mean_se:.2g}")
+                text += (f"; p = {b.pvalue:.3g} (pixels {b.pvalue_pixels:.3g}, image mean "
+                         f"{b.pvalue_mean:.3g}) at family-wise alpha {alpha} (Holm over {len(results)} "
+                         f"configurations), {b.replicas} replicas x {b.spp} spp, {b.tested} pixel-channels "
+                         f"tested; worst pixel (row, col, channel) {b.worst_pixel} t = {b.worst_t:+.2f}; "
+                         f"image-mean bias {b.bias_mean:+.3g} ± {b.bias_mean_se:.2g}")
             if r.faults.total:
                 text += f"; {r.faults}"
             problems.append(text)
         if v["convergence"] == "slower than expected":
             c = r.convergence
             lo, hi = c.confidence_interval()
-            problems.append(f"convergence: sqrt(relMSE) slope {c.slope:+.2f} [{lo:+.2f}, {hi:+.2f}], expected "
-                            f"{c.expected:+.2f} or faster (one-sided p = {c.pvalue:.3g}, Holm at alpha {alpha})\n"
-                            f"{c.table.to_string(index=False)}")
+            problems.append(f"convergence: sqrt(relMSE) slope {c.slope:+.2f} [{lo:+.2f}, {hi:+.2f}], "
+                            f"expected {c.expected:+.2f} or faster (one-sided p = {c.pvalue:.3g}, Holm at "
+                            f"alpha {alpha})\n{c.table.to_string(index=False)}")
         out.append("\n".join(problems))
     return out
 
@@ -125,7 +126,8 @@ def equal_time_relmse(results: list[RenderResult]) -> dict[str, tuple[float, flo
     return out
 
 
-def _ratio(r: RenderResult, base: dict[tuple[str, str], RenderResult]) -> tuple[RenderResult, float, float, float]:
+def _ratio(r: RenderResult,
+           base: dict[tuple[str, str], RenderResult]) -> tuple[RenderResult, float, float, float]:
     """The case's baseline and its efficiency ratio against it with a 95 % interval."""
     b0 = base[_estimand(r)]
     if b0 is r:
@@ -134,27 +136,31 @@ def _ratio(r: RenderResult, base: dict[tuple[str, str], RenderResult]) -> tuple[
     return b0, ratio, lo, hi
 
 
-def render_rows(suite: Suite, results: list[RenderResult], verdicts: list[dict[str, str]]) -> list[dict[str, Any]]:
+def render_rows(suite: Suite, results: list[RenderResult],
+                verdicts: list[dict[str, str]]) -> list[dict[str, Any]]:
     """Measurement rows for the store (same columns as the estimator cases')."""
     rows: list[dict[str, Any]] = []
     base = _baselines(results)
     equal = equal_time_relmse(results)
     for r, v in zip(results, verdicts):
-        common = {"case_key": r.key, "suite": suite.name, "integrand": r.case.scene, "technique": r.case.label}
+        common = {"case_key": r.key, "suite": suite.name, "integrand": r.case.scene,
+                  "technique": r.case.label}
         if r.bias is not None:
             b = r.bias
             rows.append({**common, "measurement": "bias", "value": b.bias_mean,
                          "lo": b.bias_mean - 1.96 * b.bias_mean_se, "hi": b.bias_mean + 1.96 * b.bias_mean_se,
-                         "n": b.replicas * b.spp, "pvalue": b.pvalue, "alpha": suite.alpha, "verdict": v["bias"],
+                         "n": b.replicas * b.spp, "pvalue": b.pvalue, "alpha": suite.alpha,
+                         "verdict": v["bias"],
                          "detail": {"pvalue_pixels": b.pvalue_pixels, "pvalue_mean": b.pvalue_mean,
-                                    "worst_pixel": list(b.worst_pixel), "worst_t": b.worst_t, "tested": b.tested,
-                                    "untestable": b.untestable, "excluded": b.excluded, "replicas": b.replicas,
-                                    "spp": b.spp, "reference": r.reference, "faults": r.faults.to_dict(),
+                                    "worst_pixel": list(b.worst_pixel), "worst_t": b.worst_t,
+                                    "tested": b.tested, "untestable": b.untestable, "excluded": b.excluded,
+                                    "replicas": b.replicas, "spp": b.spp, "reference": r.reference, "faults": r.faults.to_dict(),
                                     "notes": r.notes}})
         if r.variance is not None:
             var, se, n = r.variance
             rows.append({**common, "measurement": "variance", "value": var, "lo": var - 1.96 * se,
-                         "hi": var + 1.96 * se, "n": n, "detail": {"per": "sample, mean over pixels and channels"}})
+                         "hi": var + 1.96 * se, "n": n,
+                         "detail": {"per": "sample, mean over pixels and channels"}})
         if r.convergence is not None:
             c = r.convergence
             lo, hi = c.confidence_interval()
@@ -163,7 +169,8 @@ def render_rows(suite: Suite, results: list[RenderResult], verdicts: list[dict[s
                          "verdict": v["convergence"],
                          "detail": {"expected": c.expected, "budgets": c.table["n"].tolist(),
                                     "rmse": c.table["rmse"].tolist(), "rmse_lo": c.table["rmse_lo"].tolist(),
-                                    "rmse_hi": c.table["rmse_hi"].tolist(), "seconds": c.table["seconds"].tolist(),
+                                    "rmse_hi": c.table["rmse_hi"].tolist(),
+                                    "seconds": c.table["seconds"].tolist(),
                                     "error": "sqrt(relMSE)"}})
         if r.efficiency is not None:
             e = r.efficiency
@@ -175,12 +182,13 @@ def render_rows(suite: Suite, results: list[RenderResult], verdicts: list[dict[s
         if r.errors is not None:
             top = r.errors.iloc[-1]
             rows.append({**common, "measurement": "relmse", "value": top["relmse"],
-                         "lo": top["relmse"] - 1.96 * top["relmse_se"], "hi": top["relmse"] + 1.96 * top["relmse_se"],
-                         "n": int(top["replicas"]), "detail": {"spp": int(top["spp"]), "seconds": top["seconds"],
-                                                                "reference_noise": r.reference_noise,
-                                                                "epsilon": ist.RELMSE_EPSILON}})
+                         "lo": top["relmse"] - 1.96 * top["relmse_se"],
+                         "hi": top["relmse"] + 1.96 * top["relmse_se"], "n": int(top["replicas"]),
+                         "detail": {"spp": int(top["spp"]), "seconds": top["seconds"],
+                                    "reference_noise": r.reference_noise, "epsilon": ist.RELMSE_EPSILON}})
             rows.append({**common, "measurement": "error_vs_time", "value": float(top["relmse"]),
-                         "n": int(r.errors["replicas"].sum()), "detail": {"rows": r.errors.to_dict("records")}})
+                         "n": int(r.errors["replicas"].sum()),
+                         "detail": {"rows": r.errors.to_dict("records")}})
         if r.key in equal:
             t_star, e_star = equal[r.key]
             rows.append({**common, "measurement": "equal_time_relmse", "value": e_star,
@@ -210,7 +218,8 @@ def render_table(results: list[RenderResult], verdicts: list[dict[str, str]]) ->
             row["slope [95% CI]"] = f"{c.slope:+.2f} [{lo:+.2f}, {hi:+.2f}]"
         if r.efficiency is not None:
             b0, ratio, lo, hi = _ratio(r, base)
-            row["1/(relMSE·T) vs first [95% CI]"] = "1 (baseline)" if b0 is r else f"{ratio:.3g} [{lo:.3g}, {hi:.3g}]"
+            row["1/(relMSE·T) vs first [95% CI]"] = ("1 (baseline)" if b0 is r else
+                                                     f"{ratio:.3g} [{lo:.3g}, {hi:.3g}]")
         if r.key in equal:
             t_star, e_star = equal[r.key]
             row["relMSE @ equal time"] = f"{e_star:.3g} @ {t_star * 1e3:.3g} ms"

@@ -64,7 +64,8 @@ class RenderJob:
 
     def run(self) -> JobResult:
         u = self.unit
-        out = cached_renderer(self.adapter, self.spec, reference=self.reference).render(u.budget, render_seed(u))
+        r = cached_renderer(self.adapter, self.spec, reference=self.reference)
+        out = r.render(u.budget, render_seed(u))
         name = f"{u.case_key}/render-s{u.stream}-b{u.budget}-r{u.replica}"
         payload = {"image": name, "spp": out.spp, "faults": image_faults(out.image).to_dict()}
         return JobResult(u, payload, out.seconds, {name: out.image})
@@ -92,7 +93,8 @@ class ReferenceCache:
         self.folder = folder
 
     def _paths(self, key: str) -> tuple[Path, Path, Path]:
-        return self.folder / f"{key}-mean.exr", self.folder / f"{key}-variance.exr", self.folder / f"{key}.json"
+        folder = self.folder
+        return folder / f"{key}-mean.exr", folder / f"{key}-variance.exr", folder / f"{key}.json"
 
     def load(self, key: str) -> ist.Reference | None:
         mean_p, var_p, meta_p = self._paths(key)
@@ -108,7 +110,8 @@ class ReferenceCache:
         write_exr(mean_p, ref.mean)
         write_exr(var_p, ref.variance)
         tmp = meta_p.with_suffix(".json.partial")
-        tmp.write_text(json.dumps({**meta, "parts": ref.parts, "image_mean_variance": ref.image_mean_variance},
+        tmp.write_text(json.dumps({**meta, "parts": ref.parts,
+                                   "image_mean_variance": ref.image_mean_variance},
                                   indent=1, sort_keys=True, default=str))
         os.replace(tmp, meta_p)
 
@@ -141,8 +144,8 @@ class RenderKind:
             r = cached_renderer(rc.adapter, rc.spec)
             key = render_key(self.suite, r.fingerprint())
             ref = cached_renderer(rc.adapter, rc.spec, reference=True) if r.exact() is None else None
-            self.cases.append(_Case(rc, key, r, reference_key(self.suite, rc, ref.fingerprint()) if ref else None,
-                                    ref))
+            ref_key = reference_key(self.suite, rc, ref.fingerprint()) if ref else None
+            self.cases.append(_Case(rc, key, r, ref_key, ref))
             store.add_case(key, self.suite.name, rc.scene, rc.label,
                            {"adapter": rc.adapter, "spec": dict(rc.spec), "fingerprint": r.fingerprint()})
 
@@ -177,11 +180,13 @@ class RenderKind:
         text = ""
         if results:
             notes = [f"\n  {r.case.scene} {r.case.label}: {n}" for r in results for n in r.notes]
-            text = (f"renders (per-pixel bias test, Holm over {len(results)} configurations at alpha {alpha:g}; "
-                    "relMSE = mean (x - ref)^2 / (ref^2 + 0.01); efficiency 1/(relMSE·T) against the first "
-                    "configuration of the same scene and reference; relMSE at the longest time all of those "
-                    "reached):\n" + frame.to_string(index=False, float_format=lambda v: f"{v:.3g}") + "".join(notes))
-        return Outcome(self.name, "render configurations", tuple(self.names()), tuple(results), tuple(verdicts),
+            table = frame.to_string(index=False, float_format=lambda v: f"{v:.3g}")
+            text = (f"renders (per-pixel bias test, Holm over {len(results)} configurations at alpha "
+                    f"{alpha:g}; relMSE = mean (x - ref)^2 / (ref^2 + 0.01); efficiency 1/(relMSE·T) against "
+                    "the first configuration of the same scene and reference; relMSE at the longest time all "
+                    "of those reached):\n" + table + "".join(notes))
+        return Outcome(self.name, "render configurations", tuple(self.names()), tuple(results),
+                       tuple(verdicts),
                        tuple(failures(results, verdicts, alpha)),
                        tuple(render_rows(self.suite, results, verdicts)), frame, text)
 
@@ -221,7 +226,8 @@ def _faults(payloads: dict[Unit, dict]) -> ImageFaults:
     return total
 
 
-def _measure(rc: RenderCase, key: str, store: Store, reference: ist.Reference, ref_label: str) -> RenderResult:
+def _measure(rc: RenderCase, key: str, store: Store, reference: ist.Reference,
+             ref_label: str) -> RenderResult:
     payloads, seconds_of = store.payloads(key), store.seconds(key)
     wanted = set(rc.measurements)
     faults = _faults(payloads)
@@ -232,8 +238,9 @@ def _measure(rc: RenderCase, key: str, store: Store, reference: ist.Reference, r
         if "bias" in wanted:
             bias = ist.pixel_bias_test(images, reference, spp)
             if bias.untestable > bias.tested:
-                notes.append(f"pixel test covers {bias.tested} of {bias.tested + bias.untestable} pixel-channels "
-                             "(the rest too skewed at this spp; the image-mean test covers them)")
+                notes.append(f"pixel test covers {bias.tested} of {bias.tested + bias.untestable} "
+                             "pixel-channels (the rest too skewed at this spp; the image-mean test covers "
+                             "them)")
         if "variance" in wanted:
             variance = ist.pixel_variance(images, reference, spp)
         store.put_image(f"{key}/estimate", images.mean(axis=0))
@@ -248,15 +255,16 @@ def _measure(rc: RenderCase, key: str, store: Store, reference: ist.Reference, r
         rows.append({"spp": spp, "seconds": float(np.median(seconds)), "relmse": float(err.mean()),
                      "relmse_se": float(err.std(ddof=1) / math.sqrt(err.size)), "replicas": int(err.size)})
     if reps and min(row["relmse"] for row in rows) <= 0:
-        notes.append(f"relMSE at or below the reference's own ({noise:.2g}) at some budget: the reference is too "
-                     "noisy to measure this configuration's error; render it with more samples")
+        notes.append(f"relMSE at or below the reference's own ({noise:.2g}) at some budget: the reference is "
+                     "too noisy to measure this configuration's error; render it with more samples")
         reps = []
     if reps:
         errors = pd.DataFrame(rows)
         spp, err, seconds = reps[-1]
         eff = ist.image_efficiency(rc.label, spp, err, seconds)
         if "convergence" in wanted and len(reps) >= 3:
-            convergence = stats.fit_convergence([ist.as_replicates(rc.scene, rc.label, s, e, t) for s, e, t in reps])
+            convergence = stats.fit_convergence([ist.as_replicates(rc.scene, rc.label, s, e, t)
+                                                 for s, e, t in reps])
         if "bias" not in wanted and "variance" not in wanted:  # the top budget's images, read last above
             store.put_image(f"{key}/estimate", images.mean(axis=0))
     if reps and noise > 0.1 * max(reps[-1][1].mean() + noise, 1e-300):

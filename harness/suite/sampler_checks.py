@@ -97,7 +97,8 @@ class SamplerKind:
         failures = [_failure(r, v, adj, suite.alpha) for r, v, adj in zip(results, verdicts, adjusted)]
         frame = pd.DataFrame([{"sampler": r.case.label, "domain": r.case.domain, "n": r.case.samples,
                                **{f"{m}_pvalue": c["pvalue"] for m, c in r.checks.items()},
-                               **{f"{m}_verdict": v[m] for m in r.checks}} for r, v in zip(results, verdicts)])
+                               **{f"{m}_verdict": v[m] for m in r.checks}}
+                              for r, v in zip(results, verdicts)])
         text = ("sampler checks (chi-square and friends; MCMC cross-check):\n"
                 + _format_table(results, verdicts, suite.alpha) if results else "")
         return Outcome(self.name, "sampler checks", tuple(self.names()), tuple(results), tuple(verdicts),
@@ -140,8 +141,8 @@ def _rows(suite: Suite, results: list[SamplerResult], verdicts: list[dict[str, s
     for r, v in zip(results, verdicts):
         for m, c in r.checks.items():
             rows.append({"case_key": r.key, "suite": suite.name, "integrand": f"sampler:{r.case.label}",
-                         "technique": r.case.domain, "measurement": m, "value": c["pvalue"], "n": r.case.samples,
-                         "pvalue": c["pvalue"], "alpha": suite.alpha, "verdict": v[m],
+                         "technique": r.case.domain, "measurement": m, "value": c["pvalue"],
+                         "n": r.case.samples, "pvalue": c["pvalue"], "alpha": suite.alpha, "verdict": v[m],
                          "detail": {"tests": c["tests"], "failures": c["failures"],
                                     "normalization": c["normalization"], "residuals": c.get("residuals", {}),
                                     "marginals": c.get("marginals", {})}})

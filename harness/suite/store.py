@@ -84,7 +84,8 @@ class Store:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.db = sqlite3.connect(self.path, isolation_level=None, timeout=60)
         self.db.execute("PRAGMA journal_mode=WAL")
-        self.db.execute("PRAGMA synchronous=NORMAL")  # WAL: a crash loses at most the last commits, never corrupts
+        # WAL: a crash loses at most the last commits, never corrupts
+        self.db.execute("PRAGMA synchronous=NORMAL")
         self.db.executescript(_SCHEMA)
         self._open = False
 
@@ -93,7 +94,8 @@ class Store:
         self.db.close()
 
     # --- cases and units -------------------------------------------------------------------
-    def add_case(self, case_key: str, suite: str, integrand: str, technique: str, definition: dict[str, Any]) -> None:
+    def add_case(self, case_key: str, suite: str, integrand: str, technique: str,
+                 definition: dict[str, Any]) -> None:
         self.db.execute("INSERT OR IGNORE INTO cases VALUES (?, ?, ?, ?, ?)",
                         (case_key, suite, integrand, technique, json.dumps(definition, sort_keys=True)))
 
@@ -111,8 +113,8 @@ class Store:
             self.db.execute("BEGIN")
             self._open = True
         self.db.execute("INSERT OR IGNORE INTO units VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                        (unit.case_key, unit.stream, unit.budget, unit.replica, unit.chunk_begin, unit.chunk_end,
-                         unit.kind, json.dumps(payload), seconds, time.time()))
+                        (unit.case_key, unit.stream, unit.budget, unit.replica, unit.chunk_begin,
+                         unit.chunk_end, unit.kind, json.dumps(payload), seconds, time.time()))
 
     def commit(self) -> None:
         if self._open:
@@ -155,9 +157,11 @@ class Store:
         self.commit()
         self.db.execute("BEGIN")
         for r in rows:
-            self.db.execute("INSERT OR REPLACE INTO measurements VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                            (r["case_key"], r["suite"], r["integrand"], r["technique"], r["measurement"], r.get("value"),
-                             r.get("lo"), r.get("hi"), r.get("n"), r.get("pvalue"), r.get("alpha"), r.get("verdict"),
+            self.db.execute("INSERT OR REPLACE INTO measurements "
+                            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                            (r["case_key"], r["suite"], r["integrand"], r["technique"], r["measurement"],
+                             r.get("value"), r.get("lo"), r.get("hi"), r.get("n"), r.get("pvalue"),
+                             r.get("alpha"), r.get("verdict"),
                              json.dumps(r.get("detail", {}), sort_keys=True, default=str)))
         self.db.execute("COMMIT")
 
@@ -175,7 +179,8 @@ def write_exr(path: Path, image: np.ndarray) -> np.ndarray:
     if a.ndim == 2:
         a = a[:, :, None]
     if a.ndim != 3 or a.shape[2] < 1:
-        raise ValueError(f"'image' must have shape (height, width) or (height, width, channels), got {a.shape}")
+        raise ValueError(f"'image' must have shape (height, width) or (height, width, channels), "
+                         f"got {a.shape}")
     tmp = path.with_name(path.name + ".partial.exr")
     out = oiio.ImageOutput.create(str(tmp))
     if out is None or not out.open(str(tmp), oiio.ImageSpec(a.shape[1], a.shape[0], a.shape[2], "float")):

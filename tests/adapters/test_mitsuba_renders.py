@@ -47,9 +47,11 @@ def test_render_protocol_and_exact_scenes(variant):
 
 
 def test_spec_errors_name_the_key():
-    cases = [({"scene": "nowhere"}, "'scene'"), ({"scene": "furnace", "integrator": "nosuch"}, "'integrator'"),
+    cases = [({"scene": "nowhere"}, "'scene'"),
+             ({"scene": "furnace", "integrator": "nosuch"}, "'integrator'"),
              ({"scene": "furnace", "variant": "llvm_ad_spectral"}, "'variant'"),
-             ({"scene": "furnace", "variant": "x"}, "'variant'"), ({"scene": "furnace", "max_depth": 0}, "'max_depth'"),
+             ({"scene": "furnace", "variant": "x"}, "'variant'"),
+             ({"scene": "furnace", "max_depth": 0}, "'max_depth'"),
              ({"scene": "furnace", "width": 0}, "'width'"), ({"scene": "furnace", "spp": 3}, "'spp'")]
     for spec, key in cases:
         with pytest.raises(ValueError, match=key):
@@ -85,7 +87,8 @@ def test_pixel_bias_test_false_alarms_and_power():
 def test_rendered_reference_error_enters_the_test():
     """Against a noisy rendered reference the test uses both errors (Welch), so a reference
     from few samples does not make a correct integrator look biased."""
-    r = renderer("mitsuba", {"scene": "cornell", "integrator": "path", "variant": "llvm_ad_rgb", "max_depth": 3})
+    r = renderer("mitsuba", {"scene": "cornell", "integrator": "path", "variant": "llvm_ad_rgb",
+                             "max_depth": 3})
     ref = Reference.from_parts(_stack(r.reference(), 64, range(1000, 1008)))
     assert ref.parts == 8 and ref.image_mean_variance > 0 and np.all(ref.variance >= 0)
     b = pixel_bias_test(_stack(r, 64, range(16)), ref, 64)
@@ -164,7 +167,7 @@ def test_suite_compares_integrators_and_caches_references(tmp_path, variant):
             "equal_time_relmse"} <= set(df["measurement"])
     eff = df[(df.measurement == "efficiency") & (df.integrand == "mitsuba:furnace")]
     assert eff["value"].iloc[0] == pytest.approx(1.0)          # path is the baseline
-    assert eff["value"].iloc[1] < 0.1                             # the light tracer is far less efficient here
+    assert eff["value"].iloc[1] < 0.1                          # the light tracer is far less efficient here
     assert (eff["lo"] <= eff["value"]).all() and (eff["value"] <= eff["hi"]).all()
     # a second database reuses the cached reference: the Cornell reference is not rendered again
     again = run_suite(suite, tmp_path / "b.sqlite")
@@ -253,7 +256,8 @@ def test_suite_file_as_pytest_items(tmp_path, root):
         budgets = [4, 8, 32]
     """)
     out = subprocess.run([sys.executable, "-m", "pytest", "-q", str(path), "-p", "no:cacheprovider",
-                          "--harness-db", str(tmp_path / "items.sqlite")], capture_output=True, text=True, cwd=root)
+                          "--harness-db", str(tmp_path / "items.sqlite")],
+                         capture_output=True, text=True, cwd=root)
     assert out.returncode == 0, out.stdout + out.stderr
     assert "2 passed" in out.stdout
 

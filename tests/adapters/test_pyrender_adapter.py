@@ -60,21 +60,24 @@ def test_registry_protocol_and_fingerprint():
     r = renderer("pyrender", {**SHADOW, "points": "sobol", "light_shape": "disk", "light_size": 0.5})
     assert r.exact() is None
     out = r.render(4, 7)
-    assert out.image.shape == (32, 32, 3) and out.image.dtype == np.float64 and out.spp == 4 and out.seconds > 0
+    assert (out.image.shape == (32, 32, 3) and out.image.dtype == np.float64 and out.spp == 4
+            and out.seconds > 0)
     assert np.all((out.image >= 0) & (out.image <= 1))
     k = out.image * (255 * 4)   # an average of 4 byte frames is (integer) / (255 * 4)
     assert np.max(np.abs(k - np.round(k))) < 1e-9
     fp = r.fingerprint()
     json.dumps(fp)
-    for key, value in {"scene": "shadow", "technique": "soft_shadow", "points": "sobol", "width": 32, "height": 32,
-                       "light_shape": "disk", "light_size": 0.5, "pyrender": "0.1.45"}.items():
+    for key, value in {"scene": "shadow", "technique": "soft_shadow", "points": "sobol", "width": 32,
+                       "height": 32, "light_shape": "disk", "light_size": 0.5, "pyrender": "0.1.45"}.items():
         assert fp[key] == value, (key, fp)
     assert fp["PyOpenGL"] and fp["gl"]["renderer"] and fp["scene_digest"]
-    other = pa.make_renderer({**SHADOW, "points": "sobol", "light_shape": "disk", "light_size": 0.6}).fingerprint()
+    other = pa.make_renderer({**SHADOW, "points": "sobol", "light_shape": "disk",
+                              "light_size": 0.6}).fingerprint()
     assert other != fp and other["scene_digest"] == fp["scene_digest"]
     assert pa.make_renderer(EDGES).fingerprint()["scene_digest"] != fp["scene_digest"]
     # the point set changes the images but not their expectation
-    same = pa.make_renderer({**SHADOW, "points": "random", "light_shape": "disk", "light_size": 0.5}).fingerprint()
+    same = pa.make_renderer({**SHADOW, "points": "random", "light_shape": "disk",
+                             "light_size": 0.5}).fingerprint()
     assert same != fp and same["estimand_digest"] == fp["estimand_digest"] != other["estimand_digest"]
 
 

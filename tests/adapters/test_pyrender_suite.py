@@ -206,7 +206,8 @@ def test_renders_run_on_dask_with_the_images_of_a_local_run(tmp_path):
     finally:
         for s in stores:
             s.close()
-    measured = [load(tmp_path / name / "r.sqlite").set_index(["integrand", "measurement"]) for name in ("local", "dask")]
+    measured = [load(tmp_path / name / "r.sqlite").set_index(["integrand", "measurement"])
+                for name in ("local", "dask")]
     for key in [("pyrender:edges", "bias"), ("mitsuba:furnace", "bias"), ("pyrender:edges", "relmse")]:
         a, b = measured[0].loc[key], measured[1].loc[key]
         assert a["value"] == b["value"] and str(a["verdict"]) == str(b["verdict"]), key

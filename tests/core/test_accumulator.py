@@ -63,7 +63,8 @@ def test_subnormal_contributions_keep_their_variance():
     est = rest.accumulate(y)
     up = y * 2.0**530 * 2.0**530
     assert est.mean == pytest.approx(np.mean(up) * 2.0**-530 * 2.0**-530, rel=1e-9)
-    assert est.log10_variance == pytest.approx(math.log10(np.var(up, ddof=1)) - 2 * 1060 * math.log10(2), rel=1e-12)
+    assert est.log10_variance == pytest.approx(math.log10(np.var(up, ddof=1)) - 2 * 1060 * math.log10(2),
+                                               rel=1e-12)
     assert est.stderr > 0
 
 

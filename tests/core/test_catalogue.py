@@ -66,8 +66,8 @@ def quad_reference(name: str) -> float:
     if name == "cosine_power":
         return 2 * math.pi * q(lambda t: math.cos(t) ** 8 * math.sin(t), 0, math.pi / 2)
     if name == "ggx_lobe":
-        return 2 * math.pi * q(lambda t: float(ggx_d(math.cos(t), 0.01)) * math.cos(t) * math.sin(t), 0, math.pi / 2,
-                               points=[0.01, 0.05])
+        return 2 * math.pi * q(lambda t: float(ggx_d(math.cos(t), 0.01)) * math.cos(t) * math.sin(t), 0,
+                               math.pi / 2, points=[0.01, 0.05])
     if name == "spherical_cap":
         return 2 * math.pi * q(lambda t: math.sin(t), 0, math.radians(30))
     if name == "gaussian2d":
@@ -84,7 +84,8 @@ def test_catalogue_lists_the_required_cases():
                 "huge", "tiny", "offset", "gaussian16"}
     assert required <= set(NAMES)
     for f in rest.catalogue():
-        assert f.name and f.description and f.domain in {"interval", "square", "box", "half_line", "hemisphere", "sphere"}
+        assert f.name and f.description and f.domain in {"interval", "square", "box", "half_line",
+                                                          "hemisphere", "sphere"}
         assert f.dim >= 1 and math.isfinite(f.reference)
         assert rest.techniques(f), f.name
     assert rest.integrand("gaussian16").dim == 16
@@ -139,7 +140,8 @@ Z_CRIT = stats.norm.isf(FAMILY_ALPHA / (2 * len(FINITE)))
 # Skewed cases need more samples for the sample mean to be close to normal: a hit rate of
 # ~1e-6 (peak) or ~1e-4 (the alpha = 0.01 lobe) leaves too few hits at the default budget.
 BUDGET = {("peak", "uniform"): 100_000_000, ("ggx_lobe", "uniform"): 20_000_000,
-          ("ggx_lobe", "importance:cosine_hemisphere"): 20_000_000, ("ggx_lobe", "mis_balance:cosine_hemisphere+ggx"): 20_000_000}
+          ("ggx_lobe", "importance:cosine_hemisphere"): 20_000_000,
+          ("ggx_lobe", "mis_balance:cosine_hemisphere+ggx"): 20_000_000}
 
 
 @pytest.mark.parametrize("integrand, technique", FINITE)
@@ -152,12 +154,14 @@ def test_finite_variance_estimators_recover_the_reference(integrand, technique):
     assert est.ok, est.issues
     assert est.n == n
     z = est.z_score()
-    assert abs(z) <= Z_CRIT, f"{integrand}/{technique}: {est} vs exact {est.reference!r}, z = {z:.2f} > {Z_CRIT:.2f}"
+    assert abs(z) <= Z_CRIT, (f"{integrand}/{technique}: {est} vs exact {est.reference!r}, "
+                              f"z = {z:.2f} > {Z_CRIT:.2f}")
 
 
 def test_the_catalogue_has_every_kind_of_technique():
     kinds = {t.kind for _, t in TECHS}
-    assert kinds == {"uniform", "importance", "rejection", "russian_roulette", "splitting", "mis", "self_normalized"}
+    assert kinds == {"uniform", "importance", "rejection", "russian_roulette", "splitting", "mis",
+                     "self_normalized"}
     assert {t.points for _, t in TECHS} == {"random", "stratified", "sobol"}
     assert len(BIASED) >= 3 and len(NON_IID) >= 8
 
@@ -206,14 +210,16 @@ def test_infinite_variance_estimators_are_flagged(integrand, technique):
     assert est.mean > 0.75 * est.reference, est
 
 
-@pytest.mark.parametrize("integrand, technique", [("pareto_tail", "uniform"), ("half_cauchy", "importance:exponential")])
+@pytest.mark.parametrize("integrand, technique", [("pareto_tail", "uniform"),
+                                                  ("half_cauchy", "importance:exponential")])
 def test_sample_kurtosis_exposes_tails_heavier_than_index_two(integrand, technique):
     """With a tail index below 2 the sample kurtosis grows like n and the variance's own
     relative error (from M4) stays large: the estimate says its variance is unreliable.  At
     tail index exactly 2 (singularity/uniform) the divergence is logarithmic and the sample
     cannot show it at 4e6 samples, which is why the catalogue carries the analytic flag."""
     est = rest.integrate(integrand, technique, 4_000_000, seed=0)
-    assert not est.variance_reliable, f"kurtosis {est.kurtosis:.3g}, variance rel. error {est.variance_rel_error:.2f}"
+    assert not est.variance_reliable, (f"kurtosis {est.kurtosis:.3g}, "
+                                       f"variance rel. error {est.variance_rel_error:.2f}")
 
 
 def test_importance_sampling_beats_uniform_where_it_should():
@@ -239,7 +245,8 @@ def test_efficiency_is_one_over_variance_times_time():
     assert est.efficiency == pytest.approx(1 / (est.variance / est.n * est.seconds), rel=1e-9)
     huge = rest.integrate("huge", "uniform", 2_000_000, seed=0)
     assert huge.efficiency == 0.0 and math.isfinite(huge.log10_efficiency)  # 1e-590 is no double
-    assert huge.log10_efficiency == pytest.approx(math.log10(huge.n) - huge.log10_variance - math.log10(huge.seconds))
+    assert huge.log10_efficiency == pytest.approx(math.log10(huge.n) - huge.log10_variance
+                                                  - math.log10(huge.seconds))
 
 
 def test_confidence_interval_covers_at_the_stated_level():
@@ -261,7 +268,8 @@ def test_unknown_integrand_names_the_choices():
 
 
 def test_unknown_technique_names_the_choices():
-    with pytest.raises(ValueError, match=r"unknown technique 'importance:ggx' for integrand 'gaussian'; its techniques: uniform"):
+    with pytest.raises(ValueError, match=r"unknown technique 'importance:ggx' for integrand 'gaussian'; "
+                                         r"its techniques: uniform"):
         rest.integrate("gaussian", "importance:ggx", 10)
 
 
@@ -286,8 +294,8 @@ def test_bad_seed_and_threads_are_rejected():
 
 def test_mismatched_technique_and_integrand_dimensions_are_rejected():
     t = rest.importance(rest.sampler("ggx", alpha=0.1))
-    with pytest.raises(ValueError, match=r"technique 'importance:ggx' cannot estimate integrand 'gaussian': it draws "
-                                         r"3-dimensional points, the integrand is 1-dimensional"):
+    with pytest.raises(ValueError, match=r"technique 'importance:ggx' cannot estimate integrand 'gaussian': "
+                                         r"it draws 3-dimensional points, the integrand is 1-dimensional"):
         rest.integrate("gaussian", t, 10)
 
 

@@ -65,8 +65,8 @@ def test_exp_within_2_ulp(kind):
     if kind == "subnormal_results":
         assert sub.sum() > N // 20, "the subnormal range was not exercised"
     steps = np.abs(got[sub] - ref[sub]) / SUBNORMAL_STEP
-    assert steps.size == 0 or steps.max() <= 2, (f"exp error {steps.max()} x 2^-1074 on subnormal results:\n  "
-                                                 f"{worst(x[sub], got[sub], ref[sub], steps)}")
+    assert steps.size == 0 or steps.max() <= 2, (f"exp error {steps.max()} x 2^-1074 on subnormal results:"
+                                                 f"\n  {worst(x[sub], got[sub], ref[sub], steps)}")
 
 
 def test_exp_exact_points():
@@ -89,7 +89,8 @@ def test_exp_special_values(x, expected):
 
 
 def test_exp_overflow_threshold_agrees_with_numpy():
-    x = np.nextafter(709.782712893384, np.array([-np.inf] * 3 + [np.inf] * 3)) + np.array([0, -1e-13, -5e-13, 0, 1e-13, 5e-13])
+    x = (np.nextafter(709.782712893384, np.array([-np.inf] * 3 + [np.inf] * 3))
+         + np.array([0, -1e-13, -5e-13, 0, 1e-13, 5e-13]))
     x = np.concatenate([x, [709.782712893384, 709.78271289338397]])
     with np.errstate(over="ignore"):
         ref = np.exp(x)

@@ -35,7 +35,8 @@ PC1D_ZERO_TABLE = (0.0, 1.0, 0.0, 2.0, 0.0, 0.0, 3.0, 0.5, 0.0)
 PC2D_TABLE = tuple(tuple(1.0 + ((5 * r + c) % 7) for c in range(5)) for r in range(4))
 PC2D_ZERO_ROW = 3
 PC2D_ZERO_TABLE = tuple(
-    tuple(0.0 if r == PC2D_ZERO_ROW else 0.25 + ((3 * r + 5 * c) % 11) / 4 for c in range(16)) for r in range(8)
+    tuple(0.0 if r == PC2D_ZERO_ROW else 0.25 + ((3 * r + 5 * c) % 11) / 4 for c in range(16))
+    for r in range(8)
 )
 
 
@@ -279,7 +280,9 @@ def test_samples_lie_in_the_domain(case):
     s = case.make()
     u = uniforms_for(case)
     x, _ = s.sample(u)
-    assert np.all(np.isfinite(x)), f"{case}: non-finite points: {fmt(u[~np.isfinite(x).all(axis=-1) if x.ndim > 1 else ~np.isfinite(x)])}"
+    assert np.all(np.isfinite(x)), (
+        f"{case}: non-finite points: "
+        f"{fmt(u[~np.isfinite(x).all(axis=-1) if x.ndim > 1 else ~np.isfinite(x)])}")
     if case.is_1d:
         lo, hi = support_1d(case)
         bad = ~((x >= lo) & (x <= hi))
@@ -299,7 +302,8 @@ def test_samples_lie_in_the_domain(case):
         if case.name == "uniform_cone":
             c = case.p["cos_max"]
             bad = x[:, 2] < c
-            assert not bad.any(), f"{case}: directions outside the cone z >= {c} (u, w):\n  {fmt(u[bad], x[bad])}"
+            assert not bad.any(), (f"{case}: directions outside the cone z >= {c} (u, w):\n  "
+                                   f"{fmt(u[bad], x[bad])}")
 
 
 # --- invert() undoes sample() ----------------------------------------------------------------
@@ -338,7 +342,8 @@ def test_pdf_integrates_to_one(case):
         else:
             total, est = integrate.quad(f, lo, hi, points=pdf_breakpoints_1d(case) or None,
                                         epsabs=1e-12, epsrel=1e-12, limit=400)
-        assert abs(total - 1) < 1e-6, f"{case}: integral of pdf over [{lo}, {hi}] = {total!r} (quad error {est:.2g})"
+        assert abs(total - 1) < 1e-6, (f"{case}: integral of pdf over [{lo}, {hi}] = {total!r} "
+                                       f"(quad error {est:.2g})")
     elif case.domain == "square":
         t = np.asarray(case.table, dtype=float)
         rows, cols = t.shape
@@ -412,7 +417,8 @@ def test_points_near_table_breakpoints_stay_in_their_bin(case):
     np.testing.assert_allclose(s.invert(x), u, atol=1e-9)
 
 
-@pytest.mark.parametrize("case", [c for c in CASES if c.table is not None and 0 in np.ravel(c.table)], ids=str)
+@pytest.mark.parametrize("case", [c for c in CASES if c.table is not None and 0 in np.ravel(c.table)],
+                         ids=str)
 def test_pdf_is_zero_inside_empty_table_bins(case):
     s = case.make()
     t = np.asarray(case.table, dtype=float)
@@ -503,7 +509,8 @@ def test_draw_marginals_follow_the_exact_cdf_ks(case, which):
             "x": lambda: w[:, 0], "y": lambda: w[:, 1]}[which]()
     res = stats.kstest(data, marginal_cdf(case, which))
     alpha = KS_ALPHA / len(MARGINALS)
-    assert res.pvalue > alpha, f"{case} {which}: KS D = {res.statistic:.5g}, p = {res.pvalue:.3g} < {alpha:.3g}"
+    assert res.pvalue > alpha, (f"{case} {which}: KS D = {res.statistic:.5g}, "
+                                f"p = {res.pvalue:.3g} < {alpha:.3g}")
 
 
 # --- draw() is independent of the thread count ---------------------------------------------
@@ -678,8 +685,10 @@ def test_non_numeric_parameter_is_a_type_error():
     ("piecewise_constant_1d", [1.0, math.nan], r"table values must be finite and >= 0, got nan at index 1"),
     ("piecewise_constant_1d", [1.0, math.inf], r"table values must be finite and >= 0, got inf at index 1"),
     ("piecewise_constant_1d", [0.0, 0.0, 0.0], r"table values must not all be 0"),
-    ("piecewise_constant_2d", [[1.0, 2.0], [-0.5, 1.0]], r"table values must be finite and >= 0, got -0.5 at index 2"),
-    ("piecewise_constant_2d", [[1.0, math.nan], [0.5, 1.0]], r"table values must be finite and >= 0, got nan at index 1"),
+    ("piecewise_constant_2d", [[1.0, 2.0], [-0.5, 1.0]],
+     r"table values must be finite and >= 0, got -0.5 at index 2"),
+    ("piecewise_constant_2d", [[1.0, math.nan], [0.5, 1.0]],
+     r"table values must be finite and >= 0, got nan at index 1"),
     ("piecewise_constant_2d", np.zeros((3, 4)), r"table values must not all be 0"),
     ("piecewise_constant_2d", [1.0, 2.0, 3.0], r"table must be 2-dimensional"),
 ])
@@ -698,7 +707,8 @@ def test_table_required_and_refused():
 @pytest.mark.parametrize("case,shape,want", [
     (Case("ggx", "ggx"), (5, 3), r"'u' must have shape (N, 2), got (5, 3)"),
     (Case("ggx", "ggx"), (5,), r"'u' must have shape (N, 2), got (5,)"),
-    (Case("pc2d", "piecewise_constant_2d", table=PC2D_TABLE), (5, 1), r"'u' must have shape (N, 2), got (5, 1)"),
+    (Case("pc2d", "piecewise_constant_2d", table=PC2D_TABLE), (5, 1),
+     r"'u' must have shape (N, 2), got (5, 1)"),
     (Case("linear", "linear"), (5, 2), r"'u' must have shape (N, 1) or (N,), got (5, 2)"),
     (Case("linear", "linear"), (5, 1, 1), r"'u' must have shape (N, 1) or (N,), got (5, 1, 1)"),
 ])
@@ -710,7 +720,8 @@ def test_sample_rejects_u_of_the_wrong_shape(case, shape, want):
 @pytest.mark.parametrize("case,shape,want", [
     (Case("ggx", "ggx"), (5, 2), r"'x' must have shape (N, 3), got (5, 2)"),
     (Case("uniform_sphere", "uniform_sphere"), (3,), r"'x' must have shape (N, 3), got (3,)"),
-    (Case("pc2d", "piecewise_constant_2d", table=PC2D_TABLE), (5, 3), r"'x' must have shape (N, 2), got (5, 3)"),
+    (Case("pc2d", "piecewise_constant_2d", table=PC2D_TABLE), (5, 3),
+     r"'x' must have shape (N, 2), got (5, 3)"),
     (Case("exponential", "exponential"), (5, 2), r"'x' must have shape (N, 1) or (N,), got (5, 2)"),
 ])
 def test_pdf_and_invert_reject_x_of_the_wrong_shape(case, shape, want):
@@ -797,4 +808,5 @@ def test_every_analytic_sampler_has_a_complete_triple_by_name():
         np.testing.assert_array_equal(x, s.sample(u)[0], err_msg=name)
         np.testing.assert_array_equal(fns[1](x), s.pdf(x), err_msg=name)
         np.testing.assert_array_equal(fns[2](x), s.invert(x), err_msg=name)
-    assert sampling.sample_ggx(np.full((1, 2), 0.5), alpha=0.3)[0, 2] == pytest.approx(1 / math.sqrt(1 + 0.09))
+    assert (sampling.sample_ggx(np.full((1, 2), 0.5), alpha=0.3)[0, 2]
+            == pytest.approx(1 / math.sqrt(1 + 0.09)))

@@ -83,7 +83,8 @@ CASES = [
     ("gaussian16", "uniform"),
     ("tiny", "uniform"),
 ]
-FIELDS = ("mean", "stderr", "variance", "log10_variance", "skewness", "kurtosis", "min", "max", "n", "drawn", "counts")
+FIELDS = ("mean", "stderr", "variance", "log10_variance", "skewness", "kurtosis", "min", "max", "n", "drawn",
+          "counts")
 
 
 @pytest.mark.parametrize("integrand, technique", CASES)

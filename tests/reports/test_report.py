@@ -39,22 +39,24 @@ def _scene(h: int = 48, w: int = 64) -> np.ndarray:
 
 
 def _render_rows(key: str, technique: str, scale: float, baseline: str) -> list[dict]:
-    """Measurement rows as a renderer adapter stores them (names and detail keys as in harness.suite.renders)."""
+    """Measurement rows as a renderer adapter stores them (names and detail keys as in
+    harness.suite.renders)."""
     budgets = [4, 16, 64]
     rmse = [scale * 0.4 * (b / 4) ** -0.5 for b in budgets]
-    common = {"case_key": key, "suite": "tiny", "integrand": "toy_scene", "technique": technique, "alpha": 0.01}
+    common = {"case_key": key, "suite": "tiny", "integrand": "toy_scene", "technique": technique,
+              "alpha": 0.01}
     return [
         {**common, "measurement": "bias", "value": 1e-4, "lo": -2e-4, "hi": 4e-4, "n": 128, "pvalue": 0.6,
          "verdict": "unbiased", "detail": {"spp": 16, "replicas": 8}},
-        {**common, "measurement": "convergence", "value": -0.5, "lo": -0.6, "hi": -0.4, "n": 24, "pvalue": 0.9,
-         "verdict": "as expected",
+        {**common, "measurement": "convergence", "value": -0.5, "lo": -0.6, "hi": -0.4, "n": 24,
+         "pvalue": 0.9, "verdict": "as expected",
          "detail": {"expected": -0.5, "budgets": budgets, "rmse": rmse, "rmse_lo": [0.8 * r for r in rmse],
                     "rmse_hi": [1.25 * r for r in rmse], "seconds": [0.002 * b * scale for b in budgets],
                     "error": "sqrt(relMSE)"}},
-        {**common, "measurement": "efficiency", "value": 1 / scale**3, "lo": 0.8 / scale**3, "hi": 1.25 / scale**3,
-         "n": 128, "detail": {"baseline": baseline, "definition": "1/(relMSE T)"}},
-        {**common, "measurement": "relmse", "value": 0.01 * scale, "lo": 0.008 * scale, "hi": 0.012 * scale, "n": 8,
-         "detail": {"spp": 64}},
+        {**common, "measurement": "efficiency", "value": 1 / scale**3, "lo": 0.8 / scale**3,
+         "hi": 1.25 / scale**3, "n": 128, "detail": {"baseline": baseline, "definition": "1/(relMSE T)"}},
+        {**common, "measurement": "relmse", "value": 0.01 * scale, "lo": 0.008 * scale, "hi": 0.012 * scale,
+         "n": 8, "detail": {"spp": 64}},
     ]
 
 
@@ -87,9 +89,11 @@ def report(tmp_path_factory) -> dict:
         """))
     db = tmp / "tiny.sqlite"
     suite = load_suite(suite_file)
-    store = Store(db)   # an "earlier run" of gaussian/uniform under another build: same definition, older rows
+    # an "earlier run" of gaussian/uniform under another build: same definition, older rows
+    store = Store(db)
     store.add_case("0" * 24, "tiny", "gaussian", "uniform", {"seed": 3, "case_id": 0, "samples": 65536})
-    store.put_measurements([{"case_key": "0" * 24, "suite": "tiny", "integrand": "gaussian", "technique": "uniform",
+    store.put_measurements([{"case_key": "0" * 24, "suite": "tiny",
+                             "integrand": "gaussian", "technique": "uniform",
                              "measurement": "bias", "value": 1.0, "n": 65536, "pvalue": 1e-9, "alpha": 0.01,
                              "verdict": "biased", "detail": {"estimate": STALE_ESTIMATE, "stderr": 0.1}}])
     store.close()
@@ -159,9 +163,11 @@ def test_report_in_chromium(report):
         browser = p.chromium.launch(executable_path=CHROMIUM)
         try:
             page = browser.new_page(viewport={"width": 1500, "height": 1000})
-            page.on("console", lambda m: errors.append(f"console.{m.type}: {m.text}") if m.type == "error" else None)
+            page.on("console",
+                    lambda m: errors.append(f"console.{m.type}: {m.text}") if m.type == "error" else None)
             page.on("pageerror", lambda e: errors.append(f"page error: {e}"))
-            page.on("request", lambda r: requests.append(r.url) if not r.url.startswith(("data:", "file:")) else None)
+            page.on("request",
+                    lambda r: requests.append(r.url) if not r.url.startswith(("data:", "file:")) else None)
             page.goto(html_path.as_uri(), wait_until="load")
             assert errors == [], errors
             assert requests == [], f"the report fetched from the network: {requests}"
@@ -190,7 +196,8 @@ def test_report_in_chromium(report):
             rows = page.locator(".summary-table tbody tr")
             assert rows.count() == len(TECHNIQUES) + 2
             text = page.inner_text("#summary")
-            for t in TECHNIQUES + ["integrator=ptracer, variant=test", "α", "verdict (p)", "n = 65,536", "p = "]:
+            for t in TECHNIQUES + ["integrator=ptracer, variant=test", "α", "verdict (p)", "n = 65,536",
+                                   "p = "]:
                 assert t in text, t
             assert page.locator(".summary-table .badge.good").count() >= len(TECHNIQUES) + 2
             content = page.content()
@@ -216,7 +223,8 @@ def test_report_in_chromium(report):
             art.locator("button.flip").click()
             assert slider.input_value() == "100"
             assert np.abs(_png_array(view.screenshot()) - shot_ref).mean() < 0.5
-            assert page.inner_text("#renders").count("; 1 non-finite pixel") == 1   # the NaN planted in one estimate
+            # the NaN planted in one estimate
+            assert page.inner_text("#renders").count("; 1 non-finite pixel") == 1
             assert errors == [], errors
 
             page.evaluate("window.scrollTo(0, 0)")
@@ -243,7 +251,8 @@ def test_csv_has_every_case_with_stored_numbers(report):
         row = df[(df["integrand"] == "gaussian") & (df["technique"] == tech)].iloc[0]
         want = stored[(stored["integrand"] == "gaussian") & (stored["technique"] == tech)
                       & (stored["measurement"] == "bias") & (stored["case_key"] == row["case_key"])].iloc[0]
-        assert row["bias"] == want["value"] and row["bias_pvalue"] == want["pvalue"] and row["bias_n"] == want["n"]
+        assert (row["bias"] == want["value"] and row["bias_pvalue"] == want["pvalue"]
+                and row["bias_n"] == want["n"])
         assert row["bias_verdict"] == "unbiased" and row["alpha"] == 0.01
     assert (df["case_key"] != "0" * 24).all()           # the superseded run is left out
 
@@ -267,7 +276,8 @@ def test_sampler_checks_store_residual_grids_and_marginals(report):
     assert coarse.shape == (16, 32)
     # standardised residuals of a correct sampler: mean 0, variance 1 over the 512 cells (about 39
     # samples each; pdf cos(theta)/pi leaves the cells at the horizon below 5 expected: pooled, NaN)
-    assert 0.85 < np.nanstd(coarse) < 1.15 and abs(np.nanmean(coarse)) < 0.15 and np.isfinite(coarse).mean() > 0.9
+    assert (0.85 < np.nanstd(coarse) < 1.15 and abs(np.nanmean(coarse)) < 0.15
+            and np.isfinite(coarse).mean() > 0.9)
     assert np.isnan(coarse[0]).all()
     fine = np.asarray(hemi["residuals"]["fine"], float)   # 2.4 samples a cell: every one pooled
     assert fine.shape == (64, 128) and np.isnan(fine).all()

@@ -48,8 +48,8 @@ techniques = ["mis_balance:cosine_hemisphere+ggx"]
 def units_table(db: Path) -> list[tuple]:
     con = sqlite3.connect(db)
     try:
-        return sorted(con.execute("SELECT case_key, stream, budget, replica, chunk_begin, chunk_end, kind, payload "
-                                  "FROM units").fetchall())
+        return sorted(con.execute("SELECT case_key, stream, budget, replica, chunk_begin, chunk_end, kind, "
+                                  "payload FROM units").fetchall())
     finally:
         con.close()
 
@@ -69,7 +69,8 @@ def stored_count(db: Path) -> int:
 
 def without_timing(rows: list[tuple]) -> list[tuple]:
     """Unit rows with the payloads' wall times removed (each run measures its own)."""
-    return [(*r[:7], {k: v for k, v in json.loads(r[7]).items() if k not in ("seconds", "threads")}) for r in rows]
+    return [(*r[:7], {k: v for k, v in json.loads(r[7]).items() if k not in ("seconds", "threads")})
+            for r in rows]
 
 
 def measurements(db: Path):
@@ -87,8 +88,8 @@ def suite_file(tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def reference_db(suite_file, tmp_path_factory) -> Path:
     db = tmp_path_factory.mktemp("ref") / "ref.sqlite"
-    r = subprocess.run([HARNESS, "run", str(suite_file), "--db", str(db), "--threads", "2"], capture_output=True,
-                       text=True, timeout=600)
+    r = subprocess.run([HARNESS, "run", str(suite_file), "--db", str(db), "--threads", "2"],
+                       capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
     return db
 
@@ -134,20 +135,22 @@ def test_kill_minus_nine_at_random_points_then_resume(suite_file, reference_db, 
         assert all(json.loads(r[7]) for r in rows), "a torn payload"
         assert len(rows) <= full
     assert kills == 20, f"only {kills} runs were interrupted: the suite finished too fast to test resumption"
-    r = subprocess.run([HARNESS, "run", str(suite_file), "--db", str(db), "--threads", "2"], capture_output=True,
-                       text=True, timeout=600)
+    r = subprocess.run([HARNESS, "run", str(suite_file), "--db", str(db), "--threads", "2"],
+                       capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
     assert without_timing(units_table(db)) == without_timing(units_table(reference_db))
     a, b = measurements(db), measurements(reference_db)
     cols = ["case_key", "measurement", "value", "lo", "hi", "n", "pvalue", "verdict"]
-    stat = ~a["measurement"].isin(["log10_efficiency", "efficiency_ratio"])  # timing-based: equal only by chance
+    # timing-based: equal only by chance
+    stat = ~a["measurement"].isin(["log10_efficiency", "efficiency_ratio"])
     assert a.loc[stat, cols].equals(b.loc[stat, cols])
 
 
 @pytest.mark.slow
 def test_dask_local_cluster_gives_bitwise_the_same_units(suite_file, reference_db, tmp_path):
     db = tmp_path / "dask.sqlite"
-    r = subprocess.run([HARNESS, "run", str(suite_file), "--db", str(db), "--dask", "local", "--threads", "2"],
+    r = subprocess.run([HARNESS, "run", str(suite_file), "--db", str(db), "--dask", "local",
+                        "--threads", "2"],
                        capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
     assert without_timing(units_table(db)) == without_timing(units_table(reference_db))
@@ -155,9 +158,10 @@ def test_dask_local_cluster_gives_bitwise_the_same_units(suite_file, reference_d
 
 def test_load_gives_each_measurement_with_uncertainty_and_n(reference_db):
     df = harness.load(reference_db)
-    assert {"integrand", "technique", "measurement", "value", "lo", "hi", "n", "pvalue", "alpha", "verdict"} <= set(df)
-    assert set(df["measurement"]) == {"bias", "variance", "convergence_slope", "log10_efficiency", "efficiency_ratio",
-                                      "rmse"}
+    assert {"integrand", "technique", "measurement", "value", "lo", "hi", "n", "pvalue", "alpha",
+            "verdict"} <= set(df)
+    assert set(df["measurement"]) == {"bias", "variance", "convergence_slope", "log10_efficiency",
+                                      "efficiency_ratio", "rmse"}
     bias = df[df["measurement"] == "bias"]
     assert len(bias) == 4 and (bias["n"] == 33_554_432).all() and (bias["lo"] < bias["hi"]).all()
     assert set(bias["verdict"]) == {"unbiased"}
@@ -166,9 +170,12 @@ def test_load_gives_each_measurement_with_uncertainty_and_n(reference_db):
 
 
 def test_show_prints_the_stored_measurements(reference_db):
-    r = subprocess.run([HARNESS, "show", "--db", str(reference_db)], capture_output=True, text=True, timeout=60)
-    assert r.returncode == 0 and "convergence_slope" in r.stdout and "mis_balance:cosine_hemisphere+ggx" in r.stdout
-    r = subprocess.run([HARNESS, "show", "--db", "/nonexistent/x.sqlite"], capture_output=True, text=True, timeout=60)
+    r = subprocess.run([HARNESS, "show", "--db", str(reference_db)], capture_output=True, text=True,
+                       timeout=60)
+    assert (r.returncode == 0 and "convergence_slope" in r.stdout
+            and "mis_balance:cosine_hemisphere+ggx" in r.stdout)
+    r = subprocess.run([HARNESS, "show", "--db", "/nonexistent/x.sqlite"], capture_output=True, text=True,
+                       timeout=60)
     assert r.returncode == 2 and "no results database" in r.stderr
 
 
@@ -177,7 +184,8 @@ def test_a_precision_target_doubles_samples_until_reached_and_spends_alpha(tmp_p
     samples, reached at an intermediate look; the p-value is multiplied by the looks."""
     p = tmp_path / "t.toml"
     p.write_text('[suite]\nname = "t"\nsamples = 16384\nbatches = 32\nmeasurements = ["bias"]\n\n'
-                 '[[case]]\nintegrand = "gaussian"\ntechniques = ["uniform"]\ntarget = 1e-3\nmax_samples = 67108864\n')
+                 '[[case]]\nintegrand = "gaussian"\ntechniques = ["uniform"]\ntarget = 1e-3\n'
+                 'max_samples = 67108864\n')
     suite = load_suite(p)
     case = suite.cases[0]
     assert case.looks == 13  # 16384 * 2^k <= 2^26 for k = 0..12
@@ -195,13 +203,16 @@ def test_a_precision_target_doubles_samples_until_reached_and_spends_alpha(tmp_p
 
 def test_sampler_checks_run_from_suites_and_resume(tmp_path):
     p = tmp_path / "s.toml"
-    p.write_text('[suite]\nname = "s"\nsamples = 100000\n\n[[sampler]]\nname = "ggx"\nparams = { alpha = 0.05 }\n\n'
+    p.write_text('[suite]\nname = "s"\nsamples = 100000\n\n'
+                 '[[sampler]]\nname = "ggx"\nparams = { alpha = 0.05 }\n\n'
                  '[[sampler]]\nname = "power"\nparams = { k = -0.75 }\n')
     suite = load_suite(p)
     first = run_suite(suite, tmp_path / "s.sqlite", threads=2)
-    assert first.units_run == 2 and [r.case.label for r in first["sampler"].results] == ["ggx(alpha=0.05)", "power(k=-0.75)"]
+    assert (first.units_run == 2
+            and [r.case.label for r in first["sampler"].results] == ["ggx(alpha=0.05)", "power(k=-0.75)"])
     assert all(c["passed"] for r in first["sampler"].results for c in r.checks.values())
     again = run_suite(suite, tmp_path / "s.sqlite", threads=2)
     assert again.units_run == 0 and again["sampler"].results[0].checks == first["sampler"].results[0].checks
     df = harness.load(tmp_path / "s.sqlite")
-    assert set(df["measurement"]) == {"chi_square"} and set(df["verdict"]) == {"passed"} and (df["n"] == 100000).all()
+    assert (set(df["measurement"]) == {"chi_square"} and set(df["verdict"]) == {"passed"}
+            and (df["n"] == 100000).all())

@@ -210,7 +210,8 @@ def _choice(spec: Mapping[str, Any], key: str, options: tuple[str, ...], default
 def _size(spec: Mapping[str, Any], key: str) -> int:
     v = spec.get(key, 32)
     if isinstance(v, bool) or not isinstance(v, numbers.Integral) or not 1 <= v <= MAX_SIZE:
-        raise ValueError(f"pyrender spec: {key!r} must be an integer number of pixels in [1, {MAX_SIZE}], got {v!r}")
+        raise ValueError(f"pyrender spec: {key!r} must be an integer number of pixels in [1, {MAX_SIZE}], "
+                         f"got {v!r}")
     return int(v)
 
 
@@ -221,7 +222,8 @@ class PyrenderRenderer:
 
     def __init__(self, spec: Mapping[str, Any]) -> None:
         if not isinstance(spec, Mapping):
-            raise ValueError(f"pyrender spec must be a table of keys {list(_KEYS)}, got {type(spec).__name__}")
+            raise ValueError(f"pyrender spec must be a table of keys {list(_KEYS)}, "
+                             f"got {type(spec).__name__}")
         unknown = sorted(set(spec) - set(_KEYS))
         if unknown:
             raise ValueError(f"pyrender spec: unknown key(s) {unknown}; expected keys among {list(_KEYS)}")
@@ -236,21 +238,22 @@ class PyrenderRenderer:
         if not self.antialias and "pixel_filter" in spec:
             raise ValueError(f"pyrender spec: 'pixel_filter' applies to the antialias techniques, "
                              f"not to technique {self.technique!r}")
-        self.pixel_filter = _choice(spec, "pixel_filter", PIXEL_FILTERS, "box") if self.antialias else None
+        self.pixel_filter = (_choice(spec, "pixel_filter", PIXEL_FILTERS, "box") if self.antialias
+                             else None)
         self.light_shape: str | None = None
         self.light_size: float | None = None
         if self.soft_shadow:
             if self.desc.area_light is None:
                 with_light = [n for n in SCENE_NAMES if scenes.scene(n).area_light is not None]
-                raise ValueError(f"pyrender spec: 'scene' {self.scene_name!r} has no area light for technique "
-                                 f"{self.technique!r}; expected one of {with_light}")
+                raise ValueError(f"pyrender spec: 'scene' {self.scene_name!r} has no area light "
+                                 f"for technique {self.technique!r}; expected one of {with_light}")
             self.light_shape = _choice(spec, "light_shape", LIGHT_SHAPES, "rectangle")
             size = spec.get("light_size", self.desc.area_light.size)
             if (isinstance(size, bool) or not isinstance(size, numbers.Real) or not math.isfinite(size)
                     or not 0 < size <= 2.0):
-                raise ValueError(f"pyrender spec: 'light_size' must be a number in (0, 2] (scene units: side of the "
-                                 f"rectangle or diameter of the disk; the light must stay between the slab's "
-                                 f"shadow and the view), got {size!r}")
+                raise ValueError(f"pyrender spec: 'light_size' must be a number in (0, 2] (scene units: "
+                                 f"side of the rectangle or diameter of the disk; the light must stay "
+                                 f"between the slab's shadow and the view), got {size!r}")
             self.light_size = float(size)
         else:
             for key in ("light_shape", "light_size"):
@@ -258,7 +261,8 @@ class PyrenderRenderer:
                     raise ValueError(f"pyrender spec: {key!r} applies to the soft_shadow techniques, "
                                      f"not to technique {self.technique!r}")
         self.dim = 2 * (self.antialias + self.soft_shadow)
-        self.flags = pyrender.RenderFlags.SHADOWS_SPOT if self.desc.area_light is not None else pyrender.RenderFlags.NONE
+        self.flags = (pyrender.RenderFlags.SHADOWS_SPOT if self.desc.area_light is not None
+                      else pyrender.RenderFlags.NONE)
         self._scene, self._cam_node, self._camera, self._spot_node = scenes.build(
             self.desc, self.width, self.height)
         self._cx, self._cy = 0.5 * self.width, 0.5 * self.height
@@ -308,7 +312,8 @@ class PyrenderRenderer:
         light point), as float64 (height, width, 3) in [0, 1]: what ``render`` averages."""
         v = np.asarray(u, dtype=np.float64)
         if v.shape != (self.dim,) or not np.all((v >= 0) & (v <= 1)):
-            raise ValueError(f"'u' must be {self.dim} numbers in [0, 1] for technique {self.technique!r}, got {u!r}")
+            raise ValueError(f"'u' must be {self.dim} numbers in [0, 1] for technique {self.technique!r}, "
+                             f"got {u!r}")
         place = self._placements(v[None, :])[0]
         with _GL_LOCK:
             return self._frame_bytes(self._current(), place) / 255.0

@@ -126,7 +126,8 @@ def _edges() -> SceneDesc:
 
 def _shadow() -> SceneDesc:
     meshes = (
-        MeshDesc("ground", trimesh.creation.box((8.0, 8.0, 0.02)), (0.8, 0.8, 0.8), _translate(0.0, 0.0, -0.01)),
+        MeshDesc("ground", trimesh.creation.box((8.0, 8.0, 0.02)), (0.8, 0.8, 0.8),
+                 _translate(0.0, 0.0, -0.01)),
         MeshDesc("slab", trimesh.creation.box((0.8, 0.8, 0.1)), (0.7, 0.2, 0.2), _translate(0.0, 0.0, 1.2)),
     )
     camera = Camera(_look_at((0.0, -3.2, 4.2), (0.0, 0.0, 0.0)), math.radians(40))
@@ -169,8 +170,8 @@ def build(desc: SceneDesc, width: int, height: int):
     spot_node = None
     if desc.area_light is not None:
         a = desc.area_light
-        spot = pyrender.SpotLight(color=np.asarray(a.color), intensity=a.intensity, innerConeAngle=a.inner_cone,
-                                  outerConeAngle=a.outer_cone)
+        spot = pyrender.SpotLight(color=np.asarray(a.color), intensity=a.intensity,
+                                  innerConeAngle=a.inner_cone, outerConeAngle=a.outer_cone)
         spot_node = sc.add(spot, pose=_translate(*a.center))
     return sc, cam_node, cam, spot_node
 
