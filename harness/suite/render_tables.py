@@ -154,8 +154,8 @@ def render_rows(suite: Suite, results: list[RenderResult],
                          "detail": {"pvalue_pixels": b.pvalue_pixels, "pvalue_mean": b.pvalue_mean,
                                     "worst_pixel": list(b.worst_pixel), "worst_t": b.worst_t,
                                     "tested": b.tested, "untestable": b.untestable, "excluded": b.excluded,
-                                    "replicas": b.replicas, "spp": b.spp, "reference": r.reference, "faults": r.faults.to_dict(),
-                                    "notes": r.notes}})
+                                    "replicas": b.replicas, "spp": b.spp, "reference": r.reference,
+                                    "faults": r.faults.to_dict(), "notes": r.notes}})
         if r.variance is not None:
             var, se, n = r.variance
             rows.append({**common, "measurement": "variance", "value": var, "lo": var - 1.96 * se,
