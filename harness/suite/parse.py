@@ -61,13 +61,14 @@ Every mistake is reported as ``file:line: key: what was expected``.
 """
 from __future__ import annotations
 
-import re
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import reference_estimators as rest
+
+from harness.suite.locate import Locator
 
 __all__ = ["Suite", "Case", "SamplerCase", "RenderCase", "SuiteError", "load_suite"]
 
@@ -189,7 +190,7 @@ def load_suite(path: str | Path) -> Suite:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise SuiteError(f"{path}: not valid TOML: {e}") from None
-    where = _Locator(path, text)
+    where = Locator(path, text)
 
     for key in data:
         if key not in ("suite", "case", "sampler", "render"):
@@ -270,7 +271,7 @@ def load_suite(path: str | Path) -> Suite:
 
 
 def _renders(raw: list[dict[str, Any]], measurements: tuple[str, ...],
-             where: "_Locator") -> tuple[RenderCase, ...]:
+             where: Locator) -> tuple[RenderCase, ...]:
     """[[render]] tables: runner keys (_RENDER_KEYS) plus the adapter's own keys; a list value
     of an adapter key makes one case per element (cross product over such keys)."""
     import itertools
@@ -331,7 +332,7 @@ def _renders(raw: list[dict[str, Any]], measurements: tuple[str, ...],
 
 
 def _samplers(raw: list[dict[str, Any]], samples: int, first_id: int,
-              where: "_Locator") -> tuple[SamplerCase, ...]:
+              where: Locator) -> tuple[SamplerCase, ...]:
     from harness.samplers import DOMAINS
 
     out = []
@@ -379,7 +380,7 @@ _ADAPTER_SAMPLER_KEYS = {"adapter": str, "plugin": dict, "wi": (int, float, list
                          "samples": int, "measurements": list}
 
 
-def _adapter_sampler(c: dict[str, Any], samples: int, case_id: int, where: "_Locator",
+def _adapter_sampler(c: dict[str, Any], samples: int, case_id: int, where: Locator,
                      table: Any) -> SamplerCase:
     """A renderer's sampler (a Mitsuba BSDF, microfacet distribution or environment map):
     chi-square with failed samples accounted for, and the weight == eval/pdf check."""
@@ -420,7 +421,7 @@ def _named_key(message: str, keys: Any) -> str | None:
     return named[0][1] if named else None
 
 
-def _check_keys(table: dict[str, Any], spec: dict[str, Any], where: "_Locator", name: Any) -> None:
+def _check_keys(table: dict[str, Any], spec: dict[str, Any], where: Locator, name: Any) -> None:
     for key, value in table.items():
         if key not in spec:
             raise SuiteError(where.at(name, key, f"unknown key {key!r}; expected one of: {', '.join(spec)}"))
@@ -430,7 +431,7 @@ def _check_keys(table: dict[str, Any], spec: dict[str, Any], where: "_Locator", 
             raise SuiteError(where.at(name, key, f"expected {kinds}, got {type(value).__name__} {value!r}"))
 
 
-def _target(c: dict[str, Any], samples: int, f: Any, where: "_Locator",
+def _target(c: dict[str, Any], samples: int, f: Any, where: Locator,
             table: Any) -> tuple[float | None, int | None]:
     """A precision target: the half-width of the bias test's interval at which to stop doubling
     the samples, and the most samples to try."""
@@ -452,7 +453,7 @@ def _target(c: dict[str, Any], samples: int, f: Any, where: "_Locator",
     return target, c["max_samples"]
 
 
-def _measurements(names: list[Any], where: "_Locator", table: Any) -> tuple[str, ...]:
+def _measurements(names: list[Any], where: Locator, table: Any) -> tuple[str, ...]:
     for m in names:
         if m not in MEASUREMENTS:
             hint = " (sampler checks go in [[sampler]] tables)" if m in SAMPLER_MEASUREMENTS else ""
@@ -463,39 +464,6 @@ def _measurements(names: list[Any], where: "_Locator", table: Any) -> tuple[str,
     return tuple(dict.fromkeys(names))
 
 
-def _positive(v: int, where: "_Locator", table: Any, key: str) -> None:
+def _positive(v: int, where: Locator, table: Any, key: str) -> None:
     if v <= 0:
         raise SuiteError(where.at(table, key, f"expected a budget > 0 samples, got {v}"))
-
-
-class _Locator:
-    """Finds the line of a key in the raw text (tomllib keeps no positions)."""
-
-    def __init__(self, path: Path, text: str):
-        self.path = path
-        self.lines = text.splitlines()
-
-    def at(self, table: Any, key: str | None, message: str) -> str:
-        line = self._find(table, key)
-        prefix = f"{self.path}:{line}" if line else f"{self.path}"
-        return f"{prefix}: {key + ': ' if key else ''}{message}"
-
-    def _find(self, table: Any, key: str | None) -> int | None:
-        start, end = 0, len(self.lines)
-        if table is not None:
-            name, index = (table, 0) if isinstance(table, str) else table
-            header = re.compile(r"^\s*\[\[\s*%s\s*\]\]" % re.escape(name) if not isinstance(table, str)
-                                else r"^\s*\[\s*%s\s*\]" % re.escape(name))
-            starts = [i for i, line in enumerate(self.lines) if header.match(line)]
-            if index >= len(starts):
-                return None
-            start = starts[index]
-            nxt = [i for i, line in enumerate(self.lines) if i > start and re.match(r"^\s*\[", line)]
-            end = nxt[0] if nxt else len(self.lines)
-            if key is None:
-                return start + 1
-        pattern = re.compile(r"^\s*(\[+\s*)?%s\s*(=|\]|\.)" % re.escape(key or ""))
-        for i in range(start, end):
-            if pattern.match(self.lines[i]):
-                return i + 1
-        return None
