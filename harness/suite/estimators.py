@@ -168,7 +168,8 @@ def _measure(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int = 0
         batches = [estimate(stream, b, k) for k in range(suite.batches)]
         faults = {k: v for e in batches for k, v in e.issues.items()}
         if "bias" in wanted:
-            tail = next(p for u, p in payloads.items() if u.kind == "tail" and u.stream == stream)
+            tail = next(p for u, p in payloads.items() if u.kind == "tail" and u.stream == stream
+                        and u.budget == b)  # not a tail stored for an earlier sample count
             tails = stats.TailSample.from_tops(tail["upper"], tail["lower"])
             if faults:
                 first = next(e for e in batches if e.issues)

@@ -228,7 +228,11 @@ def _faults(payloads: dict[Unit, dict]) -> ImageFaults:
 
 def _measure(rc: RenderCase, key: str, store: Store, reference: ist.Reference,
              ref_label: str) -> RenderResult:
-    payloads, seconds_of = store.payloads(key), store.seconds(key)
+    # only the units this configuration plans: renders stored for an earlier version of the suite
+    # (other spp, budgets or replica counts) share the case key but are not part of this measurement
+    planned = set(render_units(rc, key))
+    payloads = {u: p for u, p in store.payloads(key).items() if u in planned}
+    seconds_of = {u: s for u, s in store.seconds(key).items() if u in planned}
     wanted = set(rc.measurements)
     faults = _faults(payloads)
     notes: list[str] = []

@@ -1,0 +1,84 @@
+"""A suite edited between runs on one database measures exactly what a fresh run of the
+edited suite measures: stored units of the earlier version that share a case's key (renders
+at another spp, other budgets or replica counts; the tail sample of another sample count) are
+never mixed into the new measurements."""
+from __future__ import annotations
+
+import json
+import math
+import textwrap
+
+import harness
+from harness.suite.parse import load_suite
+from harness.suite.run import run_suite
+
+TIMED = {"log10_efficiency", "efficiency_ratio", "efficiency", "equal_time_relmse"}
+TIMING_DETAIL = {"seconds", "seconds_se", "error_vs_time", "rows", "log10_value"}
+
+
+def _untimed(d):
+    """A stored detail without its wall-time fields, at any depth."""
+    if isinstance(d, dict):
+        return {k: _untimed(v) for k, v in d.items() if k not in TIMING_DETAIL}
+    return [_untimed(v) for v in d] if isinstance(d, list) else d
+
+
+def _measured(db) -> dict[tuple[str, str, str], tuple]:
+    """(integrand, technique, measurement) -> (value, lo, hi, n, pvalue, verdict, detail) of the
+    rows that do not depend on wall times (timing fields left out of the detail)."""
+    df = harness.load(db)
+    out = {}
+    for r in df.to_dict("records"):
+        if r["measurement"] not in TIMED:
+            out[(r["integrand"], r["technique"], r["measurement"])] = tuple(
+                "nan" if isinstance(v, float) and math.isnan(v) else v
+                for v in (r["value"], r["lo"], r["hi"], r["n"], r["pvalue"], r["verdict"]))
+            out[(r["integrand"], r["technique"], r["measurement"])] += (
+                repr(_untimed(json.loads(r["detail"]))),)
+    return out
+
+
+def _edited_equals_fresh(tmp_path, before: str, after: str) -> None:
+    first, second = tmp_path / "before.toml", tmp_path / "after.toml"
+    first.write_text(textwrap.dedent(before))
+    second.write_text(textwrap.dedent(after))
+    run_suite(load_suite(first), tmp_path / "edited" / "r.sqlite", threads=2)
+    edited = run_suite(load_suite(second), tmp_path / "edited" / "r.sqlite", threads=2)
+    fresh = run_suite(load_suite(second), tmp_path / "fresh" / "r.sqlite", threads=2)
+    assert edited.units_run < fresh.units_run  # the edit reused what still applies
+    assert _measured(tmp_path / "edited" / "r.sqlite") == _measured(tmp_path / "fresh" / "r.sqlite")
+
+
+def test_samples_edited_use_the_tail_sample_of_the_new_count(tmp_path):
+    base = """\
+        [suite]
+        name = "edit"
+        samples = {samples}
+        batches = 16
+        replicas = 4
+        budgets = [1024, 4096, 16384]
+        measurements = ["bias", "variance", "convergence"]
+
+        [[case]]
+        integrand = "singularity"
+        techniques = ["uniform", "importance:power"]
+        """
+    _edited_equals_fresh(tmp_path, base.format(samples=2**16), base.format(samples=2**17))
+
+
+def test_render_spp_budgets_and_replicas_edited_measure_only_the_new_renders(tmp_path):
+    base = """\
+        [suite]
+        name = "edit-renders"
+
+        [[render]]
+        adapter = "mitsuba"
+        scene = "furnace"
+        integrator = "path"
+        variant = "scalar_rgb"
+        spp = {spp}
+        replicas = {replicas}
+        budgets = {budgets}
+        """
+    _edited_equals_fresh(tmp_path, base.format(spp=4, replicas=5, budgets=[1, 2, 4]),
+                         base.format(spp=8, replicas=4, budgets=[1, 4, 8]))
