@@ -9,10 +9,11 @@ a time, with renderers rebuilt there from the suite's keys (same images, bit for
 
 A scene with an exact answer (``Renderer.exact``) renders no reference.  Otherwise the
 reference is ``reference_parts`` independent renders by ``Renderer.reference()`` with
-``reference_spp`` samples in total, stored as units like any other and then cached as EXR
-(mean and variance of the mean) plus JSON in ``references/`` beside the database, keyed by a
-hash of the reference renderer's fingerprint (scene, variant, integrator settings,
-library versions), budget and seed; every case and run that needs the same reference reuses it.
+``reference_spp`` samples in total, stored as units like any other and then cached (mean and
+variance of the mean as float64 .npy, so a rerun measures against bitwise the first run's
+reference; EXR copies for viewing; a JSON record) in ``references/`` beside the database, keyed
+by a hash of the reference renderer's fingerprint (scene, variant, integrator settings, library
+versions), budget and seed; every case and run that needs the same reference reuses it.
 """
 from __future__ import annotations
 
@@ -34,7 +35,7 @@ from harness.suite.kind import Outcome
 from harness.suite.parse import RenderCase, Suite
 from harness.suite.plan import Unit, reference_key, reference_units, render_key, render_seed, render_units
 from harness.suite.render_tables import failures, judge, render_rows, render_table
-from harness.suite.store import Store, read_exr, write_exr
+from harness.suite.store import Store, write_exr
 
 __all__ = ["RenderJob", "RenderResult", "RenderKind", "ReferenceCache", "cached_renderer"]
 
@@ -87,32 +88,35 @@ class RenderResult:
 
 
 class ReferenceCache:
-    """Rendered references as EXR (mean, variance of the mean) + JSON, keyed by hash."""
+    """Rendered references keyed by hash: the mean and the variance of the mean as lossless
+    float64 arrays (.npy, what every run measures against, so a rerun is bitwise equal to the
+    first run), the same as EXR for viewing, and a JSON record written last."""
 
     def __init__(self, folder: Path):
         self.folder = folder
 
-    def _paths(self, key: str) -> tuple[Path, Path, Path]:
-        folder = self.folder
-        return folder / f"{key}-mean.exr", folder / f"{key}-variance.exr", folder / f"{key}.json"
+    def _path(self, key: str, what: str) -> Path:
+        return self.folder / f"{key}-{what}"
 
     def load(self, key: str) -> ist.Reference | None:
-        mean_p, var_p, meta_p = self._paths(key)
-        if not meta_p.exists():  # written last: its presence means both images are complete
+        meta_p = self._path(key, "meta.json")
+        if not meta_p.exists():  # written last: its presence means the arrays are complete
             return None
         meta = json.loads(meta_p.read_text())
-        return ist.Reference(read_exr(mean_p).astype(np.float64), read_exr(var_p).astype(np.float64),
+        return ist.Reference(np.load(self._path(key, "mean.npy")), np.load(self._path(key, "variance.npy")),
                              int(meta["parts"]), float(meta["image_mean_variance"]))
 
     def save(self, key: str, ref: ist.Reference, meta: dict[str, Any]) -> None:
         self.folder.mkdir(parents=True, exist_ok=True)
-        mean_p, var_p, meta_p = self._paths(key)
-        write_exr(mean_p, ref.mean)
-        write_exr(var_p, ref.variance)
+        for what, a in (("mean", ref.mean), ("variance", ref.variance)):
+            tmp = self._path(key, f"{what}.partial.npy")
+            np.save(tmp, np.asarray(a, dtype=np.float64))
+            os.replace(tmp, self._path(key, f"{what}.npy"))
+            write_exr(self._path(key, f"{what}.exr"), a)
+        meta_p = self._path(key, "meta.json")
         tmp = meta_p.with_suffix(".json.partial")
-        tmp.write_text(json.dumps({**meta, "parts": ref.parts,
-                                   "image_mean_variance": ref.image_mean_variance},
-                                  indent=1, sort_keys=True, default=str))
+        record = {**meta, "parts": ref.parts, "image_mean_variance": ref.image_mean_variance}
+        tmp.write_text(json.dumps(record, indent=1, sort_keys=True, default=str))
         os.replace(tmp, meta_p)
 
 

@@ -82,3 +82,30 @@ def test_render_spp_budgets_and_replicas_edited_measure_only_the_new_renders(tmp
         """
     _edited_equals_fresh(tmp_path, base.format(spp=4, replicas=5, budgets=[1, 2, 4]),
                          base.format(spp=8, replicas=4, budgets=[1, 4, 8]))
+
+
+def test_a_finished_render_suite_reruns_bitwise(tmp_path):
+    """The first run measures against the reference it just rendered; a rerun reads it back from
+    the cache (lossless float64): both store bitwise the same numbers."""
+    path = tmp_path / "r.toml"
+    path.write_text(textwrap.dedent("""\
+        [suite]
+        name = "rerun"
+
+        [[render]]
+        adapter = "mitsuba"
+        scene = "cornell"
+        integrator = "path"
+        max_depth = 2
+        variant = "scalar_rgb"
+        spp = 2
+        replicas = 4
+        budgets = [1, 2, 4]
+        reference_spp = 64
+        """))
+    db = tmp_path / "rerun.sqlite"
+    first = run_suite(load_suite(path), db)
+    once = _measured(db)
+    again = run_suite(load_suite(path), db)
+    assert first.units_run > 0 and again.units_run == 0
+    assert _measured(db) == once
