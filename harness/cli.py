@@ -162,7 +162,7 @@ def _report(db: str, output: str | None, fmt: str, suite: str | None) -> int:
 def _show(db: str, suite: str | None) -> int:
     try:
         df = load(db, suite)
-    except FileNotFoundError as e:
+    except (FileNotFoundError, ValueError) as e:
         print(f"harness: {e}", file=sys.stderr)
         return 2
     if df.empty:

@@ -10,14 +10,13 @@ identified by their key.
 from __future__ import annotations
 
 import json
-import sqlite3
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from harness.suite.store import Store
+from harness.suite.store import connect_read_only, image_dir, read_exr
 
 __all__ = ["Results", "load_results", "SAMPLER_PREFIX"]
 
@@ -56,14 +55,14 @@ class Results:
 
     def image(self, name: str) -> np.ndarray:
         """A stored image, float32 (height, width, channels)."""
-        store = Store(self.db)
+        con = connect_read_only(self.db)
         try:
-            a = store.image(name)
+            row = con.execute("SELECT file FROM images WHERE name = ?", (name,)).fetchone()
         finally:
-            store.close()
-        if a is None:
+            con.close()
+        if row is None:
             raise KeyError(f"no image {name!r} in {self.db}")
-        return np.asarray(a, dtype=np.float32)
+        return np.asarray(read_exr(image_dir(self.db) / row[0]), dtype=np.float32)
 
 
 def load_results(db: str | Path, suite: str | None = None) -> Results:
@@ -71,7 +70,7 @@ def load_results(db: str | Path, suite: str | None = None) -> Results:
     path = Path(db)
     if not path.is_file():
         raise FileNotFoundError(f"no results database at {path} (run `harness run SUITE --db {path}` first)")
-    con = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
+    con = connect_read_only(path)
     try:
         tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
         if "measurements" not in tables:

@@ -24,7 +24,7 @@ import pandas as pd
 
 from harness.suite.plan import Unit
 
-__all__ = ["Store", "load", "write_exr", "read_exr"]
+__all__ = ["Store", "load", "connect_read_only", "image_dir", "write_exr", "read_exr"]
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS cases (
@@ -134,7 +134,7 @@ class Store:
     # --- images ----------------------------------------------------------------------------
     @property
     def image_dir(self) -> Path:
-        return self.path.with_name(self.path.name + ".images")
+        return image_dir(self.path)
 
     def put_image(self, name: str, image: np.ndarray) -> Path:
         """Stores a float image (height, width[, channels]) as EXR and records it; returns the file."""
@@ -164,10 +164,6 @@ class Store:
                              r.get("alpha"), r.get("verdict"),
                              json.dumps(r.get("detail", {}), sort_keys=True, default=str)))
         self.db.execute("COMMIT")
-
-    def measurements(self, suite: str | None = None) -> pd.DataFrame:
-        query = "SELECT * FROM measurements" + (" WHERE suite = ?" if suite else "") + " ORDER BY rowid"
-        return pd.read_sql_query(query, self.db, params=(suite,) if suite else ())
 
 
 def write_exr(path: Path, image: np.ndarray) -> np.ndarray:
@@ -206,14 +202,44 @@ def read_exr(path: Path) -> np.ndarray:
         inp.close()
 
 
+def image_dir(db: str | Path) -> Path:
+    """The folder of a database's images (EXR), beside it."""
+    path = Path(db)
+    return path.with_name(path.name + ".images")
+
+
+def connect_read_only(db: str | Path) -> sqlite3.Connection:
+    """A connection that never changes the database: read-only (no schema, no WAL switch), and
+    immutable where SQLite cannot open it read-only otherwise (a read-only results folder).
+    Raises FileNotFoundError for a missing file, ValueError naming the file for one that is not
+    a SQLite database."""
+    path = Path(db)
+    if not path.is_file():
+        raise FileNotFoundError(f"no results database at {path}")
+    uri = path.resolve().as_uri()
+    for flags in ("mode=ro", "mode=ro&immutable=1"):
+        con = sqlite3.connect(f"{uri}?{flags}", uri=True)
+        try:
+            con.execute("SELECT name FROM sqlite_master LIMIT 1").fetchall()
+            return con
+        except sqlite3.DatabaseError as e:
+            con.close()
+            if not isinstance(e, sqlite3.OperationalError):  # not a database at all
+                raise ValueError(f"{path} is not a results database ({e})") from None
+            error = e
+    raise ValueError(f"cannot read {path}: {error}")
+
+
 def load(db: str | Path, suite: str | None = None) -> pd.DataFrame:
     """The stored measurements as a DataFrame: one row per case and measurement with its
-    value, interval (lo, hi), sample count n, p-value, alpha and verdict."""
-    path = Path(db)
-    if not path.exists():
-        raise FileNotFoundError(f"no results database at {path}")
-    store = Store(path)
+    value, interval (lo, hi), sample count n, p-value, alpha and verdict.  Opens the database
+    read-only: it never changes it."""
+    con = connect_read_only(db)
     try:
-        return store.measurements(suite)
+        tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+        if "measurements" not in tables:
+            raise ValueError(f"{db} is not a results database (no measurements table)")
+        query = "SELECT * FROM measurements" + (" WHERE suite = ?" if suite else "") + " ORDER BY rowid"
+        return pd.read_sql_query(query, con, params=(suite,) if suite else ())
     finally:
-        store.close()
+        con.close()

@@ -170,8 +170,8 @@ def test_measurements_are_replaced_per_case_and_measurement(tmp_path):
 def test_measurement_details_are_stored_as_sorted_json(tmp_path):
     store = Store(tmp_path / "r.sqlite")
     store.put_measurements([row("bias", 0.0, detail={"z": 1, "a": [2], "p": Path("x")})])
-    assert store.measurements()["detail"].tolist() == ['{"a": [2], "p": "x", "z": 1}']
     store.close()
+    assert load(tmp_path / "r.sqlite")["detail"].tolist() == ['{"a": [2], "p": "x", "z": 1}']
 
 
 def test_load_of_a_missing_database_raises_and_creates_nothing(tmp_path):
@@ -179,3 +179,50 @@ def test_load_of_a_missing_database_raises_and_creates_nothing(tmp_path):
     with pytest.raises(FileNotFoundError, match=re.escape(f"no results database at {path}")):
         load(path)
     assert not path.exists()
+
+
+def test_load_and_show_never_change_a_database(tmp_path):
+    """`harness.load` and `harness show` open read-only: an unrelated SQLite file keeps its bytes,
+    tables and journal mode, and is refused with a one-line error naming it; so is a garbage file."""
+    import sqlite3
+    import subprocess
+    import sys
+
+    other = tmp_path / "other.sqlite"
+    con = sqlite3.connect(other)
+    con.execute("CREATE TABLE notes (text TEXT)")
+    con.execute("INSERT INTO notes VALUES ('kept')")
+    con.commit()
+    con.close()
+    before = other.read_bytes()
+    with pytest.raises(ValueError,
+                       match=r"other\.sqlite is not a results database \(no measurements table\)"):
+        load(other)
+    harness_cli = Path(sys.executable).with_name("harness")
+    r = subprocess.run([str(harness_cli), "show", "--db", str(other)], capture_output=True, text=True,
+                       timeout=60)
+    assert r.returncode == 2 and "is not a results database" in r.stderr and "Traceback" not in r.stderr
+    assert other.read_bytes() == before
+    con = sqlite3.connect(other)
+    assert con.execute("PRAGMA journal_mode").fetchone()[0] == "delete"
+    assert [t for (t,) in con.execute("SELECT name FROM sqlite_master")] == ["notes"]
+    con.close()
+
+    garbage = tmp_path / "garbage.sqlite"
+    garbage.write_bytes(b"not a database at all, just bytes" * 100)
+    with pytest.raises(ValueError, match=r"garbage\.sqlite is not a results database"):
+        load(garbage)
+    assert garbage.read_bytes() == b"not a database at all, just bytes" * 100
+
+
+def test_load_reads_a_results_database_without_writing_it(tmp_path):
+    db = tmp_path / "r.sqlite"
+    store = Store(db)
+    store.put_measurements([{"case_key": "k", "suite": "s", "integrand": "gaussian", "technique": "uniform",
+                             "measurement": "bias", "value": 0.5, "n": 10}])
+    store.close()
+    for extra in tmp_path.glob("r.sqlite-*"):  # checkpointed and closed: only the main file matters
+        extra.unlink()
+    before = db.read_bytes()
+    df = load(db)
+    assert list(df["value"]) == [0.5] and db.read_bytes() == before
