@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
 
 import pandas as pd
@@ -73,13 +74,21 @@ def main(argv: list[str] | None = None) -> int:
 def _run(suite, db: str, threads: int | None, csv: str | None, dask: str | None) -> int:
     bar = tqdm(total=0, unit="unit", desc=f"{suite.name}", disable=not sys.stderr.isatty(), leave=False)
 
+    stored = {"done": 0, "total": 0}
+
     def progress(done: int, total: int) -> None:
         bar.total = total
         bar.n = done
         bar.refresh()
+        stored.update(done=done, total=total)
 
-    summary = run_suite(suite, db, threads=threads, dask=dask, progress=progress)
-    bar.close()
+    try:
+        summary = run_suite(suite, db, threads=threads, dask=dask, progress=progress)
+    except KeyboardInterrupt as e:  # Ctrl-C or SIGTERM: say what is kept (entry() prints it)
+        what = f"{stored['done']} of {stored['total']} units stored in {db}, rerun to resume"
+        raise type(e)(what) from None
+    finally:
+        bar.close()
     print(f"suite {suite.name!r} ({suite.path}): {len(suite.cases)} cases, seed {suite.seed}, "
           f"family-wise alpha {suite.alpha:g} (Holm), {suite.batches} batches per bias test, "
           f"{suite.replicas} replicas per budget")
@@ -187,14 +196,27 @@ def _list() -> int:
     return 0
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised in the main thread like Ctrl-C's KeyboardInterrupt."""
+
+
+def _terminate(signum: int, frame: object) -> None:
+    raise Terminated()
+
+
 def entry() -> None:
-    """Console-script entry: main(), quiet when the reader of stdout goes away (| head)."""
+    """Console-script entry: main(), quiet when the reader of stdout goes away (| head); Ctrl-C
+    and SIGTERM end with one line (what was stored, how to resume) and exit 130 / 143."""
+    signal.signal(signal.SIGTERM, _terminate)
     try:
         code = main()
         sys.stdout.flush()
     except BrokenPipeError:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         code = 1
+    except KeyboardInterrupt as e:
+        print(f"harness: interrupted{': ' + str(e) if str(e) else ''}", file=sys.stderr)
+        code = 143 if isinstance(e, Terminated) else 130
     sys.exit(code)
 
 

@@ -1,8 +1,11 @@
 """The command line and suite files, run as a user runs them: the real console script."""
 from __future__ import annotations
 
+import re
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -158,3 +161,45 @@ def test_invalid_toml_names_the_file_and_position(tmp_path):
 def test_missing_file_is_reported(tmp_path):
     r = run("run", str(tmp_path / "nope.toml"))
     assert r.returncode == 2 and "cannot read suite file" in r.stderr
+
+
+@pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_an_interrupted_run_says_what_it_kept_and_resumes(tmp_path, sig, code):
+    """Ctrl-C (SIGINT) and SIGTERM end a run with one line, no traceback, exit 130 / 143; the
+    rerun computes only what is missing and finishes."""
+    suite = tmp_path / "long.toml"
+    suite.write_text('[suite]\nname = "long"\nsamples = 33_554_432\nbatches = 16\nmeasurements = ["bias"]\n\n'
+                     '[[case]]\nintegrand = "gaussian16"\ntechniques = ["uniform", "uniform/sobol"]\n')
+    db = tmp_path / "long.sqlite"
+    proc = subprocess.Popen([HARNESS, "run", str(suite), "--db", str(db), "--threads", "2"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and proc.poll() is None:  # wait for the first stored unit
+        if db.exists() and _stored(db):
+            break
+        time.sleep(0.05)
+    assert proc.poll() is None, "the run ended before it could be interrupted"
+    proc.send_signal(sig)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == code, out + err
+    assert "Traceback" not in err and re.search(r"harness: interrupted: \d+ of \d+ units stored in .*long\.sqlite, "
+                                                r"rerun to resume", err), err
+    kept = _stored(db)
+    r = subprocess.run([HARNESS, "run", str(suite), "--db", str(db), "--threads", "2"], capture_output=True,
+                       text=True, timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert re.search(r"(\d+) of (\d+) work units computed", r.stdout).group(1) == str(
+        int(re.search(r"of (\d+) work units", r.stdout).group(1)) - kept)
+
+
+def _stored(db) -> int:
+    import sqlite3
+
+    try:
+        con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
+        try:
+            return con.execute("SELECT COUNT(*) FROM units").fetchone()[0]
+        finally:
+            con.close()
+    except sqlite3.Error:  # not created yet
+        return 0

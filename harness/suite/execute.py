@@ -53,8 +53,11 @@ def run_local(jobs: list[Job], threads: int) -> Iterator[JobResult]:
     serial ones in this thread."""
     parallel = [j for j in jobs if not j.serial]
     if parallel:
-        with ThreadPoolExecutor(max_workers=max(threads, 1)) as pool:
+        pool = ThreadPoolExecutor(max_workers=max(threads, 1))
+        try:
             yield from pool.map(_run, parallel)
+        finally:  # interrupted (Ctrl-C, a failing sink): queued jobs are dropped, running ones end
+            pool.shutdown(wait=True, cancel_futures=True)
     for j in jobs:
         if j.serial:
             yield j.run()
