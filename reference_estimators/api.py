@@ -6,6 +6,7 @@ wrong; the heavy work runs in C++ with the GIL released.
 """
 from __future__ import annotations
 
+import math
 import numbers
 from typing import Any
 
@@ -302,6 +303,8 @@ def estimate_from_samples(f: str | Integrand, points: Any, pdf: Any, *, sampler:
     negative, NaN or infinite are reported and excluded, never averaged."""
     fi = integrand(f)
     x = _points(points, fi.dim, "points")
+    if len(x) == 0:
+        raise ValueError("'points' must hold at least one sample, got none")
     p = np.ascontiguousarray(pdf, dtype=np.float64)
     raw = _core.estimate_from_samples(fi, x, p, None if sampler is None else _core_sampler(sampler),
                                       _threads(threads))
@@ -331,11 +334,18 @@ def _points(a: Any, dim: int, name: str) -> np.ndarray:
     return x
 
 
+_MAX_COUNT = 2**63 - 1   # the core counts samples in 64-bit signed integers
+
+
 def _count(n: Any, name: str) -> int:
+    if isinstance(n, numbers.Real) and not isinstance(n, bool) and not math.isfinite(n):
+        raise ValueError(f"'{name}' must be a finite number of samples, got {n!r}")
     if isinstance(n, bool) or not isinstance(n, numbers.Real) or n != int(n):
         raise TypeError(f"'{name}' must be a whole number of samples, got {n!r}")
     if n <= 0:
         raise ValueError(f"'{name}' must be a positive number of samples, got {n!r}")
+    if n > _MAX_COUNT:
+        raise ValueError(f"'{name}' must be at most 2**63 - 1 samples, got {n!r}")
     return int(n)
 
 

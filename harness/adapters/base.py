@@ -48,12 +48,14 @@ class Renderer(Protocol):
 
 @dataclass
 class ImageFaults:
-    """Pixels that must not be averaged in: counts and the first positions (row, column)."""
+    """Pixels that must not be averaged in: counts and the first positions, (row, col) in one
+    image or (replica, row, col) over a case's renders (``position`` says which)."""
 
     nan: int = 0
     inf: int = 0
     negative: int = 0
-    examples: dict[str, list[tuple[int, int]]] = field(default_factory=dict)
+    examples: dict[str, list[tuple[int, ...]]] = field(default_factory=dict)
+    position: str = "row, col"
 
     @property
     def total(self) -> int:
@@ -64,7 +66,7 @@ class ImageFaults:
                 "examples": {k: [list(p) for p in v] for k, v in self.examples.items()}}
 
     def __str__(self) -> str:
-        parts = [f"{getattr(self, k)} {k} pixel(s) e.g. at (row, col) {self.examples[k][:3]}"
+        parts = [f"{getattr(self, k)} {k} pixel(s) e.g. at ({self.position}) {self.examples[k][:3]}"
                  for k in ("nan", "inf", "negative") if getattr(self, k)]
         return "; ".join(parts) if parts else "no invalid pixels"
 

@@ -219,7 +219,7 @@ def _stack(store: Store, payloads: dict[Unit, dict], seconds: dict[Unit, float],
 
 def _faults(payloads: dict[Unit, dict]) -> ImageFaults:
     """The invalid pixels of a case's renders: counts, and examples as (replica, row, col)."""
-    total = ImageFaults()
+    total = ImageFaults(position="replica, row, col")
     for u, p in sorted(payloads.items()):
         f = p["faults"]
         for kind in ("nan", "inf", "negative"):

@@ -140,6 +140,7 @@ def test_nan_frames_are_counted_not_averaged(tmp_path, monkeypatch):
     assert r.faults.nan == 4 and r.faults.examples["nan"][0] == (0, 7, 9)
     assert [v["bias"] for v in summary["render"].verdicts] == ["invalid"]
     assert "invalid (4 bad pixels)" in summary["render"].failures[0]
+    assert "e.g. at (replica, row, col)" in summary["render"].failures[0]  # positions labelled as they are
     assert r.bias.excluded == 1
 
 

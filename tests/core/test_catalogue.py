@@ -279,10 +279,18 @@ def test_unknown_technique_names_the_choices():
     (2.5, TypeError, r"'n' must be a whole number of samples, got 2.5"),
     (True, TypeError, r"'n' must be a whole number"),
     ("10", TypeError, r"'n' must be a whole number"),
+    (float("nan"), ValueError, r"'n' must be a finite number of samples, got nan"),
+    (float("inf"), ValueError, r"'n' must be a finite number of samples, got inf"),
+    (2**64, ValueError, r"'n' must be at most 2\*\*63 - 1 samples, got 18446744073709551616"),
 ])
 def test_bad_sample_counts_are_rejected(n, error, message):
     with pytest.raises(error, match=message):
         rest.integrate("gaussian", "uniform", n)
+
+
+def test_an_estimate_from_no_samples_is_refused():
+    with pytest.raises(ValueError, match=r"'points' must hold at least one sample, got none"):
+        rest.estimate_from_samples("gaussian", np.empty(0), np.empty(0))
 
 
 def test_bad_seed_and_threads_are_rejected():
