@@ -67,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.threads is not None and args.threads < 1:
         print("harness: --threads must be >= 1", file=sys.stderr)
         return 2
-    db = args.db or f"results/{suite.name}.sqlite"
+    db = args.db or f"results/{suite.file_name}.sqlite"
     return _run(suite, db, args.threads, args.csv, args.dask)
 
 

@@ -54,8 +54,8 @@ class SuiteFile(pytest.File):
         if self.summary is None:
             opt = self.config.getoption
             cache = getattr(self.config, "cache", None)  # None under -p no:cacheprovider
-            db = opt("--harness-db") or (cache.mkdir("harness") / f"{self.suite.name}.sqlite" if cache
-                                         else Path(f"results/{self.suite.name}.sqlite"))
+            db = opt("--harness-db") or (cache.mkdir("harness") / f"{self.suite.file_name}.sqlite" if cache
+                                         else Path(f"results/{self.suite.file_name}.sqlite"))
             self.summary = run_suite(self.suite, db, threads=opt("--harness-threads"))
         return self.summary
 

@@ -100,7 +100,7 @@ BAD_SUITES = [
     ('[suite]\nsamples = "many"\n\n[[case]]\nintegrand = "gaussian"\n', 2, "samples",
      "expected int, got str 'many'"),
     (GOOD_HEAD + '[[case]]\nintegrand = 3\n', 6, "integrand", "expected str, got int 3"),
-    ('[suite]\nseed = -1\n[[case]]\nintegrand = "gaussian"\n', 2, "seed", "expected an integer >= 0"),
+    ('[suite]\nseed = -1\n[[case]]\nintegrand = "gaussian"\n', 2, "seed", "expected an integer in [0, 2**64)"),
     ('[suites]\nname = "x"\n', 1, "suites", "unknown table 'suites'"),
     (GOOD_HEAD, None, "case", "expected at least one [[case]], [[sampler]] or [[render]] table"),
     (GOOD_HEAD + '[[sampler]]\nname = "gxx"\n', 6, "name",

@@ -61,6 +61,7 @@ Every mistake is reported as ``file:line: key: what was expected``.
 """
 from __future__ import annotations
 
+import re
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -169,6 +170,12 @@ class Suite:
     samplers: tuple[SamplerCase, ...] = ()
     renders: tuple[RenderCase, ...] = ()
 
+    @property
+    def file_name(self) -> str:
+        """The name as a safe file name (results/<file_name>.sqlite): letters, digits, '.', '_'
+        and '-' only, never a path (``../../x`` becomes ``x``)."""
+        return re.sub(r"[^A-Za-z0-9._-]+", "_", self.name).strip("._") or "suite"
+
 
 _RENDER_KEYS = {"adapter": str, "spp": int, "replicas": int, "budgets": list, "reference_spp": int,
                 "reference_parts": int, "measurements": list, "expect": str}
@@ -183,28 +190,26 @@ def load_suite(path: str | Path) -> Suite:
     """Parse and validate a suite file; raises SuiteError naming file, line and key."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        raw = path.read_bytes()
     except OSError as e:
         raise SuiteError(f"{path}: cannot read suite file: {e.strerror}") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise SuiteError(f"{path}: not UTF-8 text: byte {raw[e.start]:#04x} at offset {e.start}") from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise SuiteError(f"{path}: not valid TOML: {e}") from None
     where = Locator(path, text)
-
-    for key in data:
-        if key not in ("suite", "case", "sampler", "render"):
-            raise SuiteError(where.at(None, key, f"unknown table {key!r}; expected [suite], [[case]], "
-                                      "[[sampler]] and [[render]] tables"))
+    _check_tables(data, where)
     head = data.get("suite", {})
-    if not isinstance(head, dict):
-        raise SuiteError(where.at(None, "suite", "expected a [suite] table"))
     _check_keys(head, _SUITE_KEYS, where, "suite")
     samples = head.get("samples", 1_000_000)
     _positive(samples, where, "suite", "samples")
     seed = head.get("seed", 0)
-    if seed < 0:
-        raise SuiteError(where.at("suite", "seed", f"expected an integer >= 0, got {seed}"))
+    if not 0 <= seed < 2**64:
+        raise SuiteError(where.at("suite", "seed", f"expected an integer in [0, 2**64), got {seed}"))
     threads = head.get("threads")
     if threads is not None and threads < 0:
         raise SuiteError(where.at("suite", "threads",
@@ -257,6 +262,9 @@ def load_suite(path: str | Path) -> Suite:
                 wanted = list(known)
             elif isinstance(wanted, str):
                 wanted = [wanted]
+            if not wanted:
+                raise SuiteError(where.at(table, "techniques", "expected \"all\", a technique or a non-empty "
+                                                               "list of techniques, got []"))
             for t in wanted:
                 if not isinstance(t, str) or t not in known:
                     raise SuiteError(where.at(table, "techniques",
@@ -283,7 +291,10 @@ def _renders(raw: list[dict[str, Any]], measurements: tuple[str, ...],
         table = ("render", i)
         runner_keys = {k: v for k, v in c.items() if k in _RENDER_KEYS}
         _check_keys(runner_keys, _RENDER_KEYS, where, table)
-        adapter = c.get("adapter")
+        if "adapter" not in c:
+            raise SuiteError(where.at(table, None,
+                                      f"missing key 'adapter' (one of: {', '.join(ADAPTERS)})"))
+        adapter = c["adapter"]
         if adapter not in ADAPTERS:
             raise SuiteError(where.at(table, "adapter",
                                       f"expected one of: {', '.join(ADAPTERS)}, got {adapter!r}"))
@@ -316,6 +327,9 @@ def _renders(raw: list[dict[str, Any]], measurements: tuple[str, ...],
                                       f"expected \"unbiased\" or \"biased\", got {expect!r}"))
         spec = {k: v for k, v in c.items() if k not in _RENDER_KEYS}
         axes = [k for k, v in spec.items() if isinstance(v, list)]
+        for k in axes:
+            if not spec[k]:
+                raise SuiteError(where.at(table, k, "expected a value or a non-empty list of values, got []"))
         for values in itertools.product(*(spec[k] for k in axes)):
             one = {**spec, **dict(zip(axes, values))}
             try:
@@ -343,7 +357,10 @@ def _samplers(raw: list[dict[str, Any]], samples: int, first_id: int,
             out.append(_adapter_sampler(c, samples, first_id + i, where, table))
             continue
         _check_keys(c, _SAMPLER_KEYS, where, table)
-        name = c.get("name")
+        if "name" not in c:
+            raise SuiteError(where.at(table, None, "missing key 'name' (a catalogue sampler, see "
+                                                   "`harness list`) or 'adapter'"))
+        name = c["name"]
         if name not in registry:
             raise SuiteError(where.at(table, "name", f"unknown sampler {name!r}; expected one of: "
                                       f"{', '.join(registry)}"))
@@ -419,6 +436,24 @@ def _named_key(message: str, keys: Any) -> str | None:
     """The key an adapter's error message names first (quoted as 'key'), or None."""
     named = sorted((message.find(f"'{k}'"), k) for k in keys if f"'{k}'" in message)
     return named[0][1] if named else None
+
+
+def _check_tables(data: dict[str, Any], where: Locator) -> None:
+    """The document's shape: at most a [suite] table and arrays of [[case]], [[sampler]] and
+    [[render]] tables, nothing else."""
+    for key, value in data.items():
+        if key == "suite":
+            if not isinstance(value, dict):
+                raise SuiteError(where.at(None, "suite", f"expected a [suite] table, got {value!r}"))
+        elif key in ("case", "sampler", "render"):
+            if isinstance(value, dict):
+                raise SuiteError(where.at(None, key, f"expected [[{key}]] tables (an array of tables), "
+                                                     f"got a single [{key}] table"))
+            if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+                raise SuiteError(where.at(None, key, f"expected [[{key}]] tables, got {value!r}"))
+        else:
+            raise SuiteError(where.at(None, key, f"unknown table {key!r}; expected [suite], [[case]], "
+                                                 "[[sampler]] and [[render]] tables"))
 
 
 def _check_keys(table: dict[str, Any], spec: dict[str, Any], where: Locator, name: Any) -> None:

@@ -200,7 +200,10 @@ MISTAKES = {
         9, "samples", "expected at least batches = 8 samples, got 7"),
     "negative seed": (
         '[suite]\nseed = -1\n\n' + CASE,
-        2, "seed", "expected an integer >= 0, got -1"),
+        2, "seed", "expected an integer in [0, 2**64), got -1"),
+    "seed beyond 64 bits": (
+        '[suite]\nseed = 18446744073709551616\n\n' + CASE,
+        2, "seed", "expected an integer in [0, 2**64), got 18446744073709551616"),
     "negative threads": (
         '[suite]\nthreads = -2\n\n' + CASE,
         2, "threads", "expected an integer >= 0 (0: all cores), got -2"),
@@ -290,6 +293,24 @@ MISTAKES = {
     "unreachable target": (
         HEAD + CASE + 'target = 0.0\nmax_samples = 4000\n',
         9, "target", "no budget can reach a half-width of 0: it must be > 0 and above the rounding floor"),
+    # the document's shape (issue 18: these raised AttributeError / TypeError)
+    "a single [render] table": (
+        '[render]\nadapter = "mitsuba"\n', 1, "render",
+        "expected [[render]] tables (an array of tables), got a single [render] table"),
+    "render = 5": ('render = 5\n', 1, "render", "expected [[render]] tables, got 5"),
+    "sampler = [1, 2]": ('sampler = [1, 2]\n', 1, "sampler", "expected [[sampler]] tables, got [1, 2]"),
+    "case = [\"x\"]": ('case = ["x"]\n', 1, "case", "expected [[case]] tables, got ['x']"),
+    "suite = 3": ('suite = 3\n' + CASE, 1, "suite", "expected a [suite] table, got 3"),
+    "render without adapter": (
+        '[[render]]\nscene = "furnace"\n', 1, None, "missing key 'adapter' (one of: mitsuba, pyrender)"),
+    "sampler without name": (
+        '[[sampler]]\ndomain = "sphere"\n', 1, None, "missing key 'name' (a catalogue sampler"),
+    "no techniques": (
+        HEAD + '[[case]]\nintegrand = "gaussian"\ntechniques = []\n', 8, "techniques",
+        "expected \"all\", a technique or a non-empty list of techniques, got []"),
+    "no scenes": (
+        '[[render]]\nadapter = "mitsuba"\nscene = []\n', 3, "scene",
+        "expected a value or a non-empty list of values, got []"),
 }
 
 
@@ -312,6 +333,20 @@ def test_a_missing_file_names_the_path_and_why(tmp_path):
     path = tmp_path / "nope.toml"
     with pytest.raises(SuiteError, match="^" + re.escape(f"{path}: cannot read suite file: No such file")):
         load_suite(path)
+
+
+def test_non_utf8_bytes_are_named_with_their_offset(tmp_path):
+    path = tmp_path / "latin1.toml"
+    path.write_bytes('[suite]\nname = "caf\u00e9"\n'.encode("latin-1"))
+    with pytest.raises(SuiteError, match="^" + re.escape(f"{path}: not UTF-8 text: byte 0xe9 at offset 19")):
+        load_suite(path)
+
+
+@pytest.mark.parametrize("name, file_name", [("default", "default"), ("../../../x", "x"),
+                                             ("my suite/v2", "my_suite_v2"), ("..", "suite")])
+def test_a_suite_name_becomes_a_safe_file_name(tmp_path, name, file_name):
+    suite = load_suite(write(tmp_path, f'[suite]\nname = "{name}"\n\n' + CASE))
+    assert suite.name == name and suite.file_name == file_name
 
 
 def test_suite_errors_are_value_errors():
