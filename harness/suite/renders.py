@@ -20,6 +20,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -102,9 +103,13 @@ class ReferenceCache:
         meta_p = self._path(key, "meta.json")
         if not meta_p.exists():  # written last: its presence means the arrays are complete
             return None
-        meta = json.loads(meta_p.read_text())
-        return ist.Reference(np.load(self._path(key, "mean.npy")), np.load(self._path(key, "variance.npy")),
-                             int(meta["parts"]), float(meta["image_mean_variance"]))
+        try:
+            meta = json.loads(meta_p.read_text())
+            mean, variance = np.load(self._path(key, "mean.npy")), np.load(self._path(key, "variance.npy"))
+            return ist.Reference(mean, variance, int(meta["parts"]), float(meta["image_mean_variance"]))
+        except (OSError, ValueError, KeyError) as e:  # damaged or partly deleted: built again from its parts
+            warnings.warn(f"{meta_p}: cached reference unreadable ({e}); building it again", stacklevel=2)
+            return None
 
     def save(self, key: str, ref: ist.Reference, meta: dict[str, Any]) -> None:
         self.folder.mkdir(parents=True, exist_ok=True)
@@ -154,6 +159,8 @@ class RenderKind:
                            {"adapter": rc.adapter, "spec": dict(rc.spec), "fingerprint": r.fingerprint()})
 
     def plan(self, store: Store) -> list[RenderJob]:
+        """Every render the measurements need (and the reference's parts, unless it is cached);
+        a stored render whose image is missing or damaged is dropped, so it is rendered again."""
         cache = ReferenceCache(_reference_folder(store))
         jobs: dict[Unit, RenderJob] = {}
         for c in self.cases:
@@ -162,6 +169,14 @@ class RenderKind:
             if c.ref_key is not None and cache.load(c.ref_key) is None:
                 for u in reference_units(c.rc, c.ref_key):
                     jobs.setdefault(u, RenderJob(u, c.rc.adapter, c.rc.spec, True))
+        damaged = []
+        for key in {u.case_key for u in jobs}:
+            for u, p in store.payloads(key).items():
+                problem = store.image_problem(p["image"]) if u in jobs else None
+                if problem:
+                    warnings.warn(f"{problem}: rendering it again", stacklevel=2)
+                    damaged.append(u)
+        store.drop_units(damaged)
         return [jobs[u] for u in sorted(jobs)]
 
     def advance(self, store: Store) -> bool:

@@ -10,6 +10,7 @@ row always points at a complete file.
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import re
@@ -53,7 +54,8 @@ CREATE TABLE IF NOT EXISTS images (
     height  INTEGER NOT NULL,
     width   INTEGER NOT NULL,
     channels INTEGER NOT NULL,
-    finished REAL NOT NULL
+    finished REAL NOT NULL,
+    sha256   TEXT                  -- of the EXR file's bytes: a damaged or replaced file is detected
 );
 CREATE TABLE IF NOT EXISTS measurements (
     case_key    TEXT NOT NULL,
@@ -87,6 +89,8 @@ class Store:
         # WAL: a crash loses at most the last commits, never corrupts
         self.db.execute("PRAGMA synchronous=NORMAL")
         self.db.executescript(_SCHEMA)
+        if "sha256" not in {r[1] for r in self.db.execute("PRAGMA table_info(images)")}:  # older databases
+            self.db.execute("ALTER TABLE images ADD COLUMN sha256 TEXT")
         self._open = False
 
     def close(self) -> None:
@@ -143,14 +147,41 @@ class Store:
         final = self.image_dir / file
         a = write_exr(final, image)
         self.commit()
-        self.db.execute("INSERT OR REPLACE INTO images VALUES (?, ?, ?, ?, ?, ?)",
-                        (name, file, a.shape[0], a.shape[1], a.shape[2], time.time()))
+        self.db.execute("INSERT OR REPLACE INTO images (name, file, height, width, channels, finished, "
+                        "sha256) VALUES (?, ?, ?, ?, ?, ?, ?)",
+                        (name, file, a.shape[0], a.shape[1], a.shape[2], time.time(), _sha256(final)))
         return final
 
+    def image_problem(self, name: str) -> str | None:
+        """Why a stored image cannot be used (its file missing, or not the bytes written), naming
+        the file; None if it is intact or was never stored."""
+        row = self.db.execute("SELECT file, sha256 FROM images WHERE name = ?", (name,)).fetchone()
+        if row is None:
+            return None
+        path = self.image_dir / row[0]
+        if not path.is_file():
+            return f"{path}: image missing"
+        if row[1] is not None and _sha256(path) != row[1]:
+            return f"{path}: image damaged (not the bytes stored)"
+        return None
+
     def image(self, name: str) -> np.ndarray | None:
-        """The stored image (height, width, channels) as float32, or None."""
+        """The stored image (height, width, channels) as float32, or None if none was stored;
+        a missing or damaged file raises OSError naming it."""
         row = self.db.execute("SELECT file FROM images WHERE name = ?", (name,)).fetchone()
-        return None if row is None else read_exr(self.image_dir / row[0])
+        if row is None:
+            return None
+        problem = self.image_problem(name)
+        if problem:
+            raise OSError(f"{problem}; rerun the suite to compute it again")
+        return read_exr(self.image_dir / row[0])
+
+    def drop_units(self, units: Iterable[Unit]) -> None:
+        """Removes stored units (a damaged render, say), so the next plan computes them again."""
+        self.commit()
+        for u in units:
+            self.db.execute(f"DELETE FROM units WHERE ({_UNIT_COLUMNS}) = (?, ?, ?, ?, ?, ?, ?)",
+                            (u.case_key, u.stream, u.budget, u.replica, u.chunk_begin, u.chunk_end, u.kind))
 
     # --- measurements ------------------------------------------------------------------------
     def put_measurements(self, rows: list[dict[str, Any]]) -> None:
@@ -197,9 +228,16 @@ def read_exr(path: Path) -> np.ndarray:
     if inp is None:
         raise OSError(f"cannot read {path}: {oiio.geterror()}")
     try:
-        return inp.read_image("float")
+        pixels = inp.read_image("float")
     finally:
         inp.close()
+    if pixels is None:  # a truncated or damaged file
+        raise OSError(f"cannot read {path}: {oiio.geterror() or 'damaged image'}")
+    return pixels
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 def image_dir(db: str | Path) -> Path:

@@ -1,12 +1,15 @@
-"""A suite edited between runs on one database measures exactly what a fresh run of the
-edited suite measures: stored units of the earlier version that share a case's key (renders
-at another spp, other budgets or replica counts; the tail sample of another sample count) are
-never mixed into the new measurements."""
+"""Nothing stale, nothing mixed: a suite edited between runs on one database measures exactly
+what a fresh run of the edited suite measures (stored units of the earlier version that share a
+case's key — renders at another spp, other budgets or replica counts, the tail sample of another
+sample count — are never mixed in); a finished render suite reruns bitwise; a deleted or damaged
+image or cached reference is reported with its path and computed again."""
 from __future__ import annotations
 
 import json
 import math
 import textwrap
+
+import pytest
 
 import harness
 from harness.suite.parse import load_suite
@@ -108,4 +111,41 @@ def test_a_finished_render_suite_reruns_bitwise(tmp_path):
     once = _measured(db)
     again = run_suite(load_suite(path), db)
     assert first.units_run > 0 and again.units_run == 0
+    assert _measured(db) == once
+
+
+def test_a_deleted_or_damaged_image_is_reported_and_rendered_again(tmp_path):
+    """A replica EXR deleted, another truncated, the cached reference's mean deleted: the rerun
+    names each file, renders exactly those two again and rebuilds the reference from its stored
+    parts, and stores the numbers of the first run (scalar renders are deterministic)."""
+    path = tmp_path / "r.toml"
+    path.write_text(textwrap.dedent("""\
+        [suite]
+        name = "damaged"
+
+        [[render]]
+        adapter = "mitsuba"
+        scene = "cornell"
+        integrator = "path"
+        max_depth = 2
+        variant = "scalar_rgb"
+        spp = 2
+        replicas = 4
+        budgets = [1, 2, 4]
+        reference_spp = 64
+        """))
+    db = tmp_path / "d.sqlite"
+    run_suite(load_suite(path), db)
+    once = _measured(db)
+    replicas = sorted((tmp_path / "d.sqlite.images").glob("*render-s0-b2-r*.exr"))
+    replicas[0].unlink()
+    replicas[1].write_bytes(replicas[1].read_bytes()[:100])
+    next((tmp_path / "references").glob("*-mean.npy")).unlink()
+    with pytest.warns(UserWarning) as caught:
+        again = run_suite(load_suite(path), db)
+    said = "\n".join(str(w.message) for w in caught)
+    assert f"{replicas[0]}: image missing: rendering it again" in said
+    assert f"{replicas[1]}: image damaged (not the bytes stored): rendering it again" in said
+    assert "cached reference unreadable" in said
+    assert again.units_run == 2
     assert _measured(db) == once
