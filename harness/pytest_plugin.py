@@ -1,5 +1,8 @@
 """pytest plugin: ``pytest suites/ci.toml`` collects each case of a suite file as a test item.
 
+Suite files are collected when named on the command line or when they match the ini option
+``harness_suites`` (glob patterns relative to the rootdir; default ``suites/*.toml``).
+
 The suite runs once per session (stored in the pytest cache, so a rerun only computes what
 changed); each item then checks its case, whatever its kind (estimator, sampler check,
 render): no faults, the bias verdict expected for it (Holm-corrected over the suite at the
@@ -9,7 +12,7 @@ n^-1/2.  A failure shows the measurement, its interval, n, alpha and what was ex
 from __future__ import annotations
 
 import tomllib
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 
 import pytest
 
@@ -22,12 +25,30 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     group.addoption("--harness-db", default=None,
                     help="results database for suite files (default: in the pytest cache)")
     group.addoption("--harness-threads", type=int, default=None, help="threads for suite files")
+    parser.addini("harness_suites", type="args", default=["suites/*.toml"],
+                  help="glob patterns, relative to the rootdir, of the suite files pytest collects "
+                       "(a suite file named on the command line is always collected)")
 
 
 def pytest_collect_file(file_path: Path, parent: pytest.Collector):
-    if file_path.suffix == ".toml" and _is_suite(file_path):
+    if file_path.suffix == ".toml" and _wanted(file_path, parent.config) and _is_suite(file_path):
         return SuiteFile.from_parent(parent, path=file_path)
     return None
+
+
+def _wanted(path: Path, config: pytest.Config) -> bool:
+    """Named on the command line, or matching one of the ``harness_suites`` patterns (so a
+    scratch .toml elsewhere in the repository never breaks collection)."""
+    named = {Path(a.split("::")[0]).resolve() for a in config.args}
+    if path.resolve() in named:
+        return True
+    try:
+        relative = PurePosixPath(path.resolve().relative_to(config.rootpath.resolve()).as_posix())
+    except ValueError:  # outside the rootdir
+        return False
+    # anchored at the rootdir: "suites/*.toml" is not "tests/data/suites/x.toml"
+    return any(relative.match(pattern) and len(relative.parts) == len(PurePosixPath(pattern).parts)
+               for pattern in config.getini("harness_suites"))
 
 
 def _is_suite(path: Path) -> bool:

@@ -46,3 +46,19 @@ def test_a_malformed_suite_is_a_collection_error_naming_file_line_key(tmp_path):
     suite.write_text('[suite]\nsamples = 1000\n\n[[case]]\nintegrand = "gaussian"\ntechniques = ["nope"]\n')
     r = pytest_run(str(suite))
     assert r.returncode != 0 and f"{suite}:6: techniques: unknown technique 'nope'" in r.stdout
+
+
+def test_only_suite_files_matching_harness_suites_are_collected(tmp_path):
+    """A user repository: its suites under checks/ (ini option harness_suites), a broken scratch
+    suite elsewhere that must not break collection."""
+    (tmp_path / "pytest.ini").write_text("[pytest]\nharness_suites = checks/*.toml\n")
+    (tmp_path / "checks").mkdir()
+    (tmp_path / "checks" / "mine.toml").write_text(
+        '[suite]\nname = "mine"\nsamples = 4096\nbatches = 8\nmeasurements = ["bias"]\n\n'
+        '[[case]]\nintegrand = "gaussian"\ntechniques = ["uniform", "importance:linear"]\n')
+    (tmp_path / "scratch").mkdir()
+    (tmp_path / "scratch" / "broken.toml").write_text(
+        '[suite]\nsamples = -1\n\n[[case]]\nintegrand = "nope"\n')
+    r = pytest_run("--harness-db", str(tmp_path / "mine.sqlite"), cwd=tmp_path)
+    assert r.returncode == 0, r.stdout[-3000:]
+    assert "2 passed" in r.stdout and "broken" not in r.stdout
