@@ -41,7 +41,8 @@ def main(argv: list[str] | None = None) -> int:
     rep.add_argument("--suite", help="only this suite")
     sub.add_parser("list", help="list the catalogue's integrands, techniques and samplers")
     chk = sub.add_parser("check-sampler", help="test a sampler against its pdf (chi-square and friends)")
-    chk.add_argument("target", help="module:attribute, an object with sample(u) and pdf(x), or a function "
+    chk.add_argument("target", help="module:attribute or path/to/file.py:attribute (found from the current "
+                                    "directory): an object with sample(u) and pdf(x), or a function "
                                     "returning one (or a (sample, pdf[, domain]) tuple)")
     chk.add_argument("--domain",
                      help="interval, square, disk, hemisphere, sphere (unless the target gives one)")
@@ -109,18 +110,15 @@ def _run(suite, db: str, threads: int | None, csv: str | None, dask: str | None)
 
 
 def _check_sampler(args) -> int:
-    import importlib
+    from pathlib import Path
 
     from harness.samplers import check_sampler, mcmc_crosscheck
+    from harness.suite.usercode import UserCodeError, load_attr
 
-    module, _, attr = args.target.partition(":")
-    if not attr:
-        print(f"harness: target must be module:attribute, got {args.target!r}", file=sys.stderr)
-        return 2
     try:
-        obj = getattr(importlib.import_module(module), attr)
-    except (ImportError, AttributeError) as e:
-        print(f"harness: cannot load {args.target!r}: {e}", file=sys.stderr)
+        obj = load_attr(args.target, base=Path.cwd())
+    except UserCodeError as e:
+        print(f"harness: cannot load {e}", file=sys.stderr)
         return 2
     if not hasattr(obj, "sample") and callable(obj):
         obj = obj()

@@ -174,19 +174,28 @@ def test_cli_check_sampler(tmp_path):
                    "def good():\n    return (lambda u: _s.sample(u)[0], _s.pdf, 'hemisphere')\n"
                    "def bad():\n"
                    "    return (lambda u: _s.sample(u)[0], lambda w: 1.01 * _s.pdf(w), 'hemisphere')\n")
+    (tmp_path / "raises.py").write_text("raise RuntimeError('no GPU here')\n")
     harness = str(Path(sys.executable).with_name("harness"))
-    env = {"PYTHONPATH": str(tmp_path)}
-    import os
-    env = {**os.environ, **env}
-    r = subprocess.run([harness, "check-sampler", "my_sampler:good", "--samples", "200000"],
-                       capture_output=True, text=True, env=env, timeout=300)
-    assert r.returncode == 0 and "PASSED" in r.stdout, r.stdout + r.stderr
-    assert "summary: 1 passed, 0 failed" in r.stdout, r.stdout + r.stderr
-    r = subprocess.run([harness, "check-sampler", "my_sampler:bad", "--samples", "200000"],
-                       capture_output=True, text=True, env=env, timeout=300)
+
+    def run(*args: str) -> subprocess.CompletedProcess:  # as a user runs it: in the repository, no PYTHONPATH
+        return subprocess.run([harness, "check-sampler", *args], capture_output=True, text=True, cwd=tmp_path,
+                              timeout=300)
+
+    for target in ("my_sampler:good", "./my_sampler.py:good"):
+        r = run(target, "--samples", "200000")
+        assert r.returncode == 0 and "PASSED" in r.stdout, r.stdout + r.stderr
+        assert "summary: 1 passed, 0 failed" in r.stdout, r.stdout + r.stderr
+    r = run("my_sampler:bad", "--samples", "200000")
     assert r.returncode == 1 and "normalization" in r.stdout and "1.010000" in r.stdout
-    r = subprocess.run([harness, "check-sampler", "my_sampler:nope"], capture_output=True, text=True, env=env)
-    assert r.returncode == 2 and "cannot load 'my_sampler:nope'" in r.stderr
+    for target, said in [("my_sampler:nope", "'my_sampler:nope': my_sampler has no attribute 'nope'"),
+                         ("nothere:good", "'nothere:good': cannot import 'nothere'"),
+                         ("./nothere.py:good", "'./nothere.py:good': no file"),
+                         ("raises:good",
+                          "'raises:good': importing 'raises' raised RuntimeError: no GPU here"),
+                         ("my_sampler", "'my_sampler': expected module:attribute")]:
+        r = run(target)
+        assert r.returncode == 2 and f"harness: cannot load {said}" in r.stderr, r.stderr
+        assert "Traceback" not in r.stderr
 
 
 def _registry_cases():
