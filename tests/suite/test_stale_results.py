@@ -87,25 +87,28 @@ def test_render_spp_budgets_and_replicas_edited_measure_only_the_new_renders(tmp
                          base.format(spp=8, replicas=4, budgets=[1, 4, 8]))
 
 
+CORNELL = """\
+[suite]
+name = "{name}"
+
+[[render]]
+adapter = "mitsuba"
+scene = "cornell"
+integrator = "path"
+max_depth = 2
+variant = "scalar_rgb"
+spp = 2
+replicas = 4
+budgets = [1, 2, 4]
+reference_spp = 64
+"""  # a rendered reference (8 parts of 8 spp) and deterministic scalar renders
+
+
 def test_a_finished_render_suite_reruns_bitwise(tmp_path):
     """The first run measures against the reference it just rendered; a rerun reads it back from
     the cache (lossless float64): both store bitwise the same numbers."""
     path = tmp_path / "r.toml"
-    path.write_text(textwrap.dedent("""\
-        [suite]
-        name = "rerun"
-
-        [[render]]
-        adapter = "mitsuba"
-        scene = "cornell"
-        integrator = "path"
-        max_depth = 2
-        variant = "scalar_rgb"
-        spp = 2
-        replicas = 4
-        budgets = [1, 2, 4]
-        reference_spp = 64
-        """))
+    path.write_text(CORNELL.format(name="rerun"))
     db = tmp_path / "rerun.sqlite"
     first = run_suite(load_suite(path), db)
     once = _measured(db)
@@ -119,21 +122,7 @@ def test_a_deleted_or_damaged_image_is_reported_and_rendered_again(tmp_path):
     names each file, renders exactly those two again and rebuilds the reference from its stored
     parts, and stores the numbers of the first run (scalar renders are deterministic)."""
     path = tmp_path / "r.toml"
-    path.write_text(textwrap.dedent("""\
-        [suite]
-        name = "damaged"
-
-        [[render]]
-        adapter = "mitsuba"
-        scene = "cornell"
-        integrator = "path"
-        max_depth = 2
-        variant = "scalar_rgb"
-        spp = 2
-        replicas = 4
-        budgets = [1, 2, 4]
-        reference_spp = 64
-        """))
+    path.write_text(CORNELL.format(name="damaged"))
     db = tmp_path / "d.sqlite"
     run_suite(load_suite(path), db)
     once = _measured(db)
