@@ -21,7 +21,8 @@ __all__ = [
     "samplers", "sampler", "rejection_sampler", "tabulated_integrand",
     "uniform", "importance", "rejection", "roulette", "splitting", "mis", "snis", "with_points", "clamped",
     "points",
-    "integrate", "integrate_chunks", "estimate_from_states", "contributions", "accumulate",
+    "integrate", "integrate_chunks", "estimate_from_states", "estimate_of_states", "merge_states",
+    "contributions", "accumulate", "accumulate_chunk",
     "estimate_from_samples", "hardware_threads",
 ]
 
@@ -195,13 +196,40 @@ def clamped(t: Technique, clamp: float) -> Technique:
 
 
 def points(n: int, dim: int, kind: str = "random", *, seed: int = 0, case_id: int = 0, replica: int = 0,
-           threads: int | None = None) -> np.ndarray:
-    """Canonical points of shape (n, dim) in (0, 1): what a technique with this point set and
-    ``dim`` uniforms per sample consumes for an estimate of n samples."""
+           threads: int | None = None, chunk_begin: int = 0, chunk_end: int | None = None) -> np.ndarray:
+    """Canonical points in (0, 1): what a technique with this point set and ``dim`` uniforms
+    per sample consumes for an estimate of n samples, shape (n, dim); with ``chunk_begin`` /
+    ``chunk_end``, only the rows of chunks [chunk_begin, chunk_end) of that estimate
+    (chunks of ``CHUNK_SIZE`` samples, the last one partial): the same bits as those rows of
+    the whole set."""
     if isinstance(dim, bool) or not isinstance(dim, numbers.Integral) or dim < 1:
         raise ValueError(f"'dim' must be a positive integer, got {dim!r}")
-    return _core.points(_count(n, "n"), int(dim), kind, _seed(seed), _seed(case_id, "case_id"),
-                        _seed(replica, "replica"), _threads(threads))
+    n = _count(n, "n")
+    begin, end = _chunk_range(n, chunk_begin, chunk_end)
+    return _core.points(n, int(dim), kind, _seed(seed), _seed(case_id, "case_id"), _seed(replica, "replica"),
+                        _threads(threads), begin, end)
+
+
+def accumulate_chunk(values: Any, *, first: int = 0, points: Any = None) -> dict[str, Any]:
+    """The accumulator state (as ``integrate_chunks`` returns) of one chunk of contributions
+    computed elsewhere, e.g. by a user's estimator from :func:`points` of that chunk:
+    ``first`` is the index of values[0] within the estimate, ``points`` (N, dim) the canonical
+    points that gave the values, named (first 3 coordinates) in the examples of NaN, infinite
+    or negative values.  States of consecutive chunks merge, in chunk order, with
+    :func:`estimate_of_states`; ``seconds`` is 0 (the caller knows what it timed)."""
+    y = np.ascontiguousarray(values, dtype=np.float64)
+    if y.ndim != 1:
+        raise ValueError(f"'values' must be one-dimensional, got shape {y.shape}")
+    if y.size == 0:
+        raise ValueError("'values' must not be empty")
+    u = None
+    if points is not None:
+        u = np.ascontiguousarray(points, dtype=np.float64)
+        if u.ndim == 1:
+            u = u[:, None]
+        if u.ndim != 2 or u.shape[0] != y.size:
+            raise ValueError(f"'points' must have shape ({y.size}, dim), one row per value, got {u.shape}")
+    return _core.accumulate_chunk(y, _seed(first, "first"), u)
 
 
 def integrate(f: str | Integrand, t: str | Technique, n: int, *, seed: int = 0, threads: int | None = None,
@@ -238,11 +266,7 @@ def integrate_chunks(f: str | Integrand, t: str | Technique, n: int, chunk_begin
     fi = integrand(f)
     ti = technique(fi, t)
     n = _count(n, "n")
-    chunks = -(-n // _core.CHUNK_SIZE)
-    begin, end = _seed(chunk_begin, "chunk_begin"), _seed(chunk_end, "chunk_end")
-    if not begin < end <= chunks:
-        raise ValueError(f"chunks [{chunk_begin}, {chunk_end}) must be a non-empty range within the {chunks} "
-                         f"chunk(s) of n = {n} samples")
+    begin, end = _chunk_range(n, chunk_begin, chunk_end)
     return _core.integrate_chunks(fi, ti, n, _seed(seed), _seed(case_id, "case_id"),
                                   _seed(replica, "replica"), begin, end, _threads(threads))
 
@@ -262,19 +286,26 @@ def estimate_from_states(f: str | Integrand, t: str | Technique, states: list[di
     """
     fi = integrand(f)
     ti = technique(fi, t)
-    states = list(states)
-    if not states:
-        raise ValueError("'states' must hold at least one accumulator state (from integrate_chunks)")
-    for i, s in enumerate(states):
-        if not isinstance(s, dict):
-            raise TypeError(f"'states'[{i}] must be a dict from integrate_chunks, got {type(s).__name__}")
-        missing = _STATE_KEYS - s.keys()
-        if missing:
-            raise ValueError(f"'states'[{i}] is not an accumulator state (from integrate_chunks): "
-                             f"missing {', '.join(sorted(missing))}")
-    raw = _core.estimate_from_state(_core.merge_states(states))
-    return Estimate.from_core(raw, integrand=fi.name, technique=ti.name, reference=fi.reference,
+    return estimate_of_states(states, integrand=fi.name, technique=ti.name, reference=fi.reference,
                               nonnegative=fi.nonnegative, iid=ti.iid)
+
+
+def merge_states(states: list[dict[str, Any]]) -> dict[str, Any]:
+    """One accumulator state from several (of consecutive chunk ranges), merged in the order
+    given: what ``integrate_chunks`` returns for the whole range."""
+    return _core.merge_states(_checked_states(states))
+
+
+def estimate_of_states(states: list[dict[str, Any]], *, reference: float | None = None, iid: bool = True,
+                       integrand: str | None = None, technique: str | None = None,
+                       nonnegative: bool = False) -> Estimate:
+    """The estimate from accumulator states (``integrate_chunks``, ``accumulate_chunk``)
+    merged in the order given, for estimators outside the catalogue: ``reference`` is the
+    exact value if known, ``iid`` False for stratified or Sobol' points (``stderr`` is then
+    NaN), ``nonnegative`` makes negative contributions an issue."""
+    raw = _core.estimate_from_state(merge_states(states))
+    return Estimate.from_core(raw, integrand=integrand, technique=technique, reference=reference,
+                              nonnegative=nonnegative, iid=iid)
 
 
 def contributions(f: str | Integrand, t: str | Technique, n: int, *, seed: int = 0,
@@ -324,6 +355,31 @@ def _core_sampler(s: Any) -> Any:
     if isinstance(s, _core.Sampler):
         return s
     raise TypeError(f"expected a Sampler, got {type(s).__name__}")
+
+
+def _checked_states(states: Any) -> list[dict[str, Any]]:
+    states = list(states)
+    if not states:
+        raise ValueError("'states' must hold at least one accumulator state (from integrate_chunks)")
+    for i, s in enumerate(states):
+        if not isinstance(s, dict):
+            raise TypeError(f"'states'[{i}] must be a dict from integrate_chunks, got {type(s).__name__}")
+        missing = _STATE_KEYS - s.keys()
+        if missing:
+            raise ValueError(f"'states'[{i}] is not an accumulator state (from integrate_chunks): "
+                             f"missing {', '.join(sorted(missing))}")
+    return states
+
+
+def _chunk_range(n: int, chunk_begin: Any, chunk_end: Any) -> tuple[int, int]:
+    """[begin, end) within the chunks of an estimate of n samples (end None: the last)."""
+    chunks = -(-n // _core.CHUNK_SIZE)
+    begin = _seed(chunk_begin, "chunk_begin")
+    end = chunks if chunk_end is None else _seed(chunk_end, "chunk_end")
+    if not begin < end <= chunks:
+        raise ValueError(f"chunks [{chunk_begin}, {chunk_end}) must be a non-empty range within the {chunks} "
+                         f"chunk(s) of n = {n} samples")
+    return begin, end
 
 
 def _points(a: Any, dim: int, name: str) -> np.ndarray:

@@ -329,27 +329,53 @@ NB_MODULE(_core, m) {
         d.dims = int(v.shape(0));
     }, "directions"_a, "Direction numbers v[d, k] (bit k of the index, 32-bit), set once at import.");
     m.def("points", [](int64_t n, int dim, const std::string &kind, uint64_t seed, uint64_t case_id, uint64_t replica,
-                       int threads) {
+                       int threads, uint64_t chunk_begin, uint64_t chunk_end) {
         check_n(n);
         if (dim < 1) throw nb::value_error("'dim' must be >= 1");
         PointSetContext ctx;
         ctx.kind = point_set(kind);
         ctx.n = uint64_t(n);
         ctx.key = {seed, case_id, replica, 0};
+        const uint64_t nc = (uint64_t(n) + kChunkSize - 1) / kChunkSize;
+        const uint64_t c0 = std::min(chunk_begin, nc), c1 = std::min(chunk_end, nc);
+        if (c0 >= c1) throw nb::value_error("'chunk_begin' must be below 'chunk_end' and the chunk count");
+        const uint64_t offset = c0 * kChunkSize, rows = std::min(c1 * kChunkSize, uint64_t(n)) - offset;
         double *u;
-        OutArray r = new_array(size_t(n), size_t(dim), &u);
+        OutArray r = new_array(size_t(rows), size_t(dim), &u);
         {
             nb::gil_scoped_release g;
-            const uint64_t nc = (uint64_t(n) + kChunkSize - 1) / kChunkSize;
-            ThreadPool::instance().run(nc, threads > 0 ? threads : ThreadPool::default_threads(), [&](size_t c) {
+            ThreadPool::instance().run(c1 - c0, threads > 0 ? threads : ThreadPool::default_threads(), [&](size_t i) {
+                uint64_t c = c0 + i;
                 UniformStream stream({seed, case_id, replica, c});
                 uint64_t first = c * kChunkSize, count = std::min<uint64_t>(kChunkSize, uint64_t(n) - first);
-                fill_points(ctx, stream, first, count, dim, u + first * dim);
+                fill_points(ctx, stream, first, count, dim, u + (first - offset) * dim);
             });
         }
         return r;
     }, "n"_a, "dim"_a, "kind"_a = "random", "seed"_a = 0, "case_id"_a = 0, "replica"_a = 0, "threads"_a = 0,
-       "Canonical points (n, dim) of an estimate: exactly what a technique with this point set consumes.");
+       "chunk_begin"_a = 0, "chunk_end"_a = UINT64_MAX,
+       "Canonical points of chunks [chunk_begin, chunk_end) of an estimate of n samples (all of them by default): "
+       "exactly what a technique with this point set consumes.");
+    m.def("accumulate_chunk", [](InArray y, uint64_t first, nb::object points) {
+        if (y.ndim() != 1) throw nb::value_error("'values' must be one-dimensional");
+        const double *u = nullptr;
+        int ud = 0;
+        InArray pts;
+        if (!points.is_none()) {
+            pts = nb::cast<InArray>(points);
+            if (pts.ndim() != 2 || pts.shape(0) != y.shape(0))
+                throw nb::value_error("'points' must have shape (N, dim), one row per value");
+            u = pts.data();
+            ud = int(pts.shape(1));
+        }
+        Estimate e;
+        {
+            nb::gil_scoped_release g;
+            e = accumulate_chunk(y.data(), y.shape(0), first, u, ud);
+        }
+        return state_dict(e);
+    }, "values"_a, "first"_a = 0, "points"_a = nb::none(),
+       "The accumulator state of one chunk of given contributions (samples first.. of an estimate).");
     m.def("tabulated_integrand", [](InArray v, double a, double b) {
         return make_tabulated_integrand(std::vector<double>(v.data(), v.data() + v.size()), a, b);
     }, "values"_a, "a"_a, "b"_a);

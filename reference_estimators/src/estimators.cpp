@@ -365,6 +365,19 @@ Estimate accumulate_values(const double *y, uint64_t n, const RunOptions &opt) {
     });
 }
 
+Estimate accumulate_chunk(const double *y, uint64_t count, uint64_t first, const double *u, int ud) {
+    Estimate e;
+    std::vector<double> buf(kBlock);
+    for_each_block(count, [&](uint64_t b, size_t m) {
+        std::copy(y + b, y + b + m, buf.begin());
+        e.diagnostics.drawn += m;
+        screen_and_accumulate(e.moments, e.diagnostics, buf.data(), u ? u + b * ud : nullptr, ud, m, first + b, true);
+    });
+    e.chunks = 1;
+    e.threads = 1;
+    return e;
+}
+
 Estimate estimate_from_samples(const Integrand &f, const double *x, const double *pdf, uint64_t n,
                                const Domain &sampler_domain, const RunOptions &opt) {
     const int xd = f.domain.dim;

@@ -44,6 +44,11 @@ void contributions(const Integrand &f, const Technique &t, uint64_t n, const Run
 // Moments and diagnostics of given values (chunked the same way; no random numbers).
 Estimate accumulate_values(const double *y, uint64_t n, const RunOptions &opt);
 
+// The state of one chunk of a user's contributions y[0..count) (samples first.. of the
+// estimate, accumulated in blocks as integrate() does), with the canonical points u (count, ud)
+// that produced them named in the examples of faulty values; u may be null.
+Estimate accumulate_chunk(const double *y, uint64_t count, uint64_t first, const double *u, int ud);
+
 // Importance-sampling estimate f(x)/pdf from points and pdf values drawn elsewhere (a
 // renderer's sampler): reports points outside `sampler_domain` and bad pdfs.
 Estimate estimate_from_samples(const Integrand &f, const double *x, const double *pdf, uint64_t n,
