@@ -7,7 +7,9 @@ The suite runs once per session (stored in the pytest cache, so a rerun only com
 changed); each item then checks its case, whatever its kind (estimator, sampler check,
 render): no faults, the bias verdict expected for it (Holm-corrected over the suite at the
 suite's alpha), sampler checks passing, and a convergence slope not measurably worse than
-n^-1/2.  A failure shows the measurement, its interval, n, alpha and what was expected.
+n^-1/2.  A failure shows the measurement, its interval, n, alpha and what was expected.  A
+case with an ``xfail`` reason is reported as xfailed while it fails, and fails (strict) once
+it passes.
 """
 from __future__ import annotations
 
@@ -94,7 +96,10 @@ class CaseItem(pytest.Item):
         self.kind, self.index = kind, index
 
     def runtest(self) -> None:
-        why = self.parent.run()[self.kind].failures[self.index]
+        outcome = self.parent.run()[self.kind]
+        if outcome.status(self.index) == "xfailed":
+            pytest.xfail(f"{outcome.xfail[self.index]}\n{outcome.failures[self.index]}")
+        why = outcome.problem(self.index)
         if why:
             raise CaseFailure(why)
 

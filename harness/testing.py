@@ -4,15 +4,17 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 from scipy import stats as sps
 
-import reference_estimators as rest
-
 from harness import stats
+from harness.samplers.check import SamplerCheck, check_sampler
+from harness.usercode import callable_name
 
-__all__ = ["HarnessWarning", "assert_unbiased", "assert_biased", "assert_converges", "assert_rare"]
+__all__ = ["HarnessWarning", "assert_unbiased", "assert_biased", "assert_converges", "assert_sampler",
+           "assert_rare"]
 
 
 class HarnessWarning(UserWarning):
@@ -41,18 +43,35 @@ def assert_biased(contributions: Callable[[np.ndarray], np.ndarray], dim: int, r
     return r
 
 
-def assert_converges(integrand: str | rest.Integrand, technique: str | rest.Technique,
-                     budgets: Sequence[int], *, rate: float = -0.5, tolerance: float = 0.05,
-                     replicas: int = 32, seed: int = 0) -> stats.ConvergenceResult:
+def assert_converges(integrand: Any, technique: Any = None, budgets: Sequence[int] | None = None, *,
+                     dim: int | None = None, reference: float | None = None, rate: float = -0.5,
+                     tolerance: float = 0.05, replicas: int = 32, seed: int = 0) -> stats.ConvergenceResult:
     """Fails when the RMSE's log-log slope is measurably worse than ``rate`` (its whole 95 %
     bootstrap interval above rate + tolerance: verdict "slower than expected", a one-sided
-    test at level 0.025)."""
-    c = stats.convergence_rate(integrand, technique, budgets, replicas, seed=seed, expected=rate,
-                               tolerance=tolerance)
+    test at level 0.025).  The estimator is a catalogue integrand with its technique, or a
+    contributions callable with ``dim`` and ``reference``:
+    ``assert_converges(my_estimator, budgets=[256, 1024, 4096], dim=2, reference=0.349)``."""
+    c = stats.convergence_rate(integrand, technique, budgets, replicas, dim=dim, reference=reference,
+                               seed=seed, expected=rate, tolerance=tolerance)
     if not c.passed:
         raise AssertionError(f"expected RMSE ~ n^{rate:+.2f} or faster, got {c}\n"
                              f"{c.table.to_string(index=False)}")
     return c
+
+
+def assert_sampler(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.ndarray], Any], domain: Any, *,
+                   sample_count: int = 1_000_000, alpha: float = 0.01, seed: int = 0, udim: int | None = None,
+                   total: float | None = None) -> SamplerCheck:
+    """Fails when check_sampler finds that ``sample`` does not draw what ``pdf`` claims on
+    ``domain`` (false-alarm rate alpha; a deterministic failure always fails); the message is
+    the check's explanation: which tests rejected, the failures with counts and examples, and
+    the tests table.  ``total``: see check_sampler (samplers that may produce no sample)."""
+    r = check_sampler(sample, pdf, domain, sample_count=sample_count, seed=seed, alpha=alpha, udim=udim,
+                      total=total)
+    if not r.passed:
+        raise AssertionError(f"expected the samples of {callable_name(sample)} to follow the pdf "
+                             f"{callable_name(pdf)} on the {domain}, got {r}")
+    return r
 
 
 def assert_rare(count: int, n: int, p: float, *, alpha: float = 0.01) -> float:

@@ -5,16 +5,27 @@ the command line) first on the import path, so a user's repository needs no PYTH
 ``.py`` path is resolved against ``base`` and loaded as a module of its own.  Every failure
 (a malformed name, a missing file or module, an exception while importing it, a missing
 attribute) is a :class:`UserCodeError` naming the target and the cause in one line.
+
+:func:`call` runs a user's callable on arrays: an exception inside it, or an output of the
+wrong shape, is re-raised as a :class:`UserCodeError` naming the callable, what it was called
+on (shape and dtype) and what was expected back.  :func:`source_fingerprint` hashes the source
+a loaded callable comes from, so stored results of changed code are not reused.
 """
 from __future__ import annotations
 
+import hashlib
 import importlib
 import importlib.util
+import inspect
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-__all__ = ["UserCodeError", "load_attr"]
+import numpy as np
+
+__all__ = ["UserCodeError", "load_attr", "call", "array_result", "describe", "callable_name",
+           "source_fingerprint"]
 
 
 class UserCodeError(ValueError):
@@ -42,7 +53,7 @@ def _module(where: str, base: Path, target: str) -> Any:
             path = (base / where).resolve()
             if not path.is_file():
                 raise UserCodeError(f"{target!r}: no file {path}")
-            name = f"harness_user_{path.stem}_{abs(hash(str(path))):x}"
+            name = f"harness_user_{path.stem}_{hashlib.sha256(str(path).encode()).hexdigest()[:12]}"
             if name not in sys.modules:
                 spec = importlib.util.spec_from_file_location(name, path)
                 module = importlib.util.module_from_spec(spec)
@@ -63,3 +74,72 @@ def _module(where: str, base: Path, target: str) -> Any:
         raise UserCodeError(f"{target!r}: cannot import {where!r} (from {base}): {e}") from None
     except Exception as e:  # the user's module raised while importing: say which and what
         raise UserCodeError(f"{target!r}: importing {where!r} raised {type(e).__name__}: {e}") from None
+
+
+def callable_name(fn: Any) -> str:
+    """How messages name a callable: module:qualname where known (a bound method by its
+    object's class, so an inherited method names the subclass), else its repr."""
+    owner = getattr(fn, "__self__", None)
+    if owner is not None and not isinstance(owner, type) and hasattr(fn, "__name__") \
+            and not inspect.ismodule(owner):
+        cls = type(owner)
+        return f"{cls.__module__}:{cls.__qualname__}.{fn.__name__}"
+    module, qualname = getattr(fn, "__module__", None), getattr(fn, "__qualname__", None)
+    if module and qualname:
+        return f"{module}:{qualname}"
+    return repr(fn)
+
+
+def describe(a: Any) -> str:
+    """An argument as messages name it: "shape (65536, 2), float64" for arrays."""
+    if isinstance(a, np.ndarray):
+        return f"shape {a.shape}, {a.dtype}"
+    return type(a).__name__
+
+
+def call(fn: Callable[..., Any], name: str, *args: Any, what: str = "") -> Any:
+    """fn(*args); an exception inside it becomes a UserCodeError naming ``name``, the
+    arguments' shapes and dtypes and ``what`` was expected (the original is chained)."""
+    try:
+        return fn(*args)
+    except Exception as e:
+        given = ", ".join(describe(a) for a in args)
+        raise UserCodeError(f"{name} raised {type(e).__name__}: {e} (called on {given}"
+                            + (f"; expected to return {what}" if what else "") + ")") from e
+
+
+def array_result(value: Any, shape: tuple[int, ...] | None, name: str, given: str) -> np.ndarray:
+    """A user's return value as float64 of exactly ``shape`` (any shape where None), or a
+    UserCodeError saying what came back, for which input, and what was expected."""
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        want = "a float array" + (f" of shape {shape}" if shape is not None else "")
+        raise UserCodeError(f"{name} returned {type(value).__name__} for {given}; "
+                            f"expected {want} ({e})") from None
+    if shape is not None and a.shape != shape:
+        raise UserCodeError(f"{name} returned shape {a.shape} for {given}; expected shape {shape}")
+    return a
+
+
+def source_fingerprint(obj: Any) -> str:
+    """SHA-256 (24 hex digits) of the source files of the module a callable (or object) is
+    defined in and, if it differs, of the class or function it was made from: a stored result
+    of changed code is not reused.  Objects without a source file hash their repr."""
+    files: list[str] = []
+    for o in (obj, type(obj), getattr(obj, "__func__", None)):
+        try:
+            f = inspect.getsourcefile(o) if o is not None else None
+        except TypeError:
+            f = None
+        if f and f not in files:
+            files.append(f)
+    h = hashlib.sha256()
+    for f in files:
+        try:
+            h.update(Path(f).read_bytes())
+        except OSError:
+            h.update(f.encode())
+    if not files:
+        h.update(repr(obj).encode())
+    return h.hexdigest()[:24]

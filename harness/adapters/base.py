@@ -5,22 +5,45 @@
     r.exact()                            # the exact image where the scene has one, else None
     r.fingerprint()                      # JSON-able dict of everything that fixes the images
     r.reference()                        # the renderer of the reference when exact() is None
+    r.describe()                         # optional: (scene, configuration) for tables
+    r.notes()                            # optional: lines a reader of the table must know
 
-Adapters register a factory under a name; ``renderer`` imports the adapter's module on first
-use.  A factory validates its spec and raises ``ValueError`` naming the offending key.
+An adapter is a factory ``make_renderer(spec: dict, *, base: Path | None = None) -> Renderer``:
+``spec`` holds the [[render]] table's adapter keys (everything but the runner's: spp,
+replicas, budgets, ...), ``base`` the suite file's folder (where relative paths are resolved;
+a factory that takes no ``base`` is called without it).  It validates ``spec`` and raises
+``ValueError`` whose message starts with the offending key in quotes (``"'scene': ..."``), so
+the suite error names its line.  ``render`` raises :class:`RenderError` when a render fails.
+The harness's own adapters are named in ``ADAPTERS`` and imported on first use; a package
+registers more under the entry-point group ``harness.adapters`` (name = the ``adapter`` value,
+object = the factory)::
+
+    [project.entry-points."harness.adapters"]
+    myrenderer = "myrenderer.harness:make_renderer"
 """
 from __future__ import annotations
 
 import importlib
+import inspect
 from dataclasses import dataclass, field
+from importlib.metadata import entry_points
+from pathlib import Path
 from typing import Any, Callable, Protocol
 
 import numpy as np
 
-__all__ = ["Render", "Renderer", "ImageFaults", "image_faults", "renderer", "ADAPTERS"]
+__all__ = ["Render", "Renderer", "RenderError", "ImageFaults", "image_faults", "read_image", "renderer",
+           "adapter_names", "ADAPTERS", "ENTRY_POINTS"]
 
-# adapter name -> module that defines `make_renderer(spec: dict) -> Renderer`
-ADAPTERS = {"mitsuba": "harness.adapters.mitsuba.render", "pyrender": "harness.adapters.pyrender.render"}
+# adapter name -> module that defines `make_renderer(spec: dict[, base=]) -> Renderer`
+ADAPTERS = {"mitsuba": "harness.adapters.mitsuba.render", "pyrender": "harness.adapters.pyrender.render",
+            "command": "harness.adapters.command", "python": "harness.adapters.python"}
+ENTRY_POINTS = "harness.adapters"   # the entry-point group of third-party adapters
+
+
+class RenderError(RuntimeError):
+    """A render that failed (a command's non-zero exit, a timeout, no image, a user's function
+    raising); the message names what was run and why it failed."""
 
 
 @dataclass
@@ -88,9 +111,50 @@ def image_faults(image: np.ndarray, *, max_examples: int = 8) -> ImageFaults:
     return faults
 
 
-def renderer(adapter: str, spec: dict[str, Any]) -> Renderer:
-    """The renderer an adapter builds from ``spec`` (the keys of a suite's [[render]] table)."""
-    if adapter not in ADAPTERS:
-        raise ValueError(f"unknown adapter {adapter!r}; expected one of {sorted(ADAPTERS)}")
-    make: Callable[[dict[str, Any]], Renderer] = importlib.import_module(ADAPTERS[adapter]).make_renderer
-    return make(dict(spec))
+def adapter_names() -> list[str]:
+    """The harness's adapters, then those registered under the ``harness.adapters`` group."""
+    extra = sorted(ep.name for ep in entry_points(group=ENTRY_POINTS) if ep.name not in ADAPTERS)
+    return list(ADAPTERS) + extra
+
+
+def renderer(adapter: str, spec: dict[str, Any], *, base: Path | None = None) -> Renderer:
+    """The renderer an adapter builds from ``spec`` (the keys of a suite's [[render]] table);
+    ``base``: the suite file's folder, for adapters that resolve paths."""
+    if adapter in ADAPTERS:
+        make: Callable[..., Renderer] = importlib.import_module(ADAPTERS[adapter]).make_renderer
+    else:
+        found = [ep for ep in entry_points(group=ENTRY_POINTS) if ep.name == adapter]
+        if not found:
+            raise ValueError(f"unknown adapter {adapter!r}; expected one of: {', '.join(adapter_names())} "
+                             f"(third-party adapters register under the entry-point group {ENTRY_POINTS!r})")
+        try:
+            make = found[0].load()
+        except Exception as e:
+            raise ValueError(f"adapter {adapter!r}: loading its entry point {found[0].value!r} raised "
+                             f"{type(e).__name__}: {e}") from None
+        if not callable(make):
+            raise ValueError(f"adapter {adapter!r}: entry point {found[0].value!r} is not a factory "
+                             "make_renderer(spec, *, base=None)")
+    try:
+        takes_base = "base" in inspect.signature(make).parameters
+    except (TypeError, ValueError):
+        takes_base = False
+    return make(dict(spec), base=base) if takes_base else make(dict(spec))
+
+
+def read_image(path: Path) -> np.ndarray:
+    """An image file (EXR, PFM, HDR, or anything OpenImageIO reads) as float32 (height, width,
+    channels); OSError naming the file when it is missing, truncated or not an image."""
+    import OpenImageIO as oiio  # only runs that read images need it
+
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise OSError(f"cannot read image {path}: {oiio.geterror() or 'not an image'}")
+    try:
+        pixels = inp.read_image("float")
+    finally:
+        inp.close()
+    if pixels is None:
+        raise OSError(f"cannot read image {path}: {oiio.geterror() or 'truncated or damaged'}")
+    a = np.asarray(pixels, dtype=np.float32)
+    return a[:, :, None] if a.ndim == 2 else a

@@ -5,10 +5,18 @@ many cells at once (``cubature``), the chi-square check with its deterministic p
 marginal and moment tests (``check``), the emcee cross-check (``mcmc``), and the zoo of
 correct and wrong samplers (``zoo``).
 """
-from harness.samplers.check import SAMPLE_CASE, SamplerCheck, SamplerTest, check_sampler, histogram
+from harness.samplers.check import (
+    SAMPLE_CASE,
+    SamplerCheck,
+    SamplerTest,
+    check_sampler,
+    check_with_missing,
+    failure_pvalue,
+    histogram,
+)
 from harness.samplers.cubature import cell_integrals
 from harness.samplers.domains import DOMAINS, Domain, as_domain
 from harness.samplers.mcmc import mcmc_crosscheck
 
 __all__ = ["DOMAINS", "SAMPLE_CASE", "Domain", "SamplerCheck", "SamplerTest", "as_domain", "cell_integrals",
-           "check_sampler", "histogram", "mcmc_crosscheck"]
+           "check_sampler", "check_with_missing", "failure_pvalue", "histogram", "mcmc_crosscheck"]

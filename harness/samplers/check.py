@@ -6,10 +6,23 @@ equal-measure cells (:mod:`harness.samplers.domains`) against expected counts fr
 cubature of the claimed pdf (:mod:`harness.samplers.cubature`): chi-square on a coarse and a
 fine grid, fine 1-D marginals and a pdf moment, combined by Holm.  :class:`SamplerTest` does
 the sample-independent part (the cubature) once, for any number of samplers or seeds.
+
+Missing samples.  A sampler may fail to produce a sample for some u (absorption, a direction
+below the horizon): a NaN row.  Its samples then form a defective distribution whose pdf
+integrates to P <= 1 (``total``, given or from the cubature), and the question splits in two,
+both exact under the null: the failure count is Binomial(N, 1 - P) (an exact binomial test;
+with P from the cubature its p-value is maximised over P's error bound: conservative), and
+the samples produced follow pdf / P (the tests above, the cubature reused with its integrals
+divided by P).  All p-values are combined by Holm.
+
+A user's sample or pdf that raises, or returns the wrong shape, is a
+:class:`~harness.usercode.UserCodeError` naming it, its input's shape and dtype, and the shape
+expected back.
 """
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
 import math
 from collections.abc import Callable
@@ -26,8 +39,10 @@ from harness.samplers.cubature import cell_integrals
 from harness.samplers.domains import Domain, as_domain
 from harness.stats import holm
 from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
+from harness.usercode import UserCodeError, array_result, call, callable_name
 
-__all__ = ["SAMPLE_CASE", "SamplerCheck", "SamplerTest", "check_sampler", "histogram"]
+__all__ = ["SAMPLE_CASE", "SamplerCheck", "SamplerTest", "check_sampler", "check_with_missing",
+           "failure_pvalue", "histogram"]
 
 #: The stream (case id) the sampler check draws its canonical uniforms from.
 SAMPLE_CASE = 0x5A3F
@@ -118,7 +133,7 @@ class SamplerTest:
     def __init__(self, pdf: Callable[[np.ndarray], np.ndarray], domain: str | tuple | Domain, *,
                  sample_count: int = 1_000_000, alpha: float = 0.01):
         self.dom = dom = as_domain(domain)
-        self.pdf = pdf
+        self.pdf = _checked_pdf(pdf)
         self.n = n = int(sample_count)
         if n < 1000:
             raise ValueError(f"'sample_count' must be at least 1000, got {sample_count!r}")
@@ -152,7 +167,7 @@ class SamplerTest:
 
     def q(self, sp: np.ndarray) -> np.ndarray:
         """The claimed density in parameter space: |D| pdf(x(s))."""
-        return np.asarray(self.pdf(self.dom.to_points(sp)), dtype=float).reshape(-1) * self.dom.jacobian(sp)
+        return self.pdf(self.dom.to_points(sp)) * self.dom.jacobian(sp)
 
     def for_total(self, total: float) -> SamplerTest:
         """This test for the density pdf / ``total``, without a new cubature: the integrals
@@ -176,12 +191,7 @@ class SamplerTest:
         :data:`SAMPLE_CASE`) and runs the checks of :func:`check_sampler` on them."""
         dom, n, base = self.dom, self.n, self.base
         u = rest.points(n, udim or dom.udim, seed=seed, case_id=SAMPLE_CASE)
-        out = sample(u)
-        x = np.asarray(out[0] if isinstance(out, tuple) else out, dtype=float)
-        want = (n,) if dom.point_dim == 1 else (n, dom.point_dim)
-        if x.size != n * dom.point_dim:
-            raise ValueError(f"'sample' must return points of shape {want} for a {dom.kind}, got {x.shape}")
-        x = x.reshape(want)
+        x = _drawn(sample, u, dom)
         failures: list[Failure] = []
 
         def fail(check: str, mask: np.ndarray, detail: str, values: np.ndarray | None = None) -> None:
@@ -193,9 +203,7 @@ class SamplerTest:
         s, inside = dom.to_params(x)
         if not inside.all():
             fail("outside_domain", ~inside, f"points outside the {dom.kind}")
-        p = np.asarray(self.pdf(x), dtype=float).reshape(-1)
-        if p.shape != (n,):
-            raise ValueError(f"'pdf' must return shape ({n},), got {p.shape}")
+        p = self.pdf(x)
         bad = ~np.isfinite(p) | (p < 0)
         if bad.any():
             fail("bad_pdf", bad, "pdf NaN, infinite or negative at sampled points", p)
@@ -251,7 +259,7 @@ class SamplerTest:
 
 def check_sampler(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.ndarray], np.ndarray],
                   domain: str | tuple | Domain, *, sample_count: int = 1_000_000, seed: int = 0,
-                  alpha: float = 0.01, udim: int | None = None) -> SamplerCheck:
+                  alpha: float = 0.01, udim: int | None = None, total: float | None = None) -> SamplerCheck:
     """Test that ``sample`` draws points with the density ``pdf`` claims.
 
     ``sample`` maps canonical uniforms of shape (N, udim) (default: 1 for intervals, 2 else)
@@ -275,9 +283,146 @@ def check_sampler(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.ndarray
       pdf moment                E[h(pdf(X))] with h(p) = p / (p + c) bounded, against its
                                 cubature value: a density wrong where it is high or low.
     Expected counts below 5 are pooled; residual cubature error enters the variance.
+
+    A sampler that fails to produce some samples returns NaN rows for them; its pdf then
+    integrates to ``total`` < 1 (give it, or it is taken from the cubature and reported as
+    ``normalization``), and the check becomes :func:`check_with_missing`'s: the tests above on
+    the samples produced against pdf / total, plus an exact binomial test of the count of
+    missing ones against N (1 - total), all Holm-combined at ``alpha``.
     """
-    test = SamplerTest(pdf, domain, sample_count=sample_count, alpha=alpha)
-    return test.check(sample, seed=seed, udim=udim)
+    dom = as_domain(domain)
+    n = int(sample_count)
+    u = rest.points(n, udim or dom.udim, seed=seed, case_id=SAMPLE_CASE) if n >= 1000 else None
+    x = _drawn(sample, u, dom) if u is not None else None
+    if total is None and (x is None or np.isfinite(x).all()):
+        return SamplerTest(pdf, dom, sample_count=sample_count, alpha=alpha).check(lambda _u: x, seed=seed,
+                                                                                     udim=udim)
+    return check_with_missing(lambda _u: x, pdf, dom, sample_count=n, seed=seed, alpha=alpha, udim=udim,
+                              total=total)
+
+
+def failure_pvalue(failed: int, n: int, total: float, total_err: float) -> float:
+    """Two-sided exact binomial test of ``failed`` of ``n`` against failure probability
+    1 - P, P anywhere in total ± total_err: 1 where the observed rate lies in that interval,
+    else the p-value at its end nearest the observed rate (conservative)."""
+    lo, hi = min(max(1 - total - total_err, 0.0), 1.0), min(max(1 - total + total_err, 0.0), 1.0)
+    rate = failed / n
+    if lo <= rate <= hi:
+        return 1.0
+    q = lo if rate < lo else hi
+    if q <= 0:
+        return 0.0 if failed > 0 else 1.0
+    if q >= 1:
+        return 0.0 if failed < n else 1.0
+    return float(stats.binomtest(failed, n, q).pvalue)
+
+
+def check_with_missing(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.ndarray], np.ndarray],
+                       domain: str | tuple | Domain, *, sample_count: int = 1_000_000, seed: int = 0,
+                       alpha: float = 0.01, udim: int | None = None,
+                       total: float | None = None) -> SamplerCheck:
+    """check_sampler for a sampler that may fail to produce a sample (NaN rows), whether or
+    not it does this time (see the module's "Missing samples").  Deterministic failures: fewer
+    than 1000 samples produced; the pdf integrating to more than 1 (by more than 1e-3 and 10
+    times the cubature error), or, with ``total`` given, to other than ``total``; and
+    check_sampler's own on the samples produced (outside the domain, zero/NaN/negative pdf).
+    The tests table holds a "failed samples" row (the count, and its binomial p-value);
+    ``normalization`` the cubature's P and its error bound."""
+    dom = as_domain(domain)
+    n = int(sample_count)
+    if n < 1000:
+        raise ValueError(f"'sample_count' must be at least 1000, got {sample_count!r}")
+    if total is not None and not (isinstance(total, (int, float)) and 0 < total <= 1):
+        raise ValueError(f"'total' must be the pdf's integral over the domain, in (0, 1], got {total!r}")
+    u = rest.points(n, udim or dom.udim, seed=seed, case_id=SAMPLE_CASE)
+    x = _drawn(sample, u, dom).reshape(n, dom.point_dim)
+    failed = ~np.all(np.isfinite(x), axis=1)
+    produced = x[~failed].reshape((-1,) if dom.point_dim == 1 else (-1, dom.point_dim))
+    m = produced.shape[0]
+    if m < 1000:
+        table = pd.DataFrame([("failed samples", float(failed.sum()), 0, 0.0,
+                               "samples the sampler did not produce")],
+                             columns=["test", "statistic", "df", "pvalue", "detects"])
+        table["adjusted"] = 0.0
+        fail = Failure("too_few_samples", int(failed.sum()), f"only {m} of {n} samples produced",
+                       tuple(_u_examples(u, failed)))
+        return SamplerCheck(False, 0.0, alpha, n, table, [fail], (math.nan, math.nan))
+    raw = SamplerTest(pdf, dom, sample_count=m, alpha=alpha)
+    cubature, cubature_err = raw.normalization
+    failures: list[Failure] = []
+    if total is not None:
+        p_total, p_err = float(total), 0.0
+        if abs(cubature - p_total) > max(1e-3, 10 * cubature_err):
+            failures.append(Failure("normalization", 1,
+                                    f"pdf integrates to {cubature:.6f} ± {cubature_err:.1e} over the "
+                                    f"{dom.kind}, not the given total {p_total:g}"))
+    else:
+        p_total, p_err = cubature, cubature_err
+        if not cubature > 0:
+            failures.append(Failure("normalization", 1,
+                                    f"pdf integrates to {cubature:.6g} over the {dom.kind}"))
+            p_total = 1.0
+        elif cubature - 1 > max(1e-3, 10 * cubature_err):
+            failures.append(Failure("normalization", 1,
+                                    f"pdf integrates to {cubature:.6f} ± {cubature_err:.1e} over the "
+                                    f"{dom.kind}, more than 1"))
+    shape = raw.for_total(p_total).check(lambda _u: produced, seed=seed, udim=udim)
+    index = np.flatnonzero(~failed)  # the shape check's examples index the produced samples
+    for f in shape.failures:
+        if f.check != "normalization":
+            examples = tuple({**ex, "index": int(index[ex["index"]]), "u": u[index[ex["index"]]].tolist()}
+                             for ex in f.examples)
+            failures.append(dataclasses.replace(f, examples=examples))
+    k = int(failed.sum())
+    p_fail = failure_pvalue(k, n, min(p_total, 1.0), p_err)
+    expected = n * max(1 - p_total, 0.0)
+    table = shape.tests.drop(columns=["adjusted"])
+    table.loc[len(table)] = ("failed samples", float(k), 1, p_fail,
+                             f"failure count vs N(1-P) = {expected:.1f}: pdf mass where no samples go")
+    rejected, adjusted = holm(np.nan_to_num(table["pvalue"].to_numpy(dtype=float), nan=0.0), alpha)
+    table["adjusted"] = adjusted
+    passed = not failures and not rejected.any()
+    # the shape check's per-cell results (residuals, marginals) are kept: they describe the
+    # produced samples, the only ones with a direction
+    return dataclasses.replace(shape, passed=passed, pvalue=float(adjusted.min()), n=n, tests=table,
+                               failures=failures, normalization=raw.normalization)
+
+
+def _u_examples(u: np.ndarray, mask: np.ndarray, k: int = 5) -> list[dict[str, Any]]:
+    return [{"index": int(i), "u": u[i].tolist()} for i in np.flatnonzero(mask)[:k]]
+
+
+def _drawn(sample: Callable[[np.ndarray], Any], u: np.ndarray, dom: Domain) -> np.ndarray:
+    """The points ``sample`` draws from uniforms u, as float64 of shape (N,) on an interval
+    or (N, point_dim); a (points, pdf) tuple gives its points.  Errors name the sampler."""
+    name = callable_name(sample)
+    n = u.shape[0]
+    want = (n,) if dom.point_dim == 1 else (n, dom.point_dim)
+    out = call(sample, name, u, what=f"points of shape {want} on the {dom.kind}")
+    x = array_result(out[0] if isinstance(out, tuple) else out, None, name, f"uniforms of shape {u.shape}")
+    if x.size != n * dom.point_dim:
+        raise UserCodeError(f"{name} returned points of shape {x.shape} for uniforms of shape {u.shape}; "
+                            f"expected shape {want} on the {dom.kind}")
+    return x.reshape(want)
+
+
+def _checked_pdf(pdf: Callable[[np.ndarray], Any]) -> Callable[[np.ndarray], np.ndarray]:
+    """pdf, returning float64 of shape (N,) for N points; errors name it and the input."""
+    if getattr(pdf, "_checked", False):
+        return pdf
+    name = callable_name(pdf)
+
+    def checked(x: np.ndarray) -> np.ndarray:
+        n = x.shape[0]
+        p = call(pdf, name, x, what=f"densities of shape ({n},)")
+        a = array_result(p, None, name, f"points of shape {x.shape}")
+        if a.size != n:
+            raise UserCodeError(f"{name} returned shape {a.shape} for points of shape {x.shape}, {x.dtype}; "
+                                f"expected shape ({n},), one density per point")
+        return a.reshape(n)
+
+    checked._checked = True
+    return checked
 
 
 def histogram(s: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:

@@ -3,6 +3,7 @@
 ``bias``      is an estimator unbiased (check_unbiased, check_technique, judge_batches);
 ``tails``     the tail index of the contributions (TailSample);
 ``multiple``  multiple testing (holm);
+``estimator`` what estimates come from: a catalogue pair or a user's contributions callable;
 ``replicas``  replicas, convergence rates, efficiency, error against time;
 ``results``   the result family every check returns (ConfidenceInterval, Failure);
 ``merge``     Chan's merge of (count, mean, variance) summaries;
@@ -14,6 +15,7 @@ Every figure here carries its uncertainty and its sample count; every test state
 false-alarm rate and what it detects.
 """
 from harness.stats.bias import UnbiasedResult, check_technique, check_unbiased, judge_batches
+from harness.stats.estimator import CatalogueEstimator, Contributions, Estimator, estimator
 from harness.stats.multiple import holm
 from harness.stats.replicas import (
     ConvergenceResult,
@@ -31,6 +33,7 @@ from harness.stats.results import ConfidenceInterval, Failure, failure_counts, f
 from harness.stats.tails import TailSample
 
 __all__ = [
+    "Estimator", "CatalogueEstimator", "Contributions", "estimator",
     "UnbiasedResult", "check_unbiased", "check_technique", "judge_batches", "TailSample", "holm",
     "Replicates", "replicate", "median_time", "ConvergenceResult", "convergence_rate", "fit_convergence",
     "Efficiency", "efficiency", "efficiency_ratio", "error_vs_time",

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -16,6 +17,7 @@ from scipy import stats
 
 import reference_estimators as rest
 
+from harness.stats.estimator import Contributions, Estimator, estimator
 from harness.stats.merge import chan_merge
 from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
 from harness.stats.validate import count
@@ -42,7 +44,18 @@ class Replicates:
 
     Their spread measures the error of any technique, stratified and Sobol' included;
     for independent samples the pooled per-sample variance (``sample_variance``, from all
-    R * n contributions) measures it more precisely.
+    R * n contributions) measures it more precisely.  Built by :func:`replicate` (or
+    :meth:`from_estimates`); by hand, give:
+
+    * ``integrand``, ``technique``: names for tables; ``n``: contributions (or spp) per estimate;
+    * ``reference``: the exact value the errors are measured against;
+    * ``estimates``, ``seconds``: each replica's estimate and wall time (s), shape (R,);
+    * ``sample_variance``: the variance of one contribution pooled over all R * n of them, or
+      NaN where contributions are not independent (``iid`` False: stratified, Sobol', images);
+    * ``sample_kurtosis``: their (non-excess) kurtosis, 3 for normal contributions: it sets
+      the relative error sqrt((kurtosis - 1) / (R n)) of ``sample_variance``; NaN if unknown;
+    * ``iid``: the variance of an estimate is ``sample_variance`` / n (else: the replicas' spread);
+    * ``evaluations``: integrand evaluations per contribution (informational; 1 if unknown).
     """
 
     integrand: str
@@ -57,20 +70,20 @@ class Replicates:
     evaluations: int          # f evaluations per contribution
 
     @classmethod
-    def from_estimates(cls, f: rest.Integrand, t: rest.Technique, n: int,
-                       ests: Sequence[rest.Estimate]) -> Replicates:
-        """Replicates from independent estimates of one case at budget n."""
+    def from_estimates(cls, est: Estimator, n: int, ests: Sequence[rest.Estimate]) -> Replicates:
+        """Replicates from independent estimates of one case (any :class:`Estimator`) at budget n."""
         bad = {k: v for e in ests for k, v in e.issues.items()}
         if bad:
-            raise ValueError(f"{f.name}/{t.name}: contributions with faults {bad}; "
-                             f"first: {ests[0].examples[:3]}")
+            first = next(e for e in ests if e.issues)
+            raise ValueError(f"{est.integrand}/{est.technique}: contributions with faults {bad}; "
+                             f"first: {first.examples[:3]}")
         # pooled per-sample variance over all replicas (Chan's merge); kurtosis as the replicas' mean
         tot, _, m2 = chan_merge((e.n, e.mean, e.variance) for e in ests)
         var = m2 / (tot - 1)
         kurt = float(np.mean([e.kurtosis for e in ests]))
-        return cls(f.name, t.name, int(n), f.reference, np.array([e.mean for e in ests]),
-                   np.array([e.seconds for e in ests]), var if t.iid else math.nan, kurt, t.iid,
-                   t.evaluations)
+        return cls(est.integrand, est.technique, int(n), est.reference, np.array([e.mean for e in ests]),
+                   np.array([e.seconds for e in ests]), var if est.iid else math.nan, kurt, est.iid,
+                   est.evaluations)
 
     @property
     def replicas(self) -> int:
@@ -136,17 +149,24 @@ class Replicates:
         return median_time(self.seconds)
 
 
-def replicate(integrand: str | rest.Integrand, technique: str | rest.Technique, n: int, replicas: int, *,
-              seed: int = 0, case_id: int = 0, threads: int | None = None) -> Replicates:
+def replicate(integrand: Any, technique: Any = None, n: int | None = None, replicas: int | None = None, *,
+              dim: int | None = None, reference: float | None = None, seed: int = 0, case_id: int = 0,
+              threads: int | None = None) -> Replicates:
     """``replicas`` independent estimates with n contributions each (replica r uses the
-    streams of (seed, case_id, r, chunk): independent randomisations of any point set)."""
-    f = rest.integrand(integrand)
-    t = rest.technique(f, technique)
+    streams of (seed, case_id, r, chunk): independent randomisations of any point set).
+
+    The estimator is a catalogue integrand with its technique, or a contributions callable
+    u (N, dim) -> Y (N,) with ``dim`` and the exact ``reference`` (harness.stats.estimator):
+    ``replicate(my_estimator, n=4096, replicas=32, dim=2, reference=0.349)``."""
+    est = estimator(integrand, technique, dim=dim, reference=reference)
+    if n is None or replicas is None:
+        raise TypeError("replicate needs n (contributions per estimate) and replicas")
+    n = count(n, "n")
     r = count(replicas, "replicas")
     if r < 2:
         raise ValueError(f"'replicas' must be >= 2 to measure a spread, got {replicas}")
-    ests = [rest.integrate(f, t, n, seed=seed, case_id=case_id, replica=k, threads=threads) for k in range(r)]
-    return Replicates.from_estimates(f, t, n, ests)
+    ests = [est.estimate(n, seed=seed, case_id=case_id, replica=k, threads=threads) for k in range(r)]
+    return Replicates.from_estimates(est, n, ests)
 
 
 # --- convergence rate ------------------------------------------------------------------------
@@ -222,28 +242,40 @@ class ConvergenceResult:
                 f"one-sided p = {self.pvalue:.3g}, {self.n} replicas over {len(self.table)} budgets")
 
 
+def _judgeable(est: Estimator) -> Estimator:
+    """An estimator whose errors can be measured: it has an exact reference."""
+    if not math.isfinite(est.reference):
+        raise ValueError(f"{est.integrand}: errors need the exact value: give reference=")
+    return est
+
+
 def _percentile_interval(boot: np.ndarray, confidence_level: float) -> ConfidenceInterval:
     check_confidence_level(confidence_level)
     a = 1 - confidence_level
     return ConfidenceInterval(float(np.quantile(boot, a / 2)), float(np.quantile(boot, 1 - a / 2)))
 
 
-def convergence_rate(integrand: str | rest.Integrand, technique: str | rest.Technique, budgets: Sequence[int],
-                     replicas: int = 32, *, seed: int = 0, case_id: int = 0, expected: float = -0.5,
-                     tolerance: float = 0.05, confidence_level: float = 0.95, bootstrap: int = 400,
+def convergence_rate(integrand: Any, technique: Any = None, budgets: Sequence[int] | None = None,
+                     replicas: int = 32, *, dim: int | None = None, reference: float | None = None,
+                     seed: int = 0, case_id: int = 0, expected: float = -0.5, tolerance: float = 0.05,
+                     confidence_level: float = 0.95, bootstrap: int = 400,
                      threads: int | None = None) -> ConvergenceResult:
     """Fit log RMSE = a + slope log n by least squares over ``budgets`` (replicas each).
+
+    The estimator is a catalogue integrand with its technique, or a contributions callable
+    with ``dim`` and ``reference`` (as for :func:`replicate`).
 
     The slope's interval comes from a bootstrap over replicas within each budget (percentile,
     ``bootstrap`` resamples from a generator seeded by ``seed``), so it needs no normality.
     Budgets should span at least a factor 16.  Zero-variance estimators give RMSE at the
     rounding level and a slope near 0; compare with ``expected`` accordingly.
     """
-    b = sorted({count(x, "budgets") for x in budgets})
+    est = _judgeable(estimator(integrand, technique, dim=dim, reference=reference))
+    b = sorted({count(x, "budgets") for x in budgets or ()})
     if len(b) < 3:
-        raise ValueError(f"'budgets' needs at least 3 distinct sizes, got {list(budgets)!r}")
-    reps = [replicate(integrand, technique, n, replicas, seed=seed, case_id=case_id + 7919 * i,
-                      threads=threads) for i, n in enumerate(b)]
+        raise ValueError(f"'budgets' needs at least 3 distinct sizes, got {budgets!r}")
+    reps = [replicate(est, n=n, replicas=replicas, seed=seed, case_id=case_id + 7919 * i, threads=threads)
+            for i, n in enumerate(b)]
     return fit_convergence(reps, expected=expected, tolerance=tolerance, confidence_level=confidence_level,
                            bootstrap=bootstrap, seed=seed)
 
@@ -375,20 +407,29 @@ def efficiency_ratio(a: Efficiency, b: Efficiency,
 
 
 # --- error against time ----------------------------------------------------------------------
-def error_vs_time(integrand: str | rest.Integrand, techniques: Sequence[str | rest.Technique],
-                  budgets: Sequence[int], replicas: int = 16, *, seed: int = 0,
+def error_vs_time(integrand: Any, techniques: Sequence[Any], budgets: Sequence[int], replicas: int = 16, *,
+                  dim: int | None = None, reference: float | None = None, seed: int = 0,
                   threads: int | None = None, confidence_level: float = 0.95) -> pd.DataFrame:
     """RMSE against the exact reference and mean wall time, per technique and budget.
 
-    Columns: technique, n, rmse, rmse_lo, rmse_hi (chi-square interval), seconds (median per
-    estimate), seconds_se, replicas.  Plot rmse against seconds on log-log axes to see which
-    technique reaches a given error first.
+    ``techniques`` are catalogue techniques of ``integrand``; or, with ``integrand`` None,
+    contributions callables (or :class:`~harness.stats.estimator.Contributions`) of one
+    integral, with ``dim`` and ``reference`` for the bare callables.  Columns: technique, n,
+    rmse, rmse_lo, rmse_hi (chi-square interval), seconds (median per estimate), seconds_se,
+    replicas.  Plot rmse against seconds on log-log axes to see which technique reaches a
+    given error first.
     """
     rows = []
-    f = rest.integrand(integrand)
-    for i, t in enumerate(techniques):
+    if integrand is None:
+        ests = [t if isinstance(t, Contributions) else estimator(t, dim=dim, reference=reference)
+                for t in techniques]
+    else:
+        f = rest.integrand(integrand)
+        ests = [estimator(f, t) for t in techniques]
+    for i, est in enumerate(ests):
+        _judgeable(est)
         for j, n in enumerate(budgets):
-            r = replicate(f, t, n, replicas, seed=seed, case_id=1000 * i + j, threads=threads)
+            r = replicate(est, n=n, replicas=replicas, seed=seed, case_id=1000 * i + j, threads=threads)
             lo, hi = r.rmse_interval(confidence_level)
             secs, secs_se = r.time
             rows.append({"technique": r.technique, "n": r.n, "rmse": r.rmse, "rmse_lo": lo, "rmse_hi": hi,

@@ -1,10 +1,13 @@
-"""Estimator cases of a suite (``[[case]]``: a catalogue integrand x technique), as a case kind.
+"""Estimator cases of a suite (``[[case]]``: a catalogue integrand x technique, or a user's
+estimator, harness.stats.estimator), as a case kind.
 
 Per case, as its measurements ask: a bias verdict (check_technique's test on independent
 batches, Holm-corrected across the suite's estimator cases at its family-wise alpha) and the
 per-sample variance from the same batches; a convergence slope of the RMSE over geometric
-budgets with a bootstrap interval; the efficiency 1/(V T) as a ratio against uniform Monte
-Carlo on the same integrand; and RMSE against wall time.  A case with a precision target
+budgets with a bootstrap interval; the efficiency 1/(V T) as a ratio against the case named
+by ``baseline`` (default: uniform Monte Carlo on the same catalogue integrand); and RMSE
+against wall time.  A user's estimator runs serially in the runner's thread (Python code
+holds the GIL: a parallel run would time its contention, not the estimator).  A case with a precision target
 doubles its bias test's samples (a new "look") until its interval is narrow enough.
 """
 from __future__ import annotations
@@ -13,6 +16,7 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import pandas as pd
@@ -35,8 +39,19 @@ from harness.suite.plan import (
 )
 from harness.suite.store import Store
 from harness.suite.verdicts import family_rejections
+from harness.usercode import load_attr
 
 __all__ = ["EstimateJob", "CaseResult", "EstimatorKind", "results_table", "format_table"]
+
+
+def estimator_of(case: Case, base: Path) -> stats.Estimator:
+    """The case's estimator: the catalogue pair, or the user's callable loaded from ``base``
+    (the suite file's folder) first."""
+    if not case.estimator:
+        f = rest.integrand(case.integrand)
+        return stats.CatalogueEstimator(f, rest.technique(f, case.technique))
+    return stats.Contributions(load_attr(case.estimator, base=base), case.dim, case.reference, case.label,
+                               case.points, name=case.estimator)
 
 
 @dataclass(frozen=True)
@@ -46,24 +61,25 @@ class EstimateJob:
     for the tail-index test)."""
 
     unit: Unit
-    integrand: str
-    technique: str
+    case: Case
+    base: str          # the suite file's folder: where a user's estimator is loaded from
     seed: int
     core_case: int
-    serial: bool = False
+
+    @property
+    def serial(self) -> bool:
+        return bool(self.case.estimator)
 
     def run(self) -> JobResult:
         u = self.unit
-        f = rest.integrand(self.integrand)
-        t = rest.technique(f, self.technique)
+        est = estimator_of(self.case, Path(self.base))
         start = time.perf_counter()
         if u.kind == "state":
-            payload = rest.integrate_chunks(f, t, u.budget, u.chunk_begin, u.chunk_end, seed=self.seed,
-                                            case_id=self.core_case, replica=u.replica, threads=1)
+            payload = est.state(u.budget, u.chunk_begin, u.chunk_end, seed=self.seed, case_id=self.core_case,
+                                replica=u.replica)
         else:
             tails = stats.TailSample.for_count(u.budget)
-            tails.add(rest.contributions(f, t, u.budget, seed=self.seed, case_id=self.core_case,
-                                         replica=u.replica, threads=1))
+            tails.add(est.values(u.budget, seed=self.seed, case_id=self.core_case, replica=u.replica))
             payload = {"center": tails.center, "upper": tails.upper.tolist(), "lower": tails.lower.tolist()}
         return JobResult(u, payload, time.perf_counter() - start)
 
@@ -71,7 +87,7 @@ class EstimateJob:
 @dataclass(frozen=True)
 class CaseResult:
     case: Case
-    technique: rest.Technique
+    estimator: stats.Estimator
     key: str
     bias: stats.UnbiasedResult | None
     convergence: stats.ConvergenceResult | None  # None if not asked for or zero variance
@@ -100,19 +116,21 @@ class EstimatorKind:
         self.looks = {k: 0 for k, c in self.case_of.items() if c.target is not None}
 
     def names(self) -> list[str]:
-        return [f"{c.integrand}/{c.technique}#{c.case_id}" for c in self.suite.cases]
+        return [f"{c.name}#{c.case_id}" for c in self.suite.cases]
 
     def register(self, store: Store) -> None:
         for key, c in self.case_of.items():
-            store.add_case(key, self.suite.name, c.integrand, c.technique,
-                           {"seed": self.suite.seed, "case_id": c.case_id, "samples": c.samples})
+            definition = {"seed": self.suite.seed, "case_id": c.case_id, "samples": c.samples}
+            if c.estimator:
+                definition.update(estimator=c.estimator, dim=c.dim, points=c.points, source=c.source)
+            store.add_case(key, self.suite.name, c.integrand, c.technique, definition)
 
     def plan(self, store: Store) -> list[EstimateJob]:
         jobs = []
+        base = str(self.suite.path.parent)
         for key, c in self.case_of.items():
             for u in estimator_units(self.suite, c, self.looks.get(key, 0)):
-                jobs.append(EstimateJob(u, c.integrand, c.technique, self.suite.seed,
-                                        core_case_id(c, u.stream)))
+                jobs.append(EstimateJob(u, c, base, self.suite.seed, core_case_id(c, u.stream)))
         return jobs
 
     def advance(self, store: Store) -> bool:
@@ -139,7 +157,8 @@ class EstimatorKind:
                 "1/(V·T): efficiency (background eq. 5) against uniform MC on the same integrand."
                 if results else "")
         return Outcome(self.name, "cases", tuple(self.names()), tuple(results), tuple(verdicts),
-                       tuple(failures), tuple(_rows(suite, results, table)), table, text)
+                       tuple(failures), tuple(_rows(suite, results, table)), table, text,
+                       tuple(c.xfail for c in suite.cases))
 
 
 # --- measuring -----------------------------------------------------------------------------------
@@ -153,14 +172,13 @@ def _states_by_estimate(payloads: dict[Unit, dict]) -> dict[tuple[int, int, int]
 
 
 def _measure(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int = 0) -> CaseResult:
-    f = rest.integrand(case.integrand)
-    t = rest.technique(f, case.technique)
+    est = estimator_of(case, suite.path.parent)
     key = case_key(suite, case)
     wanted = set(case.measurements)
     states = _states_by_estimate(payloads)
 
     def estimate(stream: int, budget: int, replica: int) -> rest.Estimate:
-        return rest.estimate_from_states(f, t, states[(stream, budget, replica)])
+        return est.from_states(states[(stream, budget, replica)])
 
     bias = variance = conv = eff = evt = None
     if wanted & {"bias", "variance"}:
@@ -173,11 +191,11 @@ def _measure(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int = 0
             tails = stats.TailSample.from_tops(tail["upper"], tail["lower"])
             if faults:
                 first = next(e for e in batches if e.issues)
-                bias = stats.UnbiasedResult.invalid(faults, first.examples, reference=f.reference,
+                bias = stats.UnbiasedResult.invalid(faults, first.examples, reference=est.reference,
                                                     n=b * suite.batches, alpha=suite.alpha,
                                                     batches=suite.batches)
             else:
-                bias = stats.judge_batches(batches, tails, f.reference, suite.alpha, iid=t.iid)
+                bias = stats.judge_batches(batches, tails, est.reference, suite.alpha, iid=est.iid)
             if case.looks > 1 and bias.verdict != "invalid":
                 # alpha spent over the looks a target may take (Bonferroni: any dependence, any
                 # stopping rule): the final look's p-value times the number of looks
@@ -185,8 +203,8 @@ def _measure(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int = 0
                 verdict = ("consistent" if p >= suite.alpha else
                            "inconclusive" if bias.heavy_tail else "biased")
                 bias = dataclasses.replace(bias, pvalue=p, verdict=verdict)
-        if "variance" in wanted and not faults and t.iid:
-            reps = stats.Replicates.from_estimates(f, t, b, batches)
+        if "variance" in wanted and not faults and est.iid:
+            reps = stats.Replicates.from_estimates(est, b, batches)
             rel = math.sqrt(max(reps.sample_kurtosis - 1, 0.0) / (reps.replicas * b))
             variance = (reps.sample_variance, reps.sample_variance * rel, reps.replicas * b)
     budgets = convergence_budgets(suite, case)
@@ -194,7 +212,7 @@ def _measure(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int = 0
     for i, b in enumerate(budgets):
         if (1 + i, b, 0) in states:
             reps_by_budget[b] = stats.Replicates.from_estimates(
-                f, t, b, [estimate(1 + i, b, r) for r in range(suite.replicas)])
+                est, b, [estimate(1 + i, b, r) for r in range(suite.replicas)])
     if reps_by_budget:
         top = reps_by_budget[max(reps_by_budget)]
         if top.rmse > 0 and "efficiency" in wanted:
@@ -206,7 +224,7 @@ def _measure(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int = 0
                                  "rmse_hi": r.rmse_interval()[1], "seconds": r.time[0],
                                  "seconds_se": r.time[1], "replicas": r.replicas}
                                 for r in reps_by_budget.values()])
-    return CaseResult(case, t, key, bias, conv, eff, variance, evt, look)
+    return CaseResult(case, est, key, bias, conv, eff, variance, evt, look)
 
 
 # --- verdicts --------------------------------------------------------------------------------------
@@ -215,8 +233,8 @@ def _judge_convergence(results: list[CaseResult], alpha: float) -> list[str]:
     alpha: 'as expected', 'slower than expected', or 'not judged' where no rate is promised
     (infinite variance, heavy tails or skewed batches seen by the bias test: pre-asymptotic)
     or the technique is biased on purpose (its error stops falling at the bias)."""
-    judged = [r.convergence is not None and not r.technique.biased
-              and r.technique.finite_variance is not False and not (r.bias is not None and r.bias.flags)
+    judged = [r.convergence is not None and not r.estimator.biased
+              and r.estimator.finite_variance is not False and not (r.bias is not None and r.bias.flags)
               for r in results]
     # cases not judged enter the family with p = 1 (they count in Holm's m)
     rejected, _ = family_rejections([r.convergence.pvalue if ok else 1.0 for r, ok in zip(results, judged)],
@@ -248,9 +266,9 @@ def _judge_bias(results: list[CaseResult], alpha: float) -> list[str]:
         elif rej and r.bias.heavy_tail:
             out.append("inconclusive")
         elif rej:
-            out.append("biased (expected)" if r.technique.biased else "biased")
+            out.append("biased (expected)" if r.estimator.biased else "biased")
         else:
-            out.append("bias missed" if r.technique.biased else "unbiased")
+            out.append("bias missed" if r.estimator.biased else "unbiased")
     return out
 
 
@@ -265,7 +283,7 @@ def _failure(r: CaseResult, verdicts: dict[str, str], alpha: float, family: int)
         if math.isfinite(b.stderr):
             lo, hi = b.confidence_interval(1 - alpha)
             head += f", {100 * (1 - alpha):g} % CI [{lo:.10g}, {hi:.10g}]"
-        expected = "biased (deliberately)" if r.technique.biased else "unbiased"
+        expected = "biased (deliberately)" if r.estimator.biased else "unbiased"
         problems.append(f"{head}\n  verdict: {verdicts['bias']}; expected: {expected}"
                         + "".join(f"\n  {failure}" for failure in b.failures)
                         + (f"\n  flags: {'; '.join(b.flags)}" if b.flags else ""))
@@ -327,34 +345,41 @@ def _rows(suite: Suite, results: list[CaseResult], table: pd.DataFrame) -> list[
 
 def results_table(results: list[CaseResult], alpha: float) -> pd.DataFrame:
     """One row per case: the figures with their uncertainty and n, and the verdicts."""
-    # baseline per integrand: uniform MC where the suite has it, else the integrand's first case
-    baseline: dict[str, CaseResult] = {}
+    # the baseline of a case: the one its ``baseline`` names; else, for catalogue cases, per
+    # integrand: uniform MC where the suite has it, else the integrand's first case
+    by_integrand: dict[str, CaseResult] = {}
     for r in results:
-        current = baseline.get(r.case.integrand)
-        if r.efficiency and (current is None or (r.case.technique == "uniform" != current.case.technique)):
-            baseline[r.case.integrand] = r
+        current = by_integrand.get(r.case.integrand)
+        if r.efficiency and not r.case.estimator and (
+                current is None or (r.case.technique == "uniform" != current.case.technique)):
+            by_integrand[r.case.integrand] = r
+    by_name = {r.case.name: r for r in results}
     rows = []
     nan = math.nan
     for r, verdict, cverdict in zip(results, _judge_bias(results, alpha), _judge_convergence(results, alpha)):
         b, c, e = r.bias, r.convergence, r.efficiency
         ratio, (lo, hi) = (nan, (nan, nan))
-        base = baseline.get(r.case.integrand)
-        if e is not None and base is not None:
+        base = by_name[r.case.baseline] if r.case.baseline else (
+            None if r.case.estimator else by_integrand.get(r.case.integrand))
+        if e is not None and base is not None and base.efficiency is not None:
             ratio, (lo, hi) = stats.efficiency_ratio(e, base.efficiency)
         notes = _notes(r)
-        if base is not None and base.case.technique != "uniform":
-            notes += f"{'; ' if notes else ''}baseline {base.case.technique}"
+        base_name = "" if base is None else base.case.name if r.case.baseline else base.case.technique
+        if base is not None and (r.case.baseline or base.case.technique != "uniform"):
+            notes += f"{'; ' if notes else ''}baseline {base_name}"
+        elif e is not None and base is None:
+            notes += f"{'; ' if notes else ''}1/(V·T) = 10^{e.log10_value:.3g} (no baseline)"
         rows.append({
             "integrand": r.case.integrand, "technique": r.case.technique, "n": b.n if b else r.case.samples,
             "estimate": b.estimate if b else nan, "stderr": b.stderr if b else nan,
-            "exact": rest.integrand(r.case.integrand).reference,
+            "exact": r.estimator.reference,
             "z": b.statistic if b else nan, "pvalue": b.pvalue if b else nan, "verdict": verdict,
             "slope": c.slope if c else nan,
             "slope_lo": c.confidence_interval().low if c else nan,
             "slope_hi": c.confidence_interval().high if c else nan,
             "convergence": cverdict, "slope_pvalue": c.pvalue if c else nan,
             "log10_efficiency": e.log10_value if e else nan,
-            "efficiency_baseline": base.case.technique if base else "",
+            "efficiency_baseline": base_name,
             "efficiency_ratio": ratio, "ratio_lo": lo, "ratio_hi": hi,
             "seconds_per_estimate": e.seconds if e else nan,
             "notes": notes,
@@ -366,7 +391,7 @@ def _notes(r: CaseResult) -> str:
     notes = list(r.bias.flags) if r.bias else []
     if r.bias and r.bias.failures:
         notes.append(f"faults: {stats.failure_counts(r.bias.failures)}")
-    if r.technique.finite_variance is False:
+    if r.estimator.finite_variance is False:
         notes.append("infinite variance (analytic)")
     if r.bias and r.bias.stderr == 0:
         notes.append("zero variance")

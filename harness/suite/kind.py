@@ -29,7 +29,12 @@ class Outcome:
     per case; ``verdicts``: measurement -> verdict word per case (harness.suite.verdicts);
     ``failures``: why each case fails a CI run, "" where it passes; ``rows``: the measurement
     rows for the store; ``frame``: the kind's table as a DataFrame (``--csv``); ``text``: the
-    table as aligned text with its heading (empty when the kind has no cases).
+    table as aligned text with its heading (empty when the kind has no cases); ``xfail``: each
+    case's ``xfail`` reason, "" where none (a known finding: its failure is expected).
+
+    A case's :meth:`status` is "passed", "failed", "xfailed" (failed, as its xfail says) or
+    "xpassed" (has an xfail reason but passed: strict, like pytest's ``xfail(strict=True)``,
+    so a fixed finding is noticed and its xfail removed); "failed" and "xpassed" fail a run.
     """
 
     kind: str
@@ -41,11 +46,33 @@ class Outcome:
     rows: tuple[dict[str, Any], ...]
     frame: pd.DataFrame
     text: str
+    xfail: tuple[str, ...] = ()
+
+    def status(self, i: int) -> str:
+        reason = self.xfail[i] if self.xfail else ""
+        if reason:
+            return "xfailed" if self.failures[i] else "xpassed"
+        return "failed" if self.failures[i] else "passed"
+
+    def problem(self, i: int) -> str:
+        """Why case i fails a run ("" where it does not)."""
+        status = self.status(i)
+        if status == "failed":
+            return self.failures[i]
+        if status == "xpassed":
+            return (f"[XPASS(strict)] expected to fail ({self.xfail[i]}) but passed: if the finding is "
+                    "fixed, remove the case's xfail key")
+        return ""
 
     @property
     def failed(self) -> int:
-        """How many cases fail a CI run."""
-        return sum(1 for f in self.failures if f)
+        """How many cases fail a CI run (failed, or passed against their xfail)."""
+        return sum(1 for i in range(len(self.names)) if self.status(i) in ("failed", "xpassed"))
+
+    @property
+    def xfailed(self) -> int:
+        """How many cases failed as expected."""
+        return sum(1 for i in range(len(self.names)) if self.status(i) == "xfailed")
 
 
 class CaseKind(Protocol):

@@ -39,6 +39,7 @@ class Locator:
             end = nxt[0] if nxt else len(self.lines)
             if key is None:
                 return start + 1
+            start += 1  # a key inside the table, not its header ("sampler" in [[sampler]])
         pattern = re.compile(r"^\s*(\[+\s*)?%s\s*(=|\]|\.)" % re.escape(key or ""))
         for i in range(start, end):
             if pattern.match(self.lines[i]):

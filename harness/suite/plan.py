@@ -55,10 +55,13 @@ def _hash(obj: Any) -> str:
 
 # --- fingerprints --------------------------------------------------------------------------------
 def case_key(suite: Suite, case: Case) -> str:
-    """Fingerprint of what fixes a case's random numbers and contributions."""
-    return _hash({"integrand": case.integrand, "technique": case.technique, "seed": suite.seed,
-                  "case_id": case.case_id, "unit_chunks": UNIT_CHUNKS, "format": _FORMAT,
-                  "core": rest.__version__, "build": rest.core_fingerprint()})
+    """Fingerprint of what fixes a case's random numbers and contributions: for a user's
+    estimator its target, dimension, point set and the hash of its source (a change of the
+    code invalidates its stored units)."""
+    what = ({"estimator": case.estimator, "source": case.source, "dim": case.dim, "points": case.points}
+            if case.estimator else {"integrand": case.integrand, "technique": case.technique})
+    return _hash({**what, "seed": suite.seed, "case_id": case.case_id, "unit_chunks": UNIT_CHUNKS,
+                  "format": _FORMAT, "core": rest.__version__, "build": rest.core_fingerprint()})
 
 
 def sampler_key(suite: Suite, sc: SamplerCase) -> str:
@@ -66,6 +69,8 @@ def sampler_key(suite: Suite, sc: SamplerCase) -> str:
     definition = {"sampler": sc.name, "params": list(sc.params), "domain": sc.domain, "samples": sc.samples,
                   "seed": suite.seed, "case_id": sc.case_id, "format": _FORMAT, "payload": _SAMPLER_PAYLOAD,
                   "core": rest.__version__, "build": rest.core_fingerprint()}
+    if sc.target:   # a user's sampler: a change of its source invalidates the check
+        definition.update(target=sc.target, source=sc.source, total=sc.total, udim=sc.udim)
     if sc.adapter:  # a renderer's sampler: its library version is part of what is tested
         from harness.adapters.mitsuba.samplers import make_sampler
 
@@ -74,10 +79,13 @@ def sampler_key(suite: Suite, sc: SamplerCase) -> str:
     return _hash(definition)
 
 
-def sampler_spec(sc: SamplerCase) -> str:
-    """What a worker needs to rebuild the sampler (JSON)."""
+def sampler_spec(suite: Suite, sc: SamplerCase) -> str:
+    """What a worker needs to rebuild the sampler (JSON); a user's is loaded from the suite
+    file's folder."""
     return json.dumps({"name": sc.name, "params": dict(sc.params), "domain": sc.domain, "samples": sc.samples,
-                       "adapter": sc.adapter, "spec": json.loads(sc.spec) if sc.spec else None})
+                       "adapter": sc.adapter, "spec": json.loads(sc.spec) if sc.spec else None,
+                       "target": sc.target, "base": str(suite.path.parent), "total": sc.total,
+                       "udim": sc.udim})
 
 
 def render_key(suite: Suite, fingerprint: dict[str, Any]) -> str:

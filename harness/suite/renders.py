@@ -43,12 +43,14 @@ __all__ = ["RenderJob", "RenderResult", "RenderKind", "ReferenceCache", "cached_
 _RENDERERS: dict[str, Renderer] = {}   # per process: renderers keep JIT kernels and GL contexts warm
 
 
-def cached_renderer(adapter: str, spec: tuple[tuple[str, Any], ...], *, reference: bool = False) -> Renderer:
+def cached_renderer(adapter: str, spec: tuple[tuple[str, Any], ...], *, reference: bool = False,
+                    base: str = "") -> Renderer:
     """The renderer an adapter builds from a [[render]] table's keys (or its reference
-    renderer), built once per process."""
-    key = json.dumps([adapter, list(spec), reference], sort_keys=True, default=str)
+    renderer), built once per process; ``base``: the suite file's folder."""
+    key = json.dumps([adapter, list(spec), reference, base], sort_keys=True, default=str)
     if key not in _RENDERERS:
-        r = cached_renderer(adapter, spec) if reference else renderer(adapter, dict(spec))
+        r = (cached_renderer(adapter, spec, base=base) if reference
+             else renderer(adapter, dict(spec), base=Path(base) if base else None))
         _RENDERERS[key] = r.reference() if reference else r
     return _RENDERERS[key]
 
@@ -62,11 +64,12 @@ class RenderJob:
     adapter: str
     spec: tuple[tuple[str, Any], ...]
     reference: bool
+    base: str = ""
     serial: bool = True
 
     def run(self) -> JobResult:
         u = self.unit
-        r = cached_renderer(self.adapter, self.spec, reference=self.reference)
+        r = cached_renderer(self.adapter, self.spec, reference=self.reference, base=self.base)
         out = r.render(u.budget, render_seed(u))
         name = f"{u.case_key}/render-s{u.stream}-b{u.budget}-r{u.replica}"
         payload = {"image": name, "spp": out.spp, "faults": image_faults(out.image).to_dict()}
@@ -150,9 +153,10 @@ class RenderKind:
     def register(self, store: Store) -> None:
         self.cases = []
         for rc in self.suite.renders:
-            r = cached_renderer(rc.adapter, rc.spec)
+            r = cached_renderer(rc.adapter, rc.spec, base=rc.base)
             key = render_key(self.suite, r.fingerprint())
-            ref = cached_renderer(rc.adapter, rc.spec, reference=True) if r.exact() is None else None
+            ref = (cached_renderer(rc.adapter, rc.spec, reference=True, base=rc.base) if r.exact() is None
+                   else None)
             ref_key = reference_key(self.suite, rc, ref.fingerprint()) if ref else None
             self.cases.append(_Case(rc, key, r, ref_key, ref))
             store.add_case(key, self.suite.name, rc.scene, rc.label,
@@ -165,10 +169,10 @@ class RenderKind:
         jobs: dict[Unit, RenderJob] = {}
         for c in self.cases:
             for u in render_units(c.rc, c.key):
-                jobs[u] = RenderJob(u, c.rc.adapter, c.rc.spec, False)
+                jobs[u] = RenderJob(u, c.rc.adapter, c.rc.spec, False, c.rc.base)
             if c.ref_key is not None and cache.load(c.ref_key) is None:
                 for u in reference_units(c.rc, c.ref_key):
-                    jobs.setdefault(u, RenderJob(u, c.rc.adapter, c.rc.spec, True))
+                    jobs.setdefault(u, RenderJob(u, c.rc.adapter, c.rc.spec, True, c.rc.base))
         damaged = []
         for key in {u.case_key for u in jobs}:
             for u, p in store.payloads(key).items():
@@ -193,6 +197,8 @@ class RenderKind:
                 if reference is None:
                     reference = _build_reference(store, cache, c)
             results.append(_measure(c.rc, c.key, store, reference, label))
+            if hasattr(c.renderer, "notes"):  # what the adapter says a reader must know (how it timed)
+                results[-1].notes.extend(c.renderer.notes())
         alpha = self.suite.alpha
         verdicts = judge(results, alpha)
         frame = render_table(results, verdicts)
@@ -207,7 +213,8 @@ class RenderKind:
         return Outcome(self.name, "render configurations", tuple(self.names()), tuple(results),
                        tuple(verdicts),
                        tuple(failures(results, verdicts, alpha)),
-                       tuple(render_rows(self.suite, results, verdicts)), frame, text)
+                       tuple(render_rows(self.suite, results, verdicts)), frame, text,
+                       tuple(rc.xfail for rc in self.suite.renders))
 
 
 def _reference_folder(store: Store) -> Path:

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from harness.adapters.base import read_image
 from harness.suite.plan import Unit
 
 __all__ = ["Store", "load", "connect_read_only", "image_dir", "write_exr", "read_exr"]
@@ -221,19 +222,8 @@ def write_exr(path: Path, image: np.ndarray) -> np.ndarray:
 
 
 def read_exr(path: Path) -> np.ndarray:
-    """An EXR image as float32 (height, width, channels)."""
-    import OpenImageIO as oiio
-
-    inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        raise OSError(f"cannot read {path}: {oiio.geterror()}")
-    try:
-        pixels = inp.read_image("float")
-    finally:
-        inp.close()
-    if pixels is None:  # a truncated or damaged file
-        raise OSError(f"cannot read {path}: {oiio.geterror() or 'damaged image'}")
-    return pixels
+    """An EXR image as float32 (height, width, channels); OSError naming a damaged file."""
+    return read_image(path)
 
 
 def _sha256(path: Path) -> str:

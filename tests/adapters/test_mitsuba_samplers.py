@@ -16,6 +16,7 @@ from harness.adapters.mitsuba import catalogue as cat
 from harness.adapters.mitsuba import checks, faults, runtime
 from harness.adapters.mitsuba import samplers as ms
 from harness.samplers import check_sampler
+from harness.samplers.check import failure_pvalue
 from harness.stats import ConfidenceInterval
 
 N = 200_000
@@ -68,11 +69,12 @@ def test_samples_where_the_pdf_is_zero_are_reported_by_their_own_index():
         assert ex["point"][2] == pytest.approx(ex["u"][0])
 
 
-def test_check_sampler_alone_cannot_take_failed_samples():
-    # why check_mitsuba_sampler exists: NaN rows are points outside the domain for check_sampler
+def test_check_sampler_takes_failed_samples_as_the_mitsuba_check_does():
+    # NaN rows are missing samples for check_sampler too: the same failure-aware check
     s = _Capped(0.1)
-    r = check_sampler(s.sample, s.pdf, "hemisphere", sample_count=20_000, seed=0)
-    assert {f.check for f in r.failures} >= {"outside_domain", "normalization"}
+    a = check_sampler(s.sample, s.pdf, "hemisphere", sample_count=20_000, seed=0, udim=s.udim)
+    b = checks.check_mitsuba_sampler(s, sample_count=20_000, seed=0)
+    assert a.passed and b.passed and a.tests.equals(b.tests)
 
 
 @pytest.mark.slow
@@ -85,12 +87,12 @@ def test_failure_aware_check_false_alarms_stay_rare():
 
 
 def test_failure_pvalue_is_conservative_within_the_cubature_error():
-    assert checks.failure_pvalue(1000, 100_000, 0.99, 1e-6) == 1.0       # exactly N (1 - P)
-    assert 0.01 < checks.failure_pvalue(1020, 100_000, 0.99, 1e-6) < 0.9  # 0.6 sigma off
-    assert checks.failure_pvalue(1010, 100_000, 0.99, 2e-4) == 1.0       # inside the interval
-    assert checks.failure_pvalue(0, 100_000, 1.0, 1e-6) == 1.0
-    assert checks.failure_pvalue(3, 100_000, 1.0, 0.0) == 0.0            # failures where the pdf says none
-    assert checks.failure_pvalue(0, 100_000, 0.99, 1e-6) < 1e-100         # no failures, 1 % expected
+    assert failure_pvalue(1000, 100_000, 0.99, 1e-6) == 1.0       # exactly N (1 - P)
+    assert 0.01 < failure_pvalue(1020, 100_000, 0.99, 1e-6) < 0.9  # 0.6 sigma off
+    assert failure_pvalue(1010, 100_000, 0.99, 2e-4) == 1.0       # inside the interval
+    assert failure_pvalue(0, 100_000, 1.0, 1e-6) == 1.0
+    assert failure_pvalue(3, 100_000, 1.0, 0.0) == 0.0            # failures where the pdf says none
+    assert failure_pvalue(0, 100_000, 0.99, 1e-6) < 1e-100         # no failures, 1 % expected
 
 
 # --- real plugins pass, planted faults are caught ------------------------------------------------

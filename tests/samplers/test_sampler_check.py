@@ -148,7 +148,8 @@ def test_bad_arguments(kwargs, error, message):
 
 def test_wrong_point_shapes_are_named():
     with pytest.raises(ValueError,
-                       match=r"'sample' must return points of shape \(5000, 3\) for a hemisphere"):
+                       match=r"<lambda> returned points of shape \(5000, 2\) for uniforms of shape "
+                             r"\(5000, 2\); expected shape \(5000, 3\) on the hemisphere"):
         check_sampler(lambda u: u, lambda x: np.ones(len(x)), "hemisphere", sample_count=5000)
 
 

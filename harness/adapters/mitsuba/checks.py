@@ -6,134 +6,54 @@ returns equals eval / pdf.
     weight_consistency(s)         # a WeightCheck: weight == eval / pdf, sample pdf == pdf()
 
 Failed samples.  A sample Mitsuba could not produce (zero weight) is a NaN row of
-``sampler.sample``; the samples drawn then form a defective distribution whose pdf integrates
-to P <= 1.  check_sampler insists on P = 1 and on every sample landing in the domain, so
-``check_mitsuba_sampler`` splits the question in two, both exact under the null: the failure
-count is Binomial(N, 1 - P) with P from the cubature of the pdf (an exact binomial test, its
-p-value maximised over P's cubature error bound: conservative), and the directions that were
-produced follow pdf / P (check_sampler's tests on them, the cubature reused with its
-integrals divided by P).  All p-values are combined by Holm.  A pdf 0.5 % too large is caught
-by the failure count where P < 1 and by the normalisation (P > 1 + 1e-3) otherwise.
+``sampler.sample``; ``check_mitsuba_sampler`` is harness.samplers' check_with_missing (the
+failure count by an exact binomial test against N (1 - P), the directions produced against
+pdf / P).  A pdf 0.5 % too large is caught by the failure count where P < 1 and by the
+normalisation (P > 1 + 1e-3) otherwise.
 
 ``check_mitsuba_sampler`` refuses scalar variants: its cubature evaluates the pdf at ~10^7
 points, one Python call each there.
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import pandas as pd
 from scipy import stats
 
 import reference_estimators as rest
 
 from harness.adapters.mitsuba.runtime import is_jit
-from harness.samplers.check import SAMPLE_CASE, SamplerCheck, SamplerTest
-from harness.samplers.domains import as_domain
-from harness.stats import holm
+from harness.samplers.check import SamplerCheck, check_with_missing
 from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
 
-__all__ = ["WeightCheck", "check_mitsuba_sampler", "failure_pvalue", "weight_consistency"]
+__all__ = ["WeightCheck", "check_mitsuba_sampler", "weight_consistency"]
 
 _WEIGHT_CASE = 0x3E17   # weight_consistency's stream
-
-
-def failure_pvalue(failed: int, n: int, total: float, total_err: float) -> float:
-    """Two-sided exact binomial test of ``failed`` of ``n`` against failure probability
-    1 - P, P anywhere in total ± total_err: 1 where the observed rate lies in that interval,
-    else the p-value at its end nearest the observed rate (conservative)."""
-    lo, hi = min(max(1 - total - total_err, 0.0), 1.0), min(max(1 - total + total_err, 0.0), 1.0)
-    rate = failed / n
-    if lo <= rate <= hi:
-        return 1.0
-    q = lo if rate < lo else hi
-    if q <= 0:
-        return 0.0 if failed > 0 else 1.0
-    if q >= 1:
-        return 0.0 if failed < n else 1.0
-    return float(stats.binomtest(failed, n, q).pvalue)
 
 
 def check_mitsuba_sampler(sampler: Any, *, sample_count: int = 1_000_000, seed: int = 0,
                           alpha: float = 0.01) -> SamplerCheck:
     """check_sampler for a sampler that may fail to produce a sample (NaN rows of
-    ``sampler.sample``), as Mitsuba's BSDFs do; ``sampler`` needs ``sample``, ``pdf``,
+    ``sampler.sample``), as Mitsuba's BSDFs do: harness.samplers.check_with_missing, always
+    (a "failed samples" row even where none failed); ``sampler`` needs ``sample``, ``pdf``,
     ``domain`` and ``udim`` (any MitsubaSampler or Mutant, or an object of your own).
-
-    Uniforms come from the stream check_sampler uses (seed, case 0x5A3F), so a sampler that
-    never fails gets check_sampler's result plus one row.  Deterministic failures: the pdf
-    integrating to more than 1 (by more than 1e-3 and 10 times the cubature error), and
-    check_sampler's own on the produced samples (outside the domain, zero/NaN/negative pdf).
-    Statistical tests, Holm-combined at ``alpha`` (the false-alarm rate of the whole check):
-    check_sampler's chi-squares, marginals and pdf moment on the produced samples against
-    pdf / P, and an exact binomial test of the failure count against N (1 - P), P the
-    cubature integral of the pdf over the domain.  ``normalization`` holds P and its error
-    bound; ``tests`` also reports the failure count.
+    Uniforms come from the stream check_sampler uses (seed, case 0x5A3F).
     """
     if _scalar_variant(sampler):
         raise ValueError("check_mitsuba_sampler needs a JIT variant ('llvm_ad_rgb'): the cubature evaluates "
                          "the pdf at ~10^7 points, per-sample Python calls of the "
                          f"{sampler.variant!r} variant would take hours")
-    n = int(sample_count)
-    if n < 1000:
-        raise ValueError(f"'sample_count' must be at least 1000, got {sample_count!r}")
-    dom = as_domain(sampler.domain)
-    u = rest.points(n, sampler.udim, seed=seed, case_id=SAMPLE_CASE)
-    x = np.asarray(sampler.sample(u), dtype=float).reshape(n, dom.point_dim)
-    failed = ~np.all(np.isfinite(x), axis=1)
-    produced = x[~failed]
-    m = produced.shape[0]
-    if m < 1000:
-        table = pd.DataFrame([("failed samples", float(failed.sum()), 0, 0.0,
-                               "samples the sampler did not produce")],
-                             columns=["test", "statistic", "df", "pvalue", "detects"])
-        table["adjusted"] = 0.0
-        fail = Failure("too_few_samples", int(failed.sum()), f"only {m} of {n} samples produced",
-                       tuple(_examples(u, failed)))
-        return SamplerCheck(False, 0.0, alpha, n, table, [fail], (math.nan, math.nan))
-    raw = SamplerTest(sampler.pdf, dom, sample_count=m, alpha=alpha)
-    total, total_err = raw.normalization
-    failures: list[Failure] = []
-    if not total > 0:
-        failures.append(Failure("normalization", 1, f"pdf integrates to {total:.6g} over the {dom.kind}"))
-        total = 1.0
-    elif total - 1 > max(1e-3, 10 * total_err):
-        failures.append(Failure("normalization", 1, f"pdf integrates to {total:.6f} ± {total_err:.1e} "
-                                                    f"over the {dom.kind}, more than 1"))
-    shape = raw.for_total(total).check(lambda _u: produced, seed=seed, udim=sampler.udim)
-    index = np.flatnonzero(~failed)  # the shape check's examples index the produced samples
-    for f in shape.failures:
-        if f.check != "normalization":
-            examples = tuple({**ex, "index": int(index[ex["index"]]), "u": u[index[ex["index"]]].tolist()}
-                             for ex in f.examples)
-            failures.append(dataclasses.replace(f, examples=examples))
-    k = int(failed.sum())
-    p_fail = failure_pvalue(k, n, raw.normalization[0], raw.normalization[1])
-    expected = n * max(1 - raw.normalization[0], 0.0)
-    table = shape.tests.drop(columns=["adjusted"])
-    table.loc[len(table)] = ("failed samples", float(k), 1, p_fail,
-                             f"failure count vs N(1-P) = {expected:.1f}: pdf mass where no samples go")
-    rejected, adjusted = holm(np.nan_to_num(table["pvalue"].to_numpy(dtype=float), nan=0.0), alpha)
-    table["adjusted"] = adjusted
-    passed = not failures and not rejected.any()
-    # the shape check's per-cell results (residuals, marginals) are kept: they describe the
-    # produced samples, the only ones with a direction
-    return dataclasses.replace(shape, passed=passed, pvalue=float(adjusted.min()), n=n, tests=table,
-                               failures=failures, normalization=raw.normalization)
+    return check_with_missing(sampler.sample, sampler.pdf, sampler.domain, sample_count=sample_count,
+                              seed=seed, alpha=alpha, udim=sampler.udim)
 
 
 def _scalar_variant(sampler: Any) -> bool:
     variant = getattr(sampler, "variant", None)
     return isinstance(variant, str) and not is_jit(variant)
-
-
-def _examples(u: np.ndarray, mask: np.ndarray, k: int = 5) -> list[dict[str, Any]]:
-    return [{"index": int(i), "u": u[i].tolist()} for i in np.flatnonzero(mask)[:k]]
 
 
 @dataclass(frozen=True)

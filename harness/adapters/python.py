@@ -1,0 +1,110 @@
+"""The python adapter: a team's render function, called in the harness's process.
+
+    [[render]]
+    adapter = "python"
+    function = "myrenderer:render"    # module:attr or path/file.py:attr, next to the suite first
+    params = { bounces = 3 }          # optional: passed on as keyword arguments
+    exact = "ref.exr"                 # optional: an exact reference image (or reference_spp = N)
+    scene = "cornell"                 # optional: what tables call the scene (default: the function)
+
+``render(spp=, seed=, **params)`` returns an image (height, width[, channels]) in radiometric
+units, or ``(image, seconds)`` with the renderer's own time; without one the call's wall
+time is used.  An exception inside it, or a result that is not an image, is a
+:class:`~harness.adapters.base.RenderError` naming the function and the call; nothing is
+stored for that render.  The fingerprint holds the source hash of the function's module, so a
+change of the code invalidates its stored renders.
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from harness.adapters.base import Render, RenderError, read_image
+from harness.usercode import UserCodeError, load_attr, source_fingerprint
+
+__all__ = ["PythonRenderer", "make_renderer"]
+
+_KEYS = {"function": str, "params": dict, "exact": str, "scene": str}
+
+
+class PythonRenderer:
+    """A renderer that is a Python function (see the module docstring)."""
+
+    def __init__(self, spec: dict[str, Any], base: Path):
+        for key, value in spec.items():
+            want = _KEYS.get(key)
+            if want is None:
+                raise ValueError(f"'{key}': unknown key for the python adapter; expected one of: "
+                                 f"{', '.join(_KEYS)}")
+            if not isinstance(value, want):
+                raise ValueError(f"'{key}': expected {want.__name__}, got {value!r}")
+        if "function" not in spec:
+            raise ValueError("'function': missing key: module:attr of render(spp=, seed=, **params)")
+        self.spec, self.base = dict(spec), base
+        self.target = spec["function"]
+        try:
+            self.function = load_attr(self.target, base=base)
+        except UserCodeError as e:
+            raise ValueError(f"'function': {e}") from None
+        if not callable(self.function):
+            kind = type(self.function).__name__
+            raise ValueError(f"'function': {self.target!r} is a {kind}, not a function")
+        self.params = dict(spec.get("params", {}))
+        self.exact_path = (base / spec["exact"]).resolve() if "exact" in spec else None
+        if self.exact_path is not None and not self.exact_path.is_file():
+            raise ValueError(f"'exact': no image file {self.exact_path}")
+        self._exact: np.ndarray | None = None
+
+    def render(self, spp: int, seed: int) -> Render:
+        call = f"{self.target}(spp={spp}, seed={seed}" + "".join(f", {k}={v!r}"
+                                                                  for k, v in self.params.items())
+        start = time.perf_counter()
+        try:
+            out = self.function(spp=spp, seed=seed, **self.params)
+        except Exception as e:
+            raise RenderError(f"{call}) raised {type(e).__name__}: {e}") from e
+        wall = time.perf_counter() - start
+        image, seconds = (out if isinstance(out, tuple) and len(out) == 2 else (out, wall))
+        try:
+            a = np.asarray(image, dtype=np.float64)
+            seconds = float(seconds)
+        except (TypeError, ValueError) as e:
+            raise RenderError(f"{call}) returned {type(out).__name__}; expected an image (height, width[, "
+                              f"channels]) or (image, seconds): {e}") from None
+        if a.ndim == 2:
+            a = a[:, :, None]
+        if a.ndim != 3 or 0 in a.shape:
+            raise RenderError(f"{call}) returned an array of shape {a.shape}; expected an image "
+                              "(height, width[, channels])")
+        if not seconds >= 0:
+            raise RenderError(f"{call}) returned a time of {seconds!r} s")
+        return Render(a, spp, seconds)
+
+    def exact(self) -> np.ndarray | None:
+        if self.exact_path is None:
+            return None
+        if self._exact is None:
+            self._exact = read_image(self.exact_path).astype(np.float64)
+        return self._exact
+
+    def reference(self) -> PythonRenderer:
+        return self
+
+    def fingerprint(self) -> dict[str, Any]:
+        import hashlib
+
+        exact = hashlib.sha256(self.exact_path.read_bytes()).hexdigest()[:24] if self.exact_path else None
+        return {"adapter": "python", "function": self.target, "params": self.params,
+                "source": source_fingerprint(self.function), "exact": exact}
+
+    def describe(self) -> tuple[str, str]:
+        params = ", ".join(f"{k}={v}" for k, v in self.params.items())
+        return self.spec.get("scene") or self.target, self.target + (f"({params})" if params else "")
+
+
+def make_renderer(spec: dict[str, Any], *, base: Path | None = None) -> PythonRenderer:
+    """A renderer for a suite's ``[[render]] adapter = "python"`` table (see the module)."""
+    return PythonRenderer(spec, (base or Path.cwd()).resolve())

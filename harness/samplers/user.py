@@ -1,0 +1,64 @@
+"""A team's own sampler as the checks take it, from whatever shape the team wrote it in.
+
+Accepted (``resolve_sampler``): an object with ``sample(u)`` and ``pdf(x)`` methods and,
+optionally, ``domain`` (a domain name), ``total`` (the integral of its pdf where some u give
+no sample) and ``udim`` (uniforms per sample); a tuple ``(sample, pdf)`` or ``(sample, pdf,
+domain)``; or a factory returning either (a class, or a callable without ``sample``), called
+with ``params`` (``GGX(alpha=0.3)``).
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from harness.usercode import UserCodeError
+
+__all__ = ["UserSampler", "resolve_sampler"]
+
+
+@dataclass(frozen=True)
+class UserSampler:
+    """The parts check_sampler needs; None where the sampler does not say (the caller's
+    settings or the domain's defaults apply)."""
+
+    name: str
+    sample: Callable[[Any], Any]
+    pdf: Callable[[Any], Any]
+    domain: str | None = None
+    total: float | None = None
+    udim: int | None = None
+
+
+def resolve_sampler(obj: Any, params: dict[str, Any] | None = None, *, name: str) -> UserSampler:
+    """The sampler ``obj`` is (see the module docstring); ``name`` (its module:attr) names it
+    in every error.  A factory is called with ``params`` (none: called without arguments
+    when ``obj`` has no ``sample`` of its own)."""
+    if params or isinstance(obj, type) or (callable(obj) and not hasattr(obj, "sample")):
+        if not callable(obj):
+            raise UserCodeError(f"{name}: params were given, but it is a {type(obj).__name__}, not a factory")
+        try:
+            obj = obj(**(params or {}))
+        except Exception as e:
+            given = ", ".join(f"{k}={v!r}" for k, v in (params or {}).items())
+            raise UserCodeError(f"{name}({given}) raised {type(e).__name__}: {e}") from e
+    if isinstance(obj, tuple):
+        if len(obj) not in (2, 3):
+            raise UserCodeError(f"{name}: expected a (sample, pdf) or (sample, pdf, domain) tuple, got "
+                                f"{len(obj)} items")
+        sample, pdf, domain, total, udim = obj[0], obj[1], obj[2] if len(obj) == 3 else None, None, None
+    else:
+        sample, pdf = getattr(obj, "sample", None), getattr(obj, "pdf", None)
+        domain, total, udim = (getattr(obj, "domain", None), getattr(obj, "total", None),
+                               getattr(obj, "udim", None))
+    if not (callable(sample) and callable(pdf)):
+        raise UserCodeError(f"{name}: expected an object with sample(u) and pdf(x) methods, a (sample, pdf) "
+                            f"tuple or a factory of one, got a {type(obj).__name__}")
+    if domain is not None and not isinstance(domain, str):
+        raise UserCodeError(f"{name}: 'domain' must be a domain name, got {domain!r}")
+    if total is not None and (isinstance(total, bool) or not isinstance(total, (int, float))
+                              or not 0 < total <= 1):
+        raise UserCodeError(f"{name}: 'total' must be the pdf's integral, in (0, 1], got {total!r}")
+    if udim is not None and (isinstance(udim, bool) or not isinstance(udim, int) or udim < 1):
+        raise UserCodeError(f"{name}: 'udim' must be a positive integer, got {udim!r}")
+    return UserSampler(name, sample, pdf, domain, None if total is None else float(total), udim)

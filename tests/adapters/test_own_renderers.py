@@ -1,0 +1,226 @@
+"""Renderers of a team's own through the command and python adapters, and third-party
+adapters registered under the entry-point group harness.adapters: real subprocesses, real EXR
+files, every failure a clear error naming the command, and nothing stored for a failed render."""
+import json
+import sys
+import textwrap
+from importlib.metadata import EntryPoint
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from harness.adapters import base
+from harness.adapters.base import RenderError, renderer
+from harness.suite.parse import SuiteError, load_suite
+from harness.suite.run import run_suite
+from harness.suite.store import Store, write_exr
+
+SCRIPT = '''
+import argparse, json, sys, time
+import numpy as np
+import OpenImageIO as oiio
+
+
+def write_exr(path, image):
+    out = oiio.ImageOutput.create(path)
+    out.open(path, oiio.ImageSpec(image.shape[1], image.shape[0], image.shape[2], "float"))
+    out.write_image(np.ascontiguousarray(image, dtype=np.float32))
+    out.close()
+
+
+p = argparse.ArgumentParser()
+p.add_argument("--spp", type=int); p.add_argument("--seed", type=int); p.add_argument("--out")
+p.add_argument("--mode", default="ok")
+a = p.parse_args()
+if a.mode == "fail":
+    print("scene file not found: cornell.xml", file=sys.stderr); sys.exit(3)
+if a.mode == "sleep":
+    time.sleep(30)
+if a.mode == "noimage":
+    sys.exit(0)
+if a.mode == "garbage":
+    open(a.out, "w").write("not an image"); sys.exit(0)
+rng = np.random.default_rng(a.seed)
+img = rng.random((4, 6, 3, a.spp)).mean(axis=3) * 2     # mean 1 per pixel
+write_exr(a.out, img)
+if a.mode == "sidecar":
+    json.dump({{"seconds": 0.125}}, open(a.out + ".json", "w"))
+print(f"rendered in {{0.25 * a.spp}} s")
+'''
+
+
+@pytest.fixture
+def repo(tmp_path):
+    (tmp_path / "render.py").write_text(SCRIPT.format())
+    write_exr(tmp_path / "ones.exr", np.ones((4, 6, 3)))
+    return tmp_path
+
+
+def command(mode="ok", **keys):
+    return {"command": "{python} render.py --spp {spp} --seed {seed} --out {out} --mode " + mode, **keys}
+
+
+def test_a_command_renders_with_its_own_or_its_wall_time(repo):
+    r = renderer("command", command(time="stdout:rendered in ([0-9.]+) s", exact="ones.exr"), base=repo)
+    out = r.render(8, 3)
+    assert out.image.shape == (4, 6, 3) and out.seconds == 2.0 and out.spp == 8
+    assert np.array_equal(r.exact(), np.ones((4, 6, 3)))
+    assert r.describe() == ("render.py", command()["command"])
+    side = renderer("command", command("sidecar"), base=repo).render(4, 1)
+    assert side.seconds == 0.125
+    wall = renderer("command", command(), base=repo)
+    assert wall.render(4, 1).seconds >= 0 and wall._startup > 0
+    assert "start-up time (the wall time of a 1-spp render" in wall.notes()[0]
+    again = renderer("command", command(), base=repo).render(8, 3)
+    assert np.array_equal(again.image, out.image)          # the seed reaches the renderer
+
+
+@pytest.mark.parametrize("mode, keys, message", [
+    ("fail", {}, r"exited with status 3; stderr ends:\n    scene file not found: cornell.xml"),
+    ("sleep", {"timeout": 1}, r"timed out after 1 s"),
+    ("noimage", {}, r"wrote no image at \{out\} = .*image.exr"),
+    ("garbage", {}, r"cannot read image .*image.exr"),
+    ("ok", {"time": "stdout:took ([0-9.]+) s"}, r"its output has no match of time = 'stdout:took"),
+])
+def test_a_failed_render_is_a_clear_error_naming_the_command(repo, mode, keys, message):
+    r = renderer("command", command(mode, **keys), base=repo)
+    head = r"command '.*render.py --spp 2 --seed 5 .*--mode " + mode + ".*"
+    with pytest.raises(RenderError, match=head + message):
+        r.render(2, 5)
+
+
+def test_the_fingerprint_follows_the_script_source(repo):
+    before = renderer("command", command(), base=repo).fingerprint()
+    (repo / "render.py").write_text((repo / "render.py").read_text() + "\n# changed\n")
+    after = renderer("command", command(), base=repo).fingerprint()
+    assert before["sources"]["render.py"] != after["sources"]["render.py"]
+    assert "cwd" not in json.dumps(after) and str(repo) not in json.dumps(after)
+
+
+def render_function(spp, seed, gain=1.0):
+    rng = np.random.default_rng(seed)
+    return gain * rng.random((4, 6, 3, spp)).mean(axis=3) * 2, 0.01 * spp
+
+
+def test_a_python_function_renders_and_its_errors_name_the_call(repo):
+    (repo / "fn.py").write_text("from test_own_renderers import render_function\n"
+                                "def broken(spp, seed):\n    raise KeyError('material')\n"
+                                "def flat(spp, seed):\n    return [1.0, 2.0]\n")
+    sys.path.insert(0, str(Path(__file__).parent))
+    r = renderer("python", {"function": "fn:render_function", "params": {"gain": 2.0}}, base=repo)
+    out = r.render(4, 1)
+    assert out.seconds == 0.04 and out.image.shape == (4, 6, 3) and out.image.mean() > 1.5
+    with pytest.raises(RenderError, match=r"fn:broken\(spp=4, seed=1\) raised KeyError: 'material'"):
+        renderer("python", {"function": "fn:broken"}, base=repo).render(4, 1)
+    with pytest.raises(RenderError, match=r"fn:flat\(spp=4, seed=1\) returned an array of shape \(2,\)"):
+        renderer("python", {"function": "fn:flat"}, base=repo).render(4, 1)
+
+
+SUITE = '''
+[suite]
+seed = 1
+
+[[render]]
+adapter = "command"
+command = "{python} render.py --spp {spp} --seed {seed} --out {out}"
+exact = "ones.exr"
+time = "stdout:rendered in ([0-9.]+) s"
+spp = 16
+replicas = 8
+budgets = [1, 4, 16]
+
+[[render]]
+adapter = "command"
+command = "{python} render.py --spp {spp} --seed {seed} --out {out} --mode fail"
+exact = "ones.exr"
+spp = 16
+replicas = 4
+measurements = ["bias"]
+'''
+
+
+def test_a_command_renderer_in_a_suite_and_a_failing_one(repo):
+    (repo / "s.toml").write_text(SUITE)
+    suite = load_suite(repo / "s.toml")
+    assert [(rc.scene, rc.label) for rc in suite.renders] == [
+        ("command:render.py", "{python} render.py --spp {spp} --seed {seed} --out {out}"),
+        ("command:render.py", "{python} render.py --spp {spp} --seed {seed} --out {out} --mode fail")]
+    with pytest.raises(RenderError, match="exited with status 3"):
+        run_suite(suite, repo / "r.sqlite", threads=1)
+    stored = Store(repo / "r.sqlite")
+    try:
+        kept = len(stored.payloads(suite_key(suite, 0)))   # rendered before the failing one ran
+        assert not stored.payloads(suite_key(suite, 1))    # nothing stored for the failing render
+    finally:
+        stored.close()
+    (repo / "s.toml").write_text(SUITE.split("[[render]]")[0] + "[[render]]" + SUITE.split("[[render]]")[1])
+    s = run_suite(load_suite(repo / "s.toml"), repo / "r.sqlite", threads=1)
+    assert s.failed == 0 and s.units_run == 8 + 3 * 8 - kept  # resumed: what was stored is kept
+    assert s["render"].frame["bias"].tolist() == ["unbiased"]
+
+
+def suite_key(suite, i):
+    from harness.suite.plan import render_key
+    from harness.suite.renders import cached_renderer
+
+    rc = suite.renders[i]
+    return render_key(suite, cached_renderer(rc.adapter, rc.spec, base=rc.base).fingerprint())
+
+
+@pytest.mark.parametrize("table, message", [
+    ('adapter = "command"', "s.toml:1: 'command': missing key: the command line that renders one image"),
+    ('adapter = "command"\ncommand = "render {spp} {out}"',
+     "s.toml:3: command: the command must contain {seed}"),
+    ('adapter = "command"\ncommand = "r {spp} {seed} {out} {frames}"',
+     "s.toml:3: command: placeholders are {spp}, {seed}, {out}, {width}, {height}, {python}"),
+    ('adapter = "command"\ncommand = "r {spp} {seed} {out}"\nexact = "nothere.exr"',
+     "s.toml:4: exact: no image file"),
+    ('adapter = "command"\ncommand = "r {spp} {seed} {out}"\ntime = "took (.*)"',
+     "s.toml:4: time: expected \"stdout:<regex>\""),
+    ('adapter = "command"\ncommand = "r {spp} {seed} {out}"\nframes = 3',
+     "s.toml:4: frames: unknown key for the command adapter"),
+    ('adapter = "python"\nfunction = "nomodule:render"',
+     "s.toml:3: function: 'nomodule:render': cannot import"),
+    ('adapter = "myrenderer"', "s.toml:2: adapter: expected one of: mitsuba, pyrender, command, python"),
+])
+def test_render_table_mistakes_name_file_line_and_key(repo, table, message):
+    (repo / "s.toml").write_text(f"[[render]]\n{table}\n")
+    with pytest.raises(SuiteError) as e:
+        load_suite(repo / "s.toml")
+    assert message in str(e.value)
+
+
+def test_third_party_adapters_register_through_entry_points(repo, monkeypatch):
+    (repo / "thirdparty.py").write_text(textwrap.dedent('''
+        import numpy as np
+        from harness.adapters.base import Render
+
+        class Flat:
+            def __init__(self, spec):
+                self.level = spec.get("level", 1.0)
+            def render(self, spp, seed):
+                return Render(np.full((2, 2, 3), self.level), spp, 0.001)
+            def exact(self):
+                return np.full((2, 2, 3), self.level)
+            def fingerprint(self):
+                return {"adapter": "flat", "level": self.level}
+            def reference(self):
+                return self
+
+        def make_renderer(spec):
+            if set(spec) - {"level", "scene"}:
+                raise ValueError(f"'{sorted(set(spec) - {'level', 'scene'})[0]}': unknown key")
+            return Flat(spec)
+    '''))
+    monkeypatch.syspath_prepend(str(repo))
+    eps = [EntryPoint("flat", "thirdparty:make_renderer", base.ENTRY_POINTS)]
+    monkeypatch.setattr(base, "entry_points", lambda group: eps if group == base.ENTRY_POINTS else [])
+    assert base.adapter_names()[-1] == "flat"
+    (repo / "s.toml").write_text('[[render]]\nadapter = "flat"\nscene = "wall"\nlevel = 0.5\nspp = 4\n'
+                                 'replicas = 4\nmeasurements = ["bias"]\n')
+    s = run_suite(load_suite(repo / "s.toml"), repo / "r.sqlite", threads=1)
+    assert s.failed == 0 and s["render"].frame["bias"].tolist() == ["unbiased"]
+    (repo / "bad.toml").write_text('[[render]]\nadapter = "flat"\ncolour = 2\n')
+    with pytest.raises(SuiteError, match="bad.toml:3: colour: unknown key"):
+        load_suite(repo / "bad.toml")

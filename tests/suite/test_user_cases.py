@@ -1,0 +1,159 @@
+"""A team's own estimators in a suite ([[case]] estimator = "module:attr"): loaded next to the
+suite file, measured like catalogue cases from the same streams, invalidated when their source
+changes, compared with a named baseline, and known findings recorded with xfail."""
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from harness.suite.parse import SuiteError, load_suite
+from harness.suite.run import run_suite
+
+HARNESS = Path(sys.executable).with_name("harness")
+
+MODULE = '''
+import numpy as np
+
+EXACT = 1.0                      # the integral of 3 x^2 over [0, 1]
+
+
+def uniform(u):
+    return 3 * u[:, 0] ** 2
+
+
+def importance(u):               # x = sqrt(u): pdf 2x
+    return 1.5 * np.sqrt(u[:, 0])
+
+
+def too_bright(u):
+    return 1.02 * importance(u)
+
+
+def scalar(u):
+    return 1.0
+
+
+NOT_CALLABLE = 3
+'''
+
+SUITE = '''
+[suite]
+samples = 262_144
+budgets = [1024, 4096, 16384]
+replicas = 16
+
+[[case]]
+estimator = "myest:uniform"
+dim = 1
+reference = "myest:EXACT"
+
+[[case]]
+estimator = "myest.py:importance"
+dim = 2
+reference = 1.0
+label = "is"
+baseline = "uniform"
+
+[[case]]
+estimator = "myest:too_bright"
+dim = 1
+reference = 1.0
+measurements = ["bias"]
+xfail = "2 % too bright, a known finding"
+'''
+
+
+@pytest.fixture
+def repo(tmp_path):
+    (tmp_path / "myest.py").write_text(MODULE)
+    (tmp_path / "suite.toml").write_text(SUITE)
+    return tmp_path
+
+
+def test_user_estimators_are_measured_compared_and_xfailed(repo, monkeypatch):
+    monkeypatch.chdir(repo.parent)              # loaded next to the suite file, not from the cwd
+    suite = load_suite(repo / "suite.toml")
+    assert [c.name for c in suite.cases] == ["uniform", "is", "too_bright"]
+    s = run_suite(suite, repo / "r.sqlite", threads=2)
+    o = s["estimator"]
+    assert [o.status(i) for i in range(3)] == ["passed", "passed", "xfailed"]
+    assert s.failed == 0 and o.xfailed == 1
+    table = o.frame.set_index("technique")
+    assert list(table["verdict"]) == ["unbiased", "unbiased", "biased"]
+    assert table.loc["is", "efficiency_baseline"] == "uniform"
+    assert table.loc["is", "ratio_lo"] > 1            # importance sampling beats uniform, with its CI
+    assert table.loc["uniform", "exact"] == 1.0
+    assert "no baseline" in table.loc["uniform", "notes"]
+    again = run_suite(load_suite(repo / "suite.toml"), repo / "r.sqlite", threads=2)
+    assert again.units_run == 0
+    with open(repo / "myest.py", "a") as f:           # the user's code changes: its units are stale
+        f.write("\n# changed\n")
+    changed = run_suite(load_suite(repo / "suite.toml"), repo / "r.sqlite", threads=2)
+    assert changed.units_run == changed.units_planned
+
+
+def test_an_xfail_that_passes_fails_the_run(repo):
+    text = SUITE.replace('estimator = "myest:uniform"',
+                         'estimator = "myest:uniform"\nxfail = "thought wrong"')
+    (repo / "suite.toml").write_text(text)
+    s = run_suite(load_suite(repo / "suite.toml"), repo / "r.sqlite", threads=2)
+    o = s["estimator"]
+    assert o.status(0) == "xpassed" and s.failed == 1
+    assert o.problem(0).startswith("[XPASS(strict)] expected to fail (thought wrong) but passed")
+
+
+def test_cli_and_pytest_report_xfail(repo):
+    r = subprocess.run([str(HARNESS), "run", "suite.toml", "--db", "r.sqlite"], capture_output=True,
+                       text=True, cwd=repo, timeout=300)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "XFAIL too_bright#2: 2 % too bright, a known finding" in r.stdout
+    assert "summary: 2 passed, 0 failed, 1 xfailed" in r.stdout
+    p = subprocess.run([sys.executable, "-m", "pytest", "suite.toml", "-q", "-p", "no:cacheprovider",
+                        "--harness-db", "r.sqlite"], capture_output=True, text=True, cwd=repo, timeout=300)
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert "2 passed, 1 xfailed" in p.stdout
+
+
+def _error(repo, case: str) -> str:
+    (repo / "bad.toml").write_text(textwrap.dedent(case))
+    with pytest.raises(SuiteError) as e:
+        load_suite(repo / "bad.toml")
+    return str(e.value)
+
+
+@pytest.mark.parametrize("case, message", [
+    ('[[case]]\nestimator = "nosuch:f"\ndim = 1\nreference = 1.0\n',
+     "bad.toml:2: estimator: 'nosuch:f': cannot import 'nosuch'"),
+    ('[[case]]\nestimator = "myest:nothere"\ndim = 1\nreference = 1.0\n',
+     "bad.toml:2: estimator: 'myest:nothere': myest has no attribute 'nothere'"),
+    ('[[case]]\nestimator = "myest:NOT_CALLABLE"\ndim = 1\nreference = 1.0\n',
+     "bad.toml:2: estimator: 'myest:NOT_CALLABLE' is a int; expected a callable u (N, dim) -> contributions"),
+    ('[[case]]\nestimator = "myest:uniform"\nreference = 1.0\n',
+     "bad.toml:1: missing key 'dim' (canonical uniforms per sample of the estimator)"),
+    ('[[case]]\nestimator = "myest:uniform"\ndim = 0\nreference = 1.0\n',
+     "bad.toml:3: dim: expected a positive number of uniforms per sample, got 0"),
+    ('[[case]]\nestimator = "myest:uniform"\ndim = 1\n',
+     "missing key 'reference' (the exact value: a number or \"module:attr\")"),
+    ('[[case]]\nestimator = "myest:uniform"\ndim = 1\nreference = "myest:uniform"\n',
+     "bad.toml:4: reference: expected a finite number, got <function uniform"),
+    ('[[case]]\nestimator = "myest:uniform"\ndim = 1\nreference = 1.0\npoints = "halton"\n',
+     "bad.toml:5: points: expected one of: random, stratified, sobol, got 'halton'"),
+    ('[[case]]\nestimator = "myest:scalar"\ndim = 2\nreference = 1.0\n',
+     "bad.toml:2: estimator: myest:scalar returned shape () for uniforms of shape (4, 2), float64; "
+     "expected shape (4,)"),
+    ('[[case]]\nestimator = "myest:uniform"\ndim = 1\nreference = 1.0\nbaseline = "nope"\n',
+     "bad.toml:5: baseline: expected the name of one other case"),
+    ('[[case]]\nestimator = "myest:uniform"\ndim = 1\nreference = 1.0\nxfail = " "\n',
+     "bad.toml:5: xfail: expected the reason the failure is expected"),
+    ('[[case]]\nestimator = "myest:uniform"\ndim = 1\nreference = 1.0\ntechniques = "uniform"\n',
+     "bad.toml:5: techniques: unknown key 'techniques'"),
+    ('[[case]]\nestimator = "myest:uniform"\ndim = 1\nreference = 1.0\nlabel = "u"\n'
+     '[[case]]\nestimator = "myest:importance"\ndim = 1\nreference = 1.0\nlabel = "u"\n',
+     "label: two cases are called 'u'; give each its own label"),
+    ('[[case]]\nintegrand = "gaussian"\nlabel = "g"\n',
+     "bad.toml:3: label: a label names one case: give one integrand and one technique"),
+])
+def test_user_case_mistakes_name_file_line_and_key(repo, case, message):
+    assert message in _error(repo, case)
