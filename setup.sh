@@ -35,6 +35,8 @@ echo "setup: building and installing the package (C++ core included)"
 # pyrender pins PyOpenGL==3.1.0 (no OSMesaCreateContextAttribs); its other requirements come
 # with the "render" extra above, so it is installed without its pin.
 .venv/bin/python -m pip install -q --no-deps "pyrender==0.1.45"
+# the pytest plugin's entry point lives in a distribution of its own (see its pyproject.toml)
+.venv/bin/python -m pip install -q --no-deps ./plugins/pytest-harness
 
 echo "setup: running the main job: harness run suites/default.toml"
 status=0
