@@ -9,6 +9,7 @@ The public API, one import away::
     harness.mcmc_crosscheck(sample, pdf, "sphere")                               # emcee cross-check
     summary = harness.run_suite(harness.load_suite("suites/ci.toml"), "results/ci.sqlite")
     harness.load("results/ci.sqlite")                                            # a DataFrame
+    harness.record("results/mine.sqlite", {"nee": result})      # Python-API results, for `harness report`
 
 Every check returns a result of one family (``verdict``, ``passed``, ``pvalue``, ``alpha``,
 ``n``, ``confidence_interval()``, ``failures``; see harness.stats.results).  Sub-packages:
@@ -18,6 +19,7 @@ Every check returns a result of one family (``verdict``, ``passed``, ``pvalue``,
 from harness.samplers import SamplerCheck, check_sampler, mcmc_crosscheck
 from harness.stats import (
     ConfidenceInterval,
+    Contributions,
     ConvergenceResult,
     Efficiency,
     Failure,
@@ -26,10 +28,12 @@ from harness.stats import (
 )
 from harness.stats.images import ImageBias
 from harness.suite.kind import Outcome
-from harness.suite.parse import Case, Suite, SuiteError, load_suite
+from harness.suite.parse import Case, Suite, SuiteError, load_suite, loads_suite
+from harness.suite.record import record
 from harness.suite.run import RunSummary, run_suite
 from harness.suite.store import load
 
-__all__ = ["check_unbiased", "check_sampler", "mcmc_crosscheck", "load", "load_suite", "run_suite",
-           "Suite", "Case", "SuiteError", "RunSummary", "Outcome", "UnbiasedResult", "ConvergenceResult",
-           "Efficiency", "ImageBias", "SamplerCheck", "ConfidenceInterval", "Failure"]
+__all__ = ["check_unbiased", "check_sampler", "mcmc_crosscheck", "load", "load_suite", "loads_suite",
+           "record", "run_suite", "Contributions", "Suite", "Case", "SuiteError", "RunSummary", "Outcome",
+           "UnbiasedResult", "ConvergenceResult", "Efficiency", "ImageBias", "SamplerCheck",
+           "ConfidenceInterval", "Failure"]

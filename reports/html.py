@@ -41,7 +41,7 @@ def _table(rows: list[dict[str, Any]], columns: list[tables.Column], *, table_id
         last = row.get(group) if group else None
         tds = []
         for i, (c, cell) in enumerate(zip(columns, cells)):
-            note = f'<div class="note">{e(cell.note)}</div>' if cell.note else ""
+            note = f'<div class="note">{_note(cell.note)}</div>' if cell.note else ""
             cls = " ".join(([f"c{i}"] if i < sticky else []) + (["num"] if c.numeric else []))
             text = _badge(cell.verdict) if cell.verdict else e(cell.text)
             if i < sticky:   # long technique names may break after : / + , only
@@ -54,15 +54,35 @@ def _table(rows: list[dict[str, Any]], columns: list[tables.Column], *, table_id
             f'<tbody>{"".join(body)}</tbody></table></div>')
 
 
-def _counts(results: Results) -> tuple[int, int, list[str]]:
-    """(cases, sampler checks, descriptions of the verdicts a CI run fails on)."""
+_NOUNS = {"estimator": ("estimator case", "estimator cases"), "sampler": ("sampler check", "sampler checks"),
+          "render": ("render configuration", "render configurations")}
+
+
+def _holdings(results: Results) -> str:
+    """What the database holds, by kind: "3 estimator cases, 2 sampler checks"."""
+    m = results.measurements
+    parts = []
+    for kind, (one, many) in _NOUNS.items():
+        n = m.loc[m["kind"] == kind, "case_key"].nunique()
+        if n:
+            parts.append(f"{n} {one if n == 1 else many}")
+    return ", ".join(parts)
+
+
+def _note(text: str) -> str:
+    """A cell's second line: its pieces ("[lo, hi]", "n = 1,024", ...) never break inside, so
+    narrow columns wrap between them; a baseline's long name ("vs ...") may break."""
+    pieces = re.split(r", (?![^\[]*\])", text)   # commas outside brackets
+    return ", ".join(e(p) if p.startswith("vs ") else f'<span class="nw">{e(p)}</span>' for p in pieces)
+
+
+def _counts(results: Results) -> list[str]:
+    """Descriptions of the verdicts a CI run fails on."""
     m = results.measurements
     bad = m[m["verdict"].isin(tables.BAD)]
-    problems = [f"{r.integrand.removeprefix(SAMPLER_PREFIX)} / {r.technique}: {r.measurement} {r.verdict}"
-                + (f" (p = {tables.fmt_p(r.pvalue)})" if r.pvalue == r.pvalue and r.pvalue is not None
-                   else "")
-                for r in bad.itertuples()]
-    return results.cases["case_key"].nunique(), len(results.samplers), problems
+    return [f"{r.integrand.removeprefix(SAMPLER_PREFIX)} / {r.technique}: {r.measurement} {r.verdict}"
+            + (f" (p = {tables.fmt_p(r.pvalue)})" if r.pvalue == r.pvalue and r.pvalue is not None else "")
+            for r in bad.itertuples()]
 
 
 def _summary_section(results: Results) -> str:
@@ -76,13 +96,16 @@ def _summary_section(results: Results) -> str:
              'aria-label="filter rows"> <label><input id="only-bad" type="checkbox"> only failures</label> '
              '<span id="shown" class="muted"></span></div>']
     found = False
-    for kind, title in (("estimator", "Estimators on the reference catalogue"),
+    for kind, title in (("estimator", "Estimators"),
                         ("render", "Renderer configurations")):
         wide = tables.wide_table(results.of_kind(kind))
         if wide.empty:
             continue
         found = True
-        parts.append(f"<h3>{title} ({len(wide)} cases)</h3>")
+        noun = _NOUNS[kind][0] if len(wide) == 1 else _NOUNS[kind][1]
+        alphas = ", ".join(f"{a:g}" for a in sorted(set(wide["alpha"].dropna()))) if "alpha" in wide else ""
+        parts.append(f"<h3>{title} ({len(wide)} {noun}" + (f"; Holm at α = {alphas}" if alphas else "")
+                     + ")</h3>")
         parts.append(_table(wide.to_dict("records"), tables.summary_columns(wide), table_cls="summary-table",
                             group="integrand", sticky=2))
     if not found:
@@ -183,16 +206,22 @@ def _render_section(results: Results) -> str:
     parts = ['<section id="renders"><h2>Renders</h2>'
              '<p class="lead">Reference and estimate, tone-mapped identically (linear radiance clamped to '
              '[0, 1], sRGB curve), and the per-pixel relative squared error (est − ref)² / (ref² + 0.01), '
-             'averaged over RGB, in false colour on a log scale. Drag the slider over the comparison to wipe '
-             'between reference (left) and estimate (right); magenta marks NaN or infinite pixels.</p>']
+             'averaged over RGB, in false colour on a log scale shared by every configuration of a scene. '
+             'Drag the slider over the comparison to wipe between reference (left) and estimate (right); '
+             'magenta marks NaN or infinite pixels.</p>']
     m = results.cases
+    pairs = {}
     for key, (ref_name, est_name) in results.image_pairs.items():
         rows = m[m["case_key"] == key].to_dict("records")
         integrand, technique = ((rows[0]["integrand"], rows[0]["technique"]) if rows else
                                 results.labels.get(key, (key, "")))
-        ref, est = results.image(ref_name), results.image(est_name)
+        pairs[key] = (rows, integrand, technique, results.image(ref_name), results.image(est_name))
+    # one colour scale per scene: its configurations compare by colour
+    tops = {scene: images.scale_top([images.relmse_map(ref, est) for _, sc, _, ref, est in pairs.values()
+                                     if sc == scene]) for scene in {p[1] for p in pairs.values()}}
+    for key, (rows, integrand, technique, ref, est) in pairs.items():
         h, w = ref.shape[:2]
-        emap = images.error_map(ref, est)
+        emap = images.error_map(ref, est, vmax=tops[integrand])
         ref_png, est_png = images.png_bytes(images.tonemap(ref)), images.png_bytes(images.tonemap(est))
         pix = " pixelated" if w < 400 else ""
         stats = ("".join(_chip(r) for r in rows if r["measurement"] not in tables.HIDDEN)
@@ -231,7 +260,8 @@ def _render_section(results: Results) -> str:
 
 def render_html(results: Results) -> str:
     """The report page for ``results`` (see the module docstring)."""
-    n_cases, n_samplers, problems = _counts(results)
+    problems = _counts(results)
+    holds = _holdings(results)
     suites = sorted(set(results.measurements["suite"]))
     alphas = sorted(set(results.measurements["alpha"].dropna()))
     when = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
@@ -239,9 +269,8 @@ def render_html(results: Results) -> str:
         status = (f'<div class="status bad"><strong>{len(problems)} result{"s" * (len(problems) != 1)} '
                   'a CI run fails on:</strong><ul>'
                   + "".join(f"<li>{e(p)}</li>" for p in problems) + "</ul></div>")
-    elif n_cases or n_samplers:
-        status = (f'<div class="status good"><strong>No failures:</strong> {n_cases} cases and '
-                  f'{n_samplers} sampler checks came out as expected '
+    elif holds:
+        status = (f'<div class="status good"><strong>No failures:</strong> {e(holds)} came out as expected '
                   f'(or inconclusive where the variance is unreliable).</div>')
     else:
         status = '<div class="status neutral">No measurements stored in this database.</div>'
@@ -264,8 +293,7 @@ def render_html(results: Results) -> str:
 <title>mc-harness report: {e(", ".join(suites) or results.db.name)}</title>
 <style>{_CSS}</style></head>
 <body><header><h1>Monte Carlo comparison report <span class="muted">{e(", ".join(suites))}</span></h1>
-<p class="meta">{e(str(results.db))} · {n_cases} cases · {n_samplers} sampler checks · \
-{len(results.image_pairs)} renders
+<p class="meta">{e(str(results.db))} · {e(holds or "nothing stored")}
  · family-wise α = {e(", ".join(f"{a:g}" for a in alphas) or "—")} (Holm) · generated {when}{e(stale)}</p>
 <nav>{nav}</nav></header><main>{status}{"".join(sections)}</main>
 <footer>Written by <code>harness report</code> from the stored measurements; \
@@ -312,7 +340,7 @@ td{padding:4px 8px;border-bottom:1px solid #eef1f4;vertical-align:top;white-spac
 color:var(--muted);font-size:12px}
 tr.group td{border-top:1px solid #c9d1d9}tbody tr:hover td{background:#f3f8ff}
 .num{text-align:right;font-variant-numeric:tabular-nums}
-.note{color:var(--muted);font-size:11px;white-space:normal}
+.note{color:var(--muted);font-size:11px;white-space:normal}.nw{white-space:nowrap}
 table.small{font-size:12px}
 .badge{display:inline-block;padding:1px 8px;border-radius:10px;font-size:11.5px;font-weight:600;\
 white-space:nowrap}

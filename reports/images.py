@@ -72,22 +72,30 @@ class ErrorMap:
     nonfinite: int         # pixels where the estimate is NaN or infinite
 
 
-def _lut(name: str = "inferno") -> np.ndarray:
+def lut(name: str = "inferno") -> np.ndarray:
     import matplotlib
 
     return (matplotlib.colormaps[name](np.linspace(0, 1, 256))[:, :3] * 255).round().astype(np.uint8)
 
 
-def error_map(reference: np.ndarray, estimate: np.ndarray) -> ErrorMap:
-    """The relMSE map in false colour on a log10 scale (see the module docstring)."""
+def scale_top(maps: list[np.ndarray]) -> float:
+    """The top of a shared colour scale for relMSE maps: the decade above the 99.5th
+    percentile of all their finite pixels together (so maps of one scene compare by colour)."""
+    vals = np.concatenate([m[np.isfinite(m)] for m in maps]) if maps else np.zeros(0)
+    top = float(np.quantile(vals, 0.995)) if vals.size else 0.0
+    return 10.0 ** math.ceil(math.log10(top)) if top > 0 else 1e-4
+
+
+def error_map(reference: np.ndarray, estimate: np.ndarray, *, vmax: float | None = None) -> ErrorMap:
+    """The relMSE map in false colour on a log10 scale (see the module docstring); ``vmax``:
+    the top of a colour scale shared with other maps (default: this map's, ``scale_top``)."""
     e = relmse_map(reference, estimate)
     finite = np.isfinite(e)
     vals = e[finite]
-    top = float(np.quantile(vals, 0.995)) if vals.size else 0.0
-    vmax = 10.0 ** math.ceil(math.log10(top)) if top > 0 else 1e-4
+    vmax = scale_top([e]) if vmax is None else vmax
     vmin = vmax / 10**DECADES
     t = (np.log10(np.clip(np.nan_to_num(e, nan=vmin), vmin, vmax)) - math.log10(vmin)) / DECADES
-    rgb = _lut()[np.round(t * 255).astype(np.int64)]
+    rgb = lut()[np.round(t * 255).astype(np.int64)]
     rgb[~finite] = _MAGENTA
     n = int(vals.size)
     mean = float(vals.mean()) if n else math.nan
@@ -97,7 +105,7 @@ def error_map(reference: np.ndarray, estimate: np.ndarray) -> ErrorMap:
 
 def colorbar_png(width: int = 256, height: int = 14) -> bytes:
     """The error map's colour scale, left (vmin) to right (vmax), as a PNG strip."""
-    strip = np.repeat(_lut()[np.linspace(0, 255, width).round().astype(np.int64)][None], height, axis=0)
+    strip = np.repeat(lut()[np.linspace(0, 255, width).round().astype(np.int64)][None], height, axis=0)
     return png_bytes(strip)
 
 

@@ -30,14 +30,15 @@ ORDER = ("bias", "variance", "convergence_slope", "convergence", "efficiency_rat
 # and the RMSE at the top budget is drawn, with its interval, in the convergence figure
 HIDDEN = {"variance", "log10_efficiency", "error_vs_time", "rmse"}
 LABELS = {
-    "bias": ("bias [95% CI]", "estimate − exact value, 95 % interval from the batch means; n = samples"),
+    "bias": ("bias [95% CI]", "estimate − exact value, 95 % interval from the batch means; below it the "
+                              "estimate ± its standard error and n = samples"),
     "convergence_slope": ("RMSE slope [95% CI]", "log-log slope of RMSE against samples per estimate, "
                                                  "bootstrap 95 % interval; n = replicas over all budgets"),
     "convergence": ("error slope [95% CI]", "log-log slope of the error against the budget, 95 % interval"),
-    "efficiency_ratio": ("1/(V·T) vs baseline [95% CI]", "efficiency 1/(variance × time) as a ratio "
+    "efficiency_ratio": ("1/(V·T) ratio [95% CI]", "efficiency 1/(variance × time) as a ratio "
                                                          "against the baseline technique, 95 % interval; "
                                                          "n = samples"),
-    "efficiency": ("efficiency vs baseline [95% CI]", "efficiency ratio against the baseline configuration "
+    "efficiency": ("efficiency ratio [95% CI]", "efficiency ratio against the baseline configuration "
                                                       "(1/(relMSE × time) for renders), 95 % interval"),
     "rmse": ("RMSE [95% CI]", "root-mean-square error at the largest budget, 95 % interval; "
                               "n = samples per estimate"),
@@ -115,6 +116,7 @@ def wide_table(m: pd.DataFrame) -> pd.DataFrame:
                         + "".join(f"; {c}: {v}" for c, v in (d.get("counts") or {}).items())})
         elif k in ("convergence_slope", "convergence") and "expected" in d:
             row[f"{k}_expected"] = d["expected"]
+            row[f"{k}_z"], row[f"{k}_bound"] = d.get("z"), d.get("bound")
         elif k in ("efficiency_ratio", "efficiency") and "baseline" in d:
             row[f"{k}_baseline"] = d["baseline"]
         elif k in ("chi_square", "mcmc"):
@@ -135,7 +137,7 @@ def wide_table(m: pd.DataFrame) -> pd.DataFrame:
     return df
 
 
-_SUFFIXES = ("lo", "hi", "n", "pvalue", "verdict", "expected", "baseline", "failures")
+_SUFFIXES = ("lo", "hi", "n", "pvalue", "verdict", "expected", "baseline", "failures", "z", "bound")
 
 
 # --- displayed columns -------------------------------------------------------------------------
@@ -166,13 +168,31 @@ def _value_column(k: str) -> Column:
 
     def cell(row: dict[str, Any]) -> Cell:
         notes = [f"n = {fmt_n(row.get(f'{k}_n'))}"] if value_of(row, f"{k}_n") is not None else []
+        if k == "bias" and value_of(row, "estimate") is not None:   # the estimate under its bias
+            notes.insert(0, f"estimate {fmt_num(value_of(row, 'estimate'), '.9g')} ± "
+                            f"{fmt_num(value_of(row, 'stderr'), '.2g')}")
         if value_of(row, f"{k}_expected") is not None:
             notes.append(f"expected {fmt_num(row[f'{k}_expected'], '+.2f')}")
         if value_of(row, f"{k}_baseline") is not None:
             notes.append(f"vs {row[f'{k}_baseline']}")
-        return Cell(fmt_interval(value_of(row, k), value_of(row, f"{k}_lo"), value_of(row, f"{k}_hi"), fmt),
-                    ", ".join(notes))
+        # the value on the first line, its interval under it (unbroken), so the table fits a screen
+        v, lo, hi = value_of(row, k), value_of(row, f"{k}_lo"), value_of(row, f"{k}_hi")
+        if _finite(v) and _finite(lo) and _finite(hi):
+            notes.insert(0, f"[{fmt_num(lo, fmt)}, {fmt_num(hi, fmt)}]")
+        return Cell(fmt_num(v, fmt) if _finite(v) else "—", ", ".join(notes))
     return Column(header, title, cell, numeric=True)
+
+
+def _p_note(row: dict[str, Any], k: str) -> str:
+    """The p-value under a verdict; for a slope whose one-sided p rounds to 1, the margin
+    instead: how many standard errors the slope lies inside its bound."""
+    p = value_of(row, f"{k}_pvalue")
+    if p is None:
+        return ""
+    z, bound = value_of(row, f"{k}_z"), value_of(row, f"{k}_bound")
+    if p >= 0.995 and z is not None and bound is not None and math.isfinite(z):
+        return f"p ≈ 1: {-z:.1f} s.e. inside the bound {bound:+.2f}"
+    return p_equals(p)
 
 
 def summary_columns(wide: pd.DataFrame) -> list[Column]:
@@ -180,12 +200,6 @@ def summary_columns(wide: pd.DataFrame) -> list[Column]:
     cols = [Column("integrand", "integrand or scene", lambda r: Cell(str(r["integrand"]))),
             Column("technique", "estimator technique or renderer configuration",
                    lambda r: Cell(str(r["technique"])))]
-    if "estimate" in wide:
-        cols.append(Column("estimate ± s.e.", "the bias test's estimate and its standard error; n = samples",
-                           lambda r: Cell(f"{fmt_num(value_of(r, 'estimate'), '.9g')} ± "
-                                          f"{fmt_num(value_of(r, 'stderr'), '.2g')}"
-                                          if value_of(r, "estimate") is not None else "—"),
-                           numeric=True))
     present = [c for c in wide.columns if f"{c}_lo" in wide or f"{c}_verdict" in wide or f"{c}_n" in wide]
     for k in _measurement_order(present):
         if k in HIDDEN or k in ("chi_square", "mcmc"):
@@ -193,18 +207,15 @@ def summary_columns(wide: pd.DataFrame) -> list[Column]:
         cols.append(_value_column(k))
         if f"{k}_verdict" in wide:
             cols.append(Column("verdict (p)", f"verdict of the {k} test, Holm-corrected across the suite "
-                                              "at its α; p-value before the correction",
-                               lambda r, k=k: Cell(str(value_of(r, f"{k}_verdict") or "—"),
-                                                   p_equals(value_of(r, f"{k}_pvalue"))
-                                                   if value_of(r, f"{k}_pvalue") is not None else "",
+                                              "at its α; p-value before the correction (slopes: one-sided, "
+                                              "H0 the error falls at least as fast as the bound; where p "
+                                              "rounds to 1, how many standard errors the slope is inside it)",
+                               lambda r, k=k: Cell(str(value_of(r, f"{k}_verdict") or "—"), _p_note(r, k),
                                                    verdict=str(value_of(r, f"{k}_verdict") or ""))))
         elif f"{k}_pvalue" in wide:
             cols.append(Column("p", f"p-value of the {k} test",
                                lambda r, k=k: Cell(fmt_p(value_of(r, f"{k}_pvalue"))),
                                numeric=True))
-    cols.append(Column("α", "the suite's family-wise false-alarm rate (Holm)",
-                       lambda r: Cell(fmt_num(value_of(r, "alpha"), "g")),
-                       numeric=True))
     if "flags" in wide:
         cols.append(Column("notes", "warnings of the bias test: heavy tails, skewed batches, faults",
                            lambda r: Cell(str(value_of(r, "flags") or ""))))

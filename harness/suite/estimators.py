@@ -325,7 +325,8 @@ def _rows(suite: Suite, results: list[CaseResult], table: pd.DataFrame) -> list[
             rows.append({**base, "measurement": "convergence_slope", "value": c.slope, "lo": lo, "hi": hi,
                          "n": c.n, "pvalue": c.pvalue,
                          "verdict": row["convergence"],
-                         "detail": {"expected": c.expected, "table": c.table.to_dict("list")}})
+                         "detail": {"expected": c.expected, "bound": c.expected + c.tolerance,
+                                    "z": c.statistic, "table": c.table.to_dict("list")}})
         if r.efficiency is not None:
             e = r.efficiency
             z = 1.96 * e.log_se / math.log(10)

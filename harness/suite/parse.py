@@ -90,7 +90,8 @@ from harness.suite.model import MEASUREMENTS, Case, RenderCase, SamplerCase, Sui
 from harness.suite.rules import check_keys, measurements, positive, xfail_reason
 from harness.usercode import UserCodeError, load_attr, source_fingerprint
 
-__all__ = ["Suite", "Case", "SamplerCase", "RenderCase", "SuiteError", "MEASUREMENTS", "load_suite"]
+__all__ = ["Suite", "Case", "SamplerCase", "RenderCase", "SuiteError", "MEASUREMENTS", "load_suite",
+           "loads_suite"]
 
 
 _SUITE_KEYS = {"name": str, "seed": int, "samples": int, "threads": int, "alpha": float, "batches": int,
@@ -112,6 +113,13 @@ def load_suite(path: str | Path) -> Suite:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as e:
         raise SuiteError(f"{path}: not UTF-8 text: byte {raw[e.start]:#04x} at offset {e.start}") from None
+    return loads_suite(text, path=path)
+
+
+def loads_suite(text: str, *, path: str | Path = "suite.toml") -> Suite:
+    """A suite from TOML text (e.g. built in Python): ``path`` names it in errors, gives its
+    default name (the stem), and its folder is where a user's code is loaded from."""
+    path = Path(path)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:

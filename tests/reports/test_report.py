@@ -195,7 +195,7 @@ def test_report_in_chromium(report):
             # summary: every case once (the superseded one not at all), verdicts, p, alpha, n
             rows = page.locator(".summary-table tbody tr")
             assert rows.count() == len(TECHNIQUES) + 2
-            text = page.inner_text("#summary")
+            text = page.inner_text("#summary").replace("\xa0", " ")
             for t in TECHNIQUES + ["integrator=ptracer, variant=test", "α", "verdict (p)", "n = 65,536",
                                    "p = "]:
                 assert t in text, t
@@ -225,6 +225,17 @@ def test_report_in_chromium(report):
             assert np.abs(_png_array(view.screenshot()) - shot_ref).mean() < 0.5
             # the NaN planted in one estimate
             assert page.inner_text("#renders").count("; 1 non-finite pixel") == 1
+            # one colour scale per scene: both configurations of toy_scene share the error map's ticks
+            ticks = [t.inner_text() for t in page.locator("#renders .ticks").all()]
+            assert len(ticks) == 2 and ticks[0] == ticks[1], ticks
+            # the header says what the database holds, by kind
+            assert "3 estimator cases, 2 sampler checks, 2 render configurations" in page.inner_text("header")
+            # the summary tables fit a 1400 px wide window: no horizontal scrolling
+            page.set_viewport_size({"width": 1400, "height": 1000})
+            widths = page.eval_on_selector_all("#summary .scroll", "els => els.map(e => [e.scrollWidth, "
+                                                                   "e.clientWidth])")
+            assert len(widths) == 2 and all(sw <= cw for sw, cw in widths), widths
+            page.set_viewport_size({"width": 1500, "height": 1000})
             assert errors == [], errors
 
             page.evaluate("window.scrollTo(0, 0)")
@@ -263,7 +274,7 @@ def test_markdown_tables(report):
         assert heading in md
     lines = [ln for ln in md.splitlines() if ln.startswith("| gaussian")]
     assert len(lines) == len(TECHNIQUES)
-    assert all("(p = " in ln and "(n = 65,536)" in ln for ln in lines)
+    assert all("(p = " in ln and "n = 65,536)" in ln and "estimate 0.74" in ln for ln in lines)
     assert md.count("| toy_scene") == 2 and "| cosine_hemisphere" in md
 
 
@@ -322,6 +333,47 @@ def test_error_map_scale_spans_four_decades_below_the_percentile():
     assert m.vmax / 10 < top <= m.vmax and math.isclose(m.vmin, m.vmax / 1e4)
     assert m.nonfinite == 1 and m.pixels == 32 * 32 - 1 and m.rgb[0, 0].tolist() == [255, 0, 255]
     assert m.rgb.shape == (32, 32, 3) and m.rgb.dtype == np.uint8
+
+
+def test_slope_verdicts_state_their_margin_where_p_rounds_to_1():
+    from reports.tables import _p_note
+
+    row = {"convergence_pvalue": 1.0, "convergence_z": -12.3, "convergence_bound": -0.45}
+    assert _p_note(row, "convergence") == "p ≈ 1: 12.3 s.e. inside the bound -0.45"
+    assert _p_note({**row, "convergence_pvalue": 0.4}, "convergence") == "p = 0.4"
+    assert _p_note({"convergence_pvalue": 1.0}, "convergence") == "p = 1"       # stored before z was
+
+
+def test_results_of_the_python_api_are_recorded_and_reported(tmp_path):
+    import harness
+    from harness import stats
+    from harness.samplers import check_sampler
+
+    def nee(u):
+        return 1.5 * np.sqrt(u[:, 0])
+
+    def cosine(u):
+        r, phi = np.sqrt(u[:, 0]), 2 * np.pi * u[:, 1]
+        return np.column_stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(1 - r * r)])
+
+    db = tmp_path / "mine.sqlite"
+    results = {"nee": harness.check_unbiased(nee, 2, 1.0, sample_count=100_000),
+               "nee rate": stats.convergence_rate(nee, budgets=[1024, 4096, 16384], dim=2, reference=1.0)}
+    assert harness.record(db, results, suite="mine") == 2
+    check = check_sampler(cosine, lambda x: x[:, 2] / np.pi, "hemisphere", sample_count=50_000)
+    with pytest.raises(TypeError, match="needs domain="):
+        harness.record(db, {"cosine": check}, suite="mine")
+    harness.record(db, {"cosine": check}, suite="mine", domain="hemisphere")
+    with pytest.raises(TypeError, match="cannot record a str"):
+        harness.record(db, {"x": "passed"})
+    assert main(["report", "--db", str(db), "-o", str(tmp_path / "mine.html")]) == 0
+    page = (tmp_path / "mine.html").read_text()
+    assert "2 estimator cases, 1 sampler check" in page
+    assert page.count('<img class="plot"') == 2          # the convergence figure and the sampler's
+    stored = load(db).set_index("measurement")
+    assert stored.loc["bias", "verdict"] == "unbiased" and stored.loc["chi_square", "verdict"] == "passed"
+    harness.record(db, results, suite="mine")          # recorded again: replaced, not added
+    assert len(load(db)) == 3
 
 
 def test_report_cli_errors(tmp_path, capsys):

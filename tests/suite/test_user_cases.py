@@ -35,6 +35,12 @@ def scalar(u):
     return 1.0
 
 
+def late(u):                     # passes the 4-row probe when the suite loads, fails in the run
+    if len(u) > 4:
+        raise RuntimeError("texture cache exhausted")
+    return u[:, 0]
+
+
 NOT_CALLABLE = 3
 '''
 
@@ -94,6 +100,22 @@ def test_user_estimators_are_measured_compared_and_xfailed(repo, monkeypatch):
     assert changed.units_run == changed.units_planned
 
 
+def test_user_cases_are_bitwise_reproducible_and_need_no_file(repo):
+    """Two fresh runs store the same bits; a suite given as text (loads_suite) runs the same."""
+    from harness.suite.parse import loads_suite
+    from harness.suite.store import load
+
+    run_suite(load_suite(repo / "suite.toml"), repo / "one.sqlite", threads=2)
+    run_suite(loads_suite(SUITE, path=repo / "suite.toml"), repo / "two.sqlite", threads=1)
+    one, two = (load(repo / f"{n}.sqlite").set_index(["technique", "measurement"]).sort_index()
+                for n in ("one", "two"))
+    timing = {"log10_efficiency", "efficiency_ratio"}
+    keep = [k for k in one.index if k[1] not in timing]
+    assert len(keep) == 9             # bias, variance, convergence and rmse rows; bias of the twin
+    for col in ("value", "lo", "hi", "n", "pvalue", "verdict"):
+        assert one.loc[keep, col].equals(two.loc[keep, col]), col
+
+
 def test_an_xfail_that_passes_fails_the_run(repo):
     text = SUITE.replace('estimator = "myest:uniform"',
                          'estimator = "myest:uniform"\nxfail = "thought wrong"')
@@ -114,6 +136,17 @@ def test_cli_and_pytest_report_xfail(repo):
                         "--harness-db", "r.sqlite"], capture_output=True, text=True, cwd=repo, timeout=300)
     assert p.returncode == 0, p.stdout + p.stderr
     assert "2 passed, 1 xfailed" in p.stdout
+
+
+def test_a_user_estimator_failing_in_the_run_is_one_line_and_keeps_what_was_stored(repo):
+    late = '\n[[case]]\nestimator = "myest:late"\ndim = 1\nreference = 0.5\n'
+    (repo / "late.toml").write_text(SUITE + late)
+    r = subprocess.run([str(HARNESS), "run", "late.toml", "--db", "r.sqlite"], capture_output=True, text=True,
+                       cwd=repo, timeout=300)
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert ("harness: myest:late raised RuntimeError: texture cache exhausted (called on shape (4096, 1), "
+            "float64; expected to return contributions of shape (4096,))") in r.stderr
+    assert "units stored in r.sqlite; fix it and rerun to resume" in r.stderr
 
 
 def _error(repo, case: str) -> str:
