@@ -42,6 +42,16 @@ def main(argv: list[str] | None = None) -> int:
     rep.add_argument("--format", choices=["html", "csv", "markdown"], default="html")
     rep.add_argument("--suite", help="only this suite")
     sub.add_parser("list", help="list the catalogue's integrands, techniques and samplers")
+    cmp = sub.add_parser("compare", help="two renderers' replica renders against each other, no "
+                                         "reference needed (per-pixel, tile and image-mean Welch tests; "
+                                         "relMSE and FLIP maps)")
+    cmp.add_argument("a", help="a folder of replica images (EXR, PFM, HDR), or with --db a render case (key "
+                               "prefix or part of scene/configuration)")
+    cmp.add_argument("b", help="the same for the other renderer")
+    cmp.add_argument("--db", metavar="PATH", help="results database holding both render cases")
+    cmp.add_argument("-o", "--output", metavar="PATH", default="compare.html", help="the report page")
+    cmp.add_argument("--alpha", type=float, default=0.01)
+    cmp.add_argument("--tile", type=int, default=8, help="tile size (pixels) of the tile test")
     chk = sub.add_parser("check-sampler", help="test a sampler against its pdf (chi-square and friends)")
     chk.add_argument("target", help="module:attribute or path/to/file.py:attribute (found from the current "
                                     "directory): an object with sample(u) and pdf(x), or a function "
@@ -65,6 +75,8 @@ def main(argv: list[str] | None = None) -> int:
         return _report(args.db, args.output, args.format, args.suite)
     if args.command == "check-sampler":
         return _check_sampler(args)
+    if args.command == "compare":
+        return _compare(args)
     try:
         suite = load_suite(args.suite)
     except SuiteError as e:
@@ -157,6 +169,27 @@ def _check_sampler(args) -> int:
         ok = ok and m.passed
     print(f"summary: {int(ok)} passed, {int(not ok)} failed")
     return 0 if ok else 1
+
+
+def _compare(args) -> int:
+    from pathlib import Path
+
+    from harness.stats.compare import compare_images
+    from reports.compare import compare_page, load_replicas
+
+    try:
+        a, b = (load_replicas(x, db=args.db) for x in (args.a, args.b))
+        result = compare_images(a.images, b.images, alpha=args.alpha, tile=args.tile)
+    except ValueError as e:
+        print(f"harness: {e}", file=sys.stderr)
+        return 2
+    out = Path(args.output)
+    out.write_text(compare_page(a, b, result), encoding="utf-8")
+    for name, s in (("A", a), ("B", b)):
+        print(f"{name}: {s.label} ({s.images.shape[0]} replicas, {s.source})")
+    print(f"{result}\nreport: {out}")
+    print(f"summary: {int(result.passed)} passed, {int(not result.passed)} failed")
+    return 0 if result.passed else 1
 
 
 def _report(db: str, output: str | None, fmt: str, suite: str | None) -> int:

@@ -22,10 +22,11 @@ from harness.stats.results import ConfidenceInterval, Failure, check_confidence_
 from harness.stats.validate import level
 
 __all__ = ["RELMSE_EPSILON", "relative_squared_error", "Reference", "ImageBias", "pixel_bias_test", "relmse",
-           "as_replicates", "image_efficiency", "pixel_variance"]
+           "as_replicates", "image_efficiency", "pixel_variance", "normal_enough", "t_summary",
+           "excluded_pixels", "PixelVerdict", "ROUNDING"]
 
 RELMSE_EPSILON = 1e-2   # relMSE = mean over pixels of (x - ref)^2 / (ref^2 + eps): keeps black pixels finite
-_ROUNDING = 2.0**-20    # relative float32 rounding floor of an accumulated render (8 ulp of 2^-23)
+ROUNDING = 2.0**-20     # relative float32 rounding floor of an accumulated render (8 ulp of 2^-23)
 _MAX_EXAMPLES = 8       # first excluded pixels listed in a failure
 
 
@@ -73,8 +74,55 @@ class Reference:
         return float(np.mean(share if valid is None else share[valid]))
 
 
+def t_summary(t: np.ndarray, testable: np.ndarray,
+              valid: np.ndarray) -> tuple[np.ndarray, tuple[int, int, int], float]:
+    """From per pixel-channel t (m, c) over the ``valid`` pixels (h, w): the (h, w) map of the
+    largest tested |t| (NaN elsewhere), the worst tested (row, col, channel) and its t."""
+    t_map = np.full(valid.shape, np.nan)
+    if t.size:
+        t_map[valid] = np.where(testable, np.abs(t), np.nan).max(axis=-1)
+    if not testable.any():
+        return t_map, (-1, -1, -1), math.nan
+    pix, ch = np.unravel_index(int(np.argmax(np.where(testable, np.abs(t), -1.0))), t.shape)
+    rows, cols = np.nonzero(valid)
+    return t_map, (int(rows[pix]), int(cols[pix]), int(ch)), float(t[pix, ch])
+
+
+def excluded_pixels(valid: np.ndarray, detail: str) -> list[Failure]:
+    """The "excluded_pixels" failure (count, first positions) where ``valid`` is False."""
+    excluded = int((~valid).sum())
+    return [Failure("excluded_pixels", excluded, detail,
+                    tuple({"row": int(i), "col": int(j)} for i, j in np.argwhere(~valid)[:_MAX_EXAMPLES]))
+            ] if excluded else []
+
+
+class PixelVerdict:
+    """The verdict of a per-pixel test result (``pvalue``, ``alpha``, ``failures``): "invalid"
+    where pixels were excluded, ``reject`` when pvalue <= alpha, else "consistent"."""
+
+    reject = "biased"
+    pvalue: float
+    alpha: float
+    failures: list[Failure]
+
+    @property
+    def verdict(self) -> str:
+        if self.failures:
+            return "invalid"
+        return self.reject if self.pvalue <= self.alpha else "consistent"
+
+    @property
+    def passed(self) -> bool:
+        return self.verdict == "consistent"
+
+    @property
+    def statistic(self) -> float:
+        """NaN: the p-value combines several tests."""
+        return math.nan
+
+
 @dataclass(frozen=True)
-class ImageBias:
+class ImageBias(PixelVerdict):
     """Per-pixel bias test of one render configuration, a member of the result family
     (:mod:`harness.stats.results`).
 
@@ -119,22 +167,8 @@ class ImageBias:
     failures: list[Failure] = field(default_factory=list)
 
     @property
-    def verdict(self) -> str:
-        if self.failures:
-            return "invalid"
-        return "biased" if self.pvalue <= self.alpha else "consistent"
-
-    @property
-    def passed(self) -> bool:
-        return self.verdict == "consistent"
-
-    @property
     def n(self) -> int:
         return self.replicas * self.spp
-
-    @property
-    def statistic(self) -> float:
-        return math.nan
 
     def confidence_interval(self, confidence_level: float = 0.95) -> ConfidenceInterval:
         """Student-t interval (``replicas`` - 1 degrees of freedom, the image-mean test's) of the
@@ -162,6 +196,26 @@ def _valid(images: np.ndarray, reference: Reference) -> np.ndarray:
     return ok(images).all(axis=0) & ok(reference.mean) & ok(reference.variance)
 
 
+def normal_enough(x: np.ndarray, family: int, gate_alpha: float) -> tuple[np.ndarray, np.ndarray]:
+    """Where replicas x (R, ...) are close enough to normal for a two-sided t test at the
+    Bonferroni level gate_alpha / family, and where they are all equal (constant).
+
+    The one-term Edgeworth correction of the tail at the critical value z,
+    |skew| (2 z^2 + 1) / (6 sqrt(R)), must stay below half the nominal tail, up to one standard
+    deviation sqrt(6 / R) of the sample skewness of R normal values (else a normal pixel is
+    excluded by chance).  Sparse pixels (a light tracer's few hits, fireflies) fail it."""
+    r = x.shape[0]
+    m = x.mean(axis=0)
+    dev = x - m
+    m2 = (dev**2).mean(axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        skew = (dev**3).mean(axis=0) / m2**1.5
+    z = sps.norm.isf(gate_alpha / (2 * max(family, 1)))
+    limit = 0.5 * 6 * math.sqrt(r) / (2 * z * z + 1) + math.sqrt(6 / r)
+    constant = ~(m2 > 0)
+    return ~constant & (np.abs(skew) <= limit), constant
+
+
 def pixel_bias_test(images: np.ndarray, reference: Reference, spp: int, *, alpha: float = 0.01,
                     gate_alpha: float = 0.01) -> ImageBias:
     """Tests replica renders (R, h, w, c) against a reference; see ImageBias.  ``alpha`` is the
@@ -177,7 +231,7 @@ def pixel_bias_test(images: np.ndarray, reference: Reference, spp: int, *, alpha
     xv, ref, ref_var = x[:, valid], reference.mean[valid], reference.variance[valid]   # (R, m, c), (m, c)
     m = xv.mean(axis=0)
     s2 = xv.var(axis=0, ddof=1) / r
-    floor = (_ROUNDING * np.maximum(np.abs(ref), np.abs(m))) ** 2
+    floor = (ROUNDING * np.maximum(np.abs(ref), np.abs(m))) ** 2
     se2 = s2 + ref_var + floor
     df = np.full_like(se2, r - 1.0)
     if reference.parts:  # Welch-Satterthwaite: replicas' and reference's errors together
@@ -190,16 +244,10 @@ def pixel_bias_test(images: np.ndarray, reference: Reference, spp: int, *, alpha
     # |skew| (2 z^2 + 1) / (6 sqrt(R)), must stay below half the nominal tail, up to the noise
     # of the skewness estimate itself (else a normal pixel is excluded by chance).  Sparse pixels
     # (a light tracer's few hits, fireflies) are left to the image-mean test and counted.
-    dev = xv - m
-    m2 = (dev**2).mean(axis=0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        skew = (dev**3).mean(axis=0) / m2**1.5
-    z = sps.norm.isf(gate_alpha / (4 * max(m.size, 1)))
-    # allowance: one standard deviation of the sample skewness of R normal values, sqrt(6 / R)
-    limit = 0.5 * 6 * math.sqrt(r) / (2 * z * z + 1) + math.sqrt(6 / r)
+    normal, constant = normal_enough(xv, 2 * m.size, gate_alpha)
     # Replicas that are all equal reveal nothing about the estimator's spread (a light tracer
     # may never reach a pixel in R renders): testable only if they agree with the reference.
-    testable = np.where(m2 > 0, np.abs(skew) <= limit, np.abs(m - ref) <= np.sqrt(floor))
+    testable = np.where(constant, np.abs(m - ref) <= np.sqrt(floor), normal)
     p = np.where(testable, 2 * sps.t.sf(np.abs(t), np.maximum(df, 1.0)), 1.0)
     tested = int(testable.sum())
     p_pix = min(1.0, float(p.min()) * tested) if tested else 1.0
@@ -213,20 +261,10 @@ def pixel_bias_test(images: np.ndarray, reference: Reference, spp: int, *, alpha
     else:
         p_mean = 1.0 if bias == 0 else 0.0
 
-    t_map = np.full(valid.shape, np.nan)
-    t_map[valid] = np.where(testable, np.abs(t), np.nan).max(axis=-1) if ref.size else np.nan
-    if tested:
-        flat = int(np.argmax(np.where(testable, np.abs(t), -1.0)))
-        pix, ch = np.unravel_index(flat, t.shape)
-        rows, cols = np.nonzero(valid)
-        worst, worst_t = (int(rows[pix]), int(cols[pix]), int(ch)), float(t[pix, ch])
-    else:
-        worst, worst_t = (-1, -1, -1), math.nan
+    t_map, worst, worst_t = t_summary(t, testable, valid)
     excluded = int((~valid).sum())
-    failures = [Failure("excluded_pixels", excluded, "pixels NaN, infinite or negative in a replica or the "
-                        "reference, left out of every average",
-                        tuple({"row": int(i), "col": int(j)} for i, j in np.argwhere(~valid)[:_MAX_EXAMPLES]))
-                ] if excluded else []
+    failures = excluded_pixels(valid, "pixels NaN, infinite or negative in a replica or the reference, "
+                                      "left out of every average")
     return ImageBias(min(1.0, 2 * min(p_pix, p_mean)), p_pix, p_mean, bias, se, worst, worst_t, tested,
                      int(testable.size - tested), excluded, r, int(spp), t_map, alpha, failures)
 
