@@ -194,10 +194,16 @@ def test_renders_run_on_dask_with_the_images_of_a_local_run(tmp_path):
     path = tmp_path / "d.toml"
     path.write_text(textwrap.dedent(DASK_SUITE))
     harness_cli = str(Path(sys.executable).with_name("harness"))
+    outputs = []
     for name, extra in (("local", []), ("dask", ["--dask", "local", "--threads", "2"])):
         r = subprocess.run([harness_cli, "run", str(path), "--db", str(tmp_path / name / "r.sqlite"), *extra],
                            capture_output=True, text=True, timeout=900)
-        assert r.returncode == 0, r.stdout + r.stderr
+        # what this test checks is that both runs store the same images and figures, not the
+        # verdicts of these 4-replica configurations (1: a check failed, the same in both runs)
+        assert r.returncode in (0, 1), r.stdout + r.stderr
+        verdicts = [ln for ln in r.stdout.splitlines() if "FAILED" in ln or "summary:" in ln]
+        outputs.append((r.returncode, verdicts))
+    assert outputs[0] == outputs[1], outputs
     stores = [Store(tmp_path / name / "r.sqlite") for name in ("local", "dask")]
     try:
         names = [sorted(n for (n,) in s.db.execute("SELECT name FROM images")) for s in stores]

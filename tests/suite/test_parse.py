@@ -269,7 +269,8 @@ MISTAKES = {
         8, "domain", "expected one of: interval, half_line, square, disk, hemisphere, sphere, got 'torus'"),
     "unknown adapter": (
         HEAD + '[[render]]\nadapter = "blender"\n',
-        7, "adapter", "expected one of: mitsuba, pyrender, got 'blender'"),
+        7, "adapter", "expected one of: mitsuba, pyrender, command, python (or an adapter registered under "
+                      "the entry-point group 'harness.adapters'), got 'blender'"),
     "unknown scene": (
         HEAD + '[[render]]\nadapter = "mitsuba"\nscene = "nosuch"\n',
         8, "scene", "'nosuch' is neither a built-in scene"),
@@ -302,7 +303,8 @@ MISTAKES = {
     "case = [\"x\"]": ('case = ["x"]\n', 1, "case", "expected [[case]] tables, got ['x']"),
     "suite = 3": ('suite = 3\n' + CASE, 1, "suite", "expected a [suite] table, got 3"),
     "render without adapter": (
-        '[[render]]\nscene = "furnace"\n', 1, None, "missing key 'adapter' (one of: mitsuba, pyrender)"),
+        '[[render]]\nscene = "furnace"\n', 1, None,
+        "missing key 'adapter' (one of: mitsuba, pyrender, command, python)"),
     "sampler without name": (
         '[[sampler]]\ndomain = "sphere"\n', 1, None, "missing key 'name' (a catalogue sampler"),
     "no techniques": (
