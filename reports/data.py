@@ -90,6 +90,7 @@ def load_results(db: str | Path, suite: str | None = None) -> Results:
     latest = m.groupby("_ident", sort=False)["row"].transform("max")
     keep_keys = set(m.loc[m["row"] == latest, "case_key"])
     rendered = {n.rpartition("/")[0] for n in names if n.endswith("/estimate")}
+    m["xfail"] = [d.get("xfail", "") for d in m["detail"]]   # a known finding's reason
     m["kind"] = ["sampler" if i.startswith(SAMPLER_PREFIX) else
                  "render" if k in rendered or '"adapter"' in str(d) else "estimator"
                  for i, k, d in zip(m["integrand"], m["case_key"], m["definition"])]

@@ -76,13 +76,27 @@ def _note(text: str) -> str:
     return ", ".join(e(p) if p.startswith("vs ") else f'<span class="nw">{e(p)}</span>' for p in pieces)
 
 
-def _counts(results: Results) -> list[str]:
-    """Descriptions of the verdicts a CI run fails on."""
+def _counts(results: Results) -> tuple[list[str], list[str]]:
+    """Descriptions of what a CI run fails on (failing verdicts; cases with an xfail reason
+    that no longer fail: strict), and of the known findings (xfailed cases, with their reason)."""
     m = results.measurements
-    bad = m[m["verdict"].isin(tables.BAD)]
-    return [f"{r.integrand.removeprefix(SAMPLER_PREFIX)} / {r.technique}: {r.measurement} {r.verdict}"
-            + (f" (p = {tables.fmt_p(r.pvalue)})" if r.pvalue == r.pvalue and r.pvalue is not None else "")
-            for r in bad.itertuples()]
+
+    def name(r) -> str:
+        return f"{r.integrand.removeprefix(SAMPLER_PREFIX)} / {r.technique}"
+
+    failing = m["verdict"].isin(tables.BAD)
+    problems = [f"{name(r)}: {r.measurement} {r.verdict}"
+                + (f" (p = {tables.fmt_p(r.pvalue)})" if r.pvalue == r.pvalue and r.pvalue is not None
+                   else "")
+                for r in m[failing & (m["xfail"] == "")].itertuples()]
+    known = []
+    for _, g in m[m["xfail"] != ""].groupby("case_key", sort=False):
+        r = next(g.itertuples())
+        if (g["verdict"].isin(tables.FAILING)).any():
+            known.append(f"{name(r)}: {r.xfail}")
+        else:
+            problems.append(f"{name(r)}: [XPASS(strict)] expected to fail ({r.xfail}) but passed")
+    return problems, known
 
 
 def _summary_section(results: Results) -> str:
@@ -260,7 +274,7 @@ def _render_section(results: Results) -> str:
 
 def render_html(results: Results) -> str:
     """The report page for ``results`` (see the module docstring)."""
-    problems = _counts(results)
+    problems, known = _counts(results)
     holds = _holdings(results)
     suites = sorted(set(results.measurements["suite"]))
     alphas = sorted(set(results.measurements["alpha"].dropna()))
@@ -274,6 +288,10 @@ def render_html(results: Results) -> str:
                   f'(or inconclusive where the variance is unreliable).</div>')
     else:
         status = '<div class="status neutral">No measurements stored in this database.</div>'
+    if known:
+        status += (f'<div class="status neutral"><strong>{len(known)} known finding{"s" * (len(known) != 1)} '
+                   '(xfail: failing as recorded, a run passes on them):</strong><ul>'
+                   + "".join(f"<li>{e(k)}</li>" for k in known) + "</ul></div>")
     groups = plots.integrand_curves(results)
     sampler_rows = results.samplers.to_dict("records")
     jobs = [(plots.integrand_figure, (g,)) for g in groups.values()] + _sampler_jobs(sampler_rows)

@@ -54,6 +54,13 @@ BAD = FAILING | {"not reached"}
 GOOD = PASSING
 
 
+def shown_verdict(verdict: Any, xfail: Any) -> str:
+    """The verdict as the report shows it: "xfailed" where a case with an ``xfail`` reason
+    failed (a known finding, neutral), else the stored one."""
+    v = str(verdict or "")
+    return "xfailed" if xfail and v in FAILING else v
+
+
 def verdict_class(verdict: str) -> str:
     """CSS class of a verdict: 'bad' (a CI failure), 'good', or 'neutral' (inconclusive, not judged)."""
     return "bad" if verdict in BAD else ("good" if verdict in GOOD else "neutral")
@@ -105,7 +112,7 @@ def wide_table(m: pd.DataFrame) -> pd.DataFrame:
     for r in m.itertuples(index=False):
         row = rows.setdefault(r.case_key, {"suite": r.suite, "kind": r.kind, "integrand": r.integrand,
                                            "technique": r.technique, "case_key": r.case_key,
-                                           "alpha": r.alpha})
+                                           "alpha": r.alpha, "xfail": getattr(r, "xfail", "")})
         k = r.measurement
         row.update({k: r.value, f"{k}_lo": r.lo, f"{k}_hi": r.hi, f"{k}_n": r.n, f"{k}_pvalue": r.pvalue,
                     f"{k}_verdict": r.verdict})
@@ -183,6 +190,14 @@ def _value_column(k: str) -> Column:
     return Column(header, title, cell, numeric=True)
 
 
+def _verdict_cell(row: dict[str, Any], k: str) -> Cell:
+    shown = shown_verdict(value_of(row, f"{k}_verdict"), value_of(row, "xfail"))
+    note = _p_note(row, k)
+    if shown == "xfailed":
+        note = f"{note}; xfail: {row['xfail']}" if note else f"xfail: {row['xfail']}"
+    return Cell(shown or "—", note, verdict=shown)
+
+
 def _p_note(row: dict[str, Any], k: str) -> str:
     """The p-value under a verdict; for a slope whose one-sided p rounds to 1, the margin
     instead: how many standard errors the slope lies inside its bound."""
@@ -210,8 +225,7 @@ def summary_columns(wide: pd.DataFrame) -> list[Column]:
                                               "at its α; p-value before the correction (slopes: one-sided, "
                                               "H0 the error falls at least as fast as the bound; where p "
                                               "rounds to 1, how many standard errors the slope is inside it)",
-                               lambda r, k=k: Cell(str(value_of(r, f"{k}_verdict") or "—"), _p_note(r, k),
-                                                   verdict=str(value_of(r, f"{k}_verdict") or ""))))
+                               lambda r, k=k: _verdict_cell(r, k)))
         elif f"{k}_pvalue" in wide:
             cols.append(Column("p", f"p-value of the {k} test",
                                lambda r, k=k: Cell(fmt_p(value_of(r, f"{k}_pvalue"))),
@@ -220,6 +234,11 @@ def summary_columns(wide: pd.DataFrame) -> list[Column]:
         cols.append(Column("notes", "warnings of the bias test: heavy tails, skewed batches, faults",
                            lambda r: Cell(str(value_of(r, "flags") or ""))))
     return cols
+
+
+def _sampler_verdict(r: dict[str, Any]) -> Cell:
+    shown = shown_verdict(r["verdict"], r.get("xfail"))
+    return Cell(shown or "—", f"xfail: {r['xfail']}" if shown == "xfailed" else "", verdict=shown)
 
 
 def sampler_columns() -> list[Column]:
@@ -244,7 +263,7 @@ def sampler_columns() -> list[Column]:
                numeric=True),
         Column("verdict", "Holm across the suite's sampler checks at its α; "
                           "deterministic failures always fail",
-               lambda r: Cell(str(r["verdict"] or "—"), verdict=str(r["verdict"] or ""))),
+               _sampler_verdict),
         Column("α", "the suite's family-wise false-alarm rate", lambda r: Cell(fmt_num(r["alpha"], "g")),
                numeric=True),
         Column("∫ pdf", "integral of the claimed pdf over the domain (cubature) ± its error bound", norm,

@@ -22,6 +22,11 @@ def test_own_renderer_example_runs_as_its_readme_says(tmp_path):
                  "--off-by-one#1: divides the sum of spp samples by spp + 1"):
         assert twin in out
     assert "command:myrenderer.py" in out and "myrenderer:?" not in out
+    rep = subprocess.run([str(BIN / "harness"), "report", "--db", "r.sqlite", "-o", "r.html"], cwd=repo,
+                         capture_output=True, text=True, timeout=300)
+    page = (repo / "r.html").read_text()
+    assert rep.returncode == 0 and "3 known findings (xfail" in page and "a CI run fails on" not in page
+    assert page.count(">xfailed<") == 3 and "xfail: divides the sum of spp samples by spp + 1" in page
     p = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "--harness-db",
                         "r.sqlite"], cwd=repo, capture_output=True, text=True, timeout=900)
     assert p.returncode == 0, p.stdout + p.stderr

@@ -38,7 +38,7 @@ from harness.suite.plan import (
     estimator_units,
 )
 from harness.suite.store import Store
-from harness.suite.verdicts import family_rejections
+from harness.suite.verdicts import family_rejections, mark_xfail
 from harness.usercode import load_attr
 
 __all__ = ["EstimateJob", "CaseResult", "EstimatorKind", "results_table", "format_table"]
@@ -157,7 +157,10 @@ class EstimatorKind:
                 "1/(V·T): efficiency (background eq. 5) against uniform MC on the same integrand."
                 if results else "")
         return Outcome(self.name, "cases", tuple(self.names()), tuple(results), tuple(verdicts),
-                       tuple(failures), tuple(_rows(suite, results, table)), table, text,
+                       tuple(failures),
+                       tuple(mark_xfail(_rows(suite, results, table),
+                                        {k: c.xfail for k, c in self.case_of.items()})),
+                       table, text,
                        tuple(c.xfail for c in suite.cases))
 
 

@@ -37,6 +37,7 @@ from harness.suite.parse import RenderCase, Suite
 from harness.suite.plan import Unit, reference_key, reference_units, render_key, render_seed, render_units
 from harness.suite.render_tables import failures, judge, render_rows, render_table
 from harness.suite.store import Store, write_exr
+from harness.suite.verdicts import mark_xfail
 
 __all__ = ["RenderJob", "RenderResult", "RenderKind", "ReferenceCache", "cached_renderer"]
 
@@ -213,7 +214,8 @@ class RenderKind:
         return Outcome(self.name, "render configurations", tuple(self.names()), tuple(results),
                        tuple(verdicts),
                        tuple(failures(results, verdicts, alpha)),
-                       tuple(render_rows(self.suite, results, verdicts)), frame, text,
+                       tuple(mark_xfail(render_rows(self.suite, results, verdicts),
+                                        {c.key: c.rc.xfail for c in self.cases})), frame, text,
                        tuple(rc.xfail for rc in self.suite.renders))
 
 

@@ -22,7 +22,7 @@ from harness.suite.kind import Outcome
 from harness.suite.parse import SamplerCase, Suite
 from harness.suite.plan import Unit, sampler_key, sampler_spec, sampler_units
 from harness.suite.store import Store
-from harness.suite.verdicts import family_rejections
+from harness.suite.verdicts import family_rejections, mark_xfail
 
 __all__ = ["SamplerJob", "SamplerResult", "SamplerKind"]
 
@@ -119,7 +119,9 @@ class SamplerKind:
         text = ("sampler checks (chi-square and friends; MCMC cross-check):\n"
                 + _format_table(results, verdicts, suite.alpha) if results else "")
         return Outcome(self.name, "sampler checks", tuple(self.names()), tuple(results), tuple(verdicts),
-                       tuple(failures), tuple(_rows(suite, results, verdicts)), frame, text,
+                       tuple(failures),
+                       tuple(mark_xfail(_rows(suite, results, verdicts),
+                                        {k: sc.xfail for k, sc in self.sampler_of.items()})), frame, text,
                        tuple(sc.xfail for sc in suite.samplers))
 
 

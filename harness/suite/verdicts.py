@@ -21,10 +21,20 @@ from collections.abc import Sequence
 
 from harness.stats import holm
 
-__all__ = ["FAILING", "PASSING", "family_rejections"]
+__all__ = ["FAILING", "PASSING", "family_rejections", "mark_xfail"]
 
 FAILING = frozenset({"biased", "bias missed", "invalid", "slower than expected", "failed"})
 PASSING = frozenset({"unbiased", "biased (expected)", "consistent", "as expected", "passed", "reached"})
+
+
+def mark_xfail(rows: list[dict], reasons: dict[str, str]) -> list[dict]:
+    """The measurement rows with the ``xfail`` reason of their case (case key -> reason, ""
+    where none) in their detail, so the report shows a known finding as one."""
+    for row in rows:
+        reason = reasons.get(row["case_key"], "")
+        if reason:
+            row["detail"] = {**row.get("detail", {}), "xfail": reason}
+    return rows
 
 
 def family_rejections(pvalues: Sequence[float | None], alpha: float) -> tuple[list[bool | None],

@@ -124,6 +124,12 @@ def test_an_xfail_that_passes_fails_the_run(repo):
     o = s["estimator"]
     assert o.status(0) == "xpassed" and s.failed == 1
     assert o.problem(0).startswith("[XPASS(strict)] expected to fail (thought wrong) but passed")
+    from reports import write_report
+
+    page = write_report(repo / "r.sqlite", repo / "r.html").read_text()
+    assert "1 result a CI run fails on" in page
+    assert "uniform / uniform: [XPASS(strict)] expected to fail (thought wrong) but passed" in page
+    assert "1 known finding (xfail" in page                 # the too-bright twin, failing as recorded
 
 
 def test_cli_and_pytest_report_xfail(repo):
