@@ -33,7 +33,7 @@ from typing import Any, Callable, Protocol
 import numpy as np
 
 __all__ = ["Render", "Renderer", "RenderError", "ImageFaults", "image_faults", "read_image", "renderer",
-           "adapter_names", "ADAPTERS", "ENTRY_POINTS"]
+           "adapter_names", "check_spec", "file_digest", "ExactImage", "ADAPTERS", "ENTRY_POINTS"]
 
 # adapter name -> module that defines `make_renderer(spec: dict[, base=]) -> Renderer`
 ADAPTERS = {"mitsuba": "harness.adapters.mitsuba.render", "pyrender": "harness.adapters.pyrender.render",
@@ -140,6 +140,46 @@ def renderer(adapter: str, spec: dict[str, Any], *, base: Path | None = None) ->
     except (TypeError, ValueError):
         takes_base = False
     return make(dict(spec), base=base) if takes_base else make(dict(spec))
+
+
+def check_spec(spec: dict[str, Any], keys: dict[str, Any], adapter: str) -> None:
+    """Every key of ``spec`` is one of ``keys`` (name -> type or tuple of types; a bool is
+    never a number), with a value of its type; ValueError naming the key otherwise."""
+    for key, value in spec.items():
+        want = keys.get(key)
+        if want is None:
+            raise ValueError(f"'{key}': unknown key for the {adapter} adapter; expected one of: "
+                             f"{', '.join(keys)}")
+        if isinstance(value, bool) or not isinstance(value, want):
+            raise ValueError(f"'{key}': expected {getattr(want, '__name__', 'a number')}, got {value!r}")
+
+
+def file_digest(path: Path) -> str:
+    """SHA-256 (24 hex digits) of a file's bytes, for fingerprints."""
+    import hashlib
+
+    return hashlib.sha256(path.read_bytes()).hexdigest()[:24]
+
+
+class ExactImage:
+    """An adapter's ``exact`` key: an image file resolved against the suite's folder, checked
+    to exist when the renderer is built, read once (float64) when first asked for."""
+
+    def __init__(self, spec: dict[str, Any], base: Path):
+        self.path = (base / spec["exact"]).resolve() if "exact" in spec else None
+        if self.path is not None and not self.path.is_file():
+            raise ValueError(f"'exact': no image file {self.path}")
+        self._image: np.ndarray | None = None
+
+    def image(self) -> np.ndarray | None:
+        """The exact image, or None where the spec gives none."""
+        if self.path is not None and self._image is None:
+            self._image = read_image(self.path).astype(np.float64)
+        return self._image
+
+    def digest(self) -> str | None:
+        """The image file's digest for the renderer's fingerprint (None without one)."""
+        return file_digest(self.path) if self.path is not None else None
 
 
 def read_image(path: Path) -> np.ndarray:

@@ -30,7 +30,6 @@ change of the renderer's source invalidates its stored renders.
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import re
 import shlex
@@ -43,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from harness.adapters.base import Render, RenderError, read_image
+from harness.adapters.base import ExactImage, Render, RenderError, check_spec, file_digest, read_image
 
 __all__ = ["CommandRenderer", "make_renderer"]
 
@@ -56,13 +55,7 @@ class CommandRenderer:
     """A renderer run as a command per image (see the module docstring)."""
 
     def __init__(self, spec: dict[str, Any], base: Path):
-        for key, value in spec.items():
-            want = _KEYS.get(key)
-            if want is None:
-                raise ValueError(f"'{key}': unknown key for the command adapter; expected one of: "
-                                 f"{', '.join(_KEYS)}")
-            if isinstance(value, bool) or not isinstance(value, want):
-                raise ValueError(f"'{key}': expected {getattr(want, '__name__', 'a number')}, got {value!r}")
+        check_spec(spec, _KEYS, "command")
         if "command" not in spec:
             raise ValueError("'command': missing key: the command line that renders one image, with "
                              "{spp}, {seed} and {out}")
@@ -87,12 +80,7 @@ class CommandRenderer:
             if self.pattern.groups < 1:
                 raise ValueError("'time': the regex needs a group capturing the seconds, "
                                  "e.g. \"took ([0-9.]+) s\"")
-        self.exact_path = None
-        if "exact" in spec:
-            self.exact_path = (base / spec["exact"]).resolve()
-            if not self.exact_path.is_file():
-                raise ValueError(f"'exact': no image file {self.exact_path}")
-        self._exact: np.ndarray | None = None
+        self._exact = ExactImage(spec, base)
         self._startup: float | None = None
 
     def _check_placeholders(self, command: str, key: str) -> None:
@@ -113,11 +101,7 @@ class CommandRenderer:
         return Render(image, spp, max(wall - self.startup(), 0.0))
 
     def exact(self) -> np.ndarray | None:
-        if self.exact_path is None:
-            return None
-        if self._exact is None:
-            self._exact = read_image(self.exact_path).astype(np.float64)
-        return self._exact
+        return self._exact.image()
 
     def reference(self) -> CommandRenderer:
         if "reference_command" not in self.spec:
@@ -127,9 +111,9 @@ class CommandRenderer:
         return CommandRenderer(spec, self.base)
 
     def fingerprint(self) -> dict[str, Any]:
-        files = {w: _sha256(self.base / w) for w in _words(self.command) if (self.base / w).is_file()}
+        files = {w: file_digest(self.base / w) for w in _words(self.command) if (self.base / w).is_file()}
         return {"adapter": "command", **{k: v for k, v in self.spec.items() if k != "exact"},
-                "sources": files, "exact": _sha256(self.exact_path) if self.exact_path else None}
+                "sources": files, "exact": self._exact.digest()}
 
     def describe(self) -> tuple[str, str]:
         """(scene, configuration) for tables: the ``scene`` key or the script the command runs,
@@ -207,10 +191,6 @@ def _words(command: str) -> list[str]:
         return shlex.split(command)
     except ValueError:
         return command.split()
-
-
-def _sha256(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()[:24]
 
 
 def _seconds(value: Any, line: str, where: str) -> float:

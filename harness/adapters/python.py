@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from harness.adapters.base import Render, RenderError, read_image
+from harness.adapters.base import ExactImage, Render, RenderError, check_spec
 from harness.usercode import UserCodeError, load_attr, source_fingerprint
 
 __all__ = ["PythonRenderer", "make_renderer"]
@@ -34,13 +34,7 @@ class PythonRenderer:
     """A renderer that is a Python function (see the module docstring)."""
 
     def __init__(self, spec: dict[str, Any], base: Path):
-        for key, value in spec.items():
-            want = _KEYS.get(key)
-            if want is None:
-                raise ValueError(f"'{key}': unknown key for the python adapter; expected one of: "
-                                 f"{', '.join(_KEYS)}")
-            if not isinstance(value, want):
-                raise ValueError(f"'{key}': expected {want.__name__}, got {value!r}")
+        check_spec(spec, _KEYS, "python")
         if "function" not in spec:
             raise ValueError("'function': missing key: module:attr of render(spp=, seed=, **params)")
         self.spec, self.base = dict(spec), base
@@ -53,10 +47,7 @@ class PythonRenderer:
             kind = type(self.function).__name__
             raise ValueError(f"'function': {self.target!r} is a {kind}, not a function")
         self.params = dict(spec.get("params", {}))
-        self.exact_path = (base / spec["exact"]).resolve() if "exact" in spec else None
-        if self.exact_path is not None and not self.exact_path.is_file():
-            raise ValueError(f"'exact': no image file {self.exact_path}")
-        self._exact: np.ndarray | None = None
+        self._exact = ExactImage(spec, base)
 
     def render(self, spp: int, seed: int) -> Render:
         call = f"{self.target}(spp={spp}, seed={seed}" + "".join(f", {k}={v!r}"
@@ -84,21 +75,14 @@ class PythonRenderer:
         return Render(a, spp, seconds)
 
     def exact(self) -> np.ndarray | None:
-        if self.exact_path is None:
-            return None
-        if self._exact is None:
-            self._exact = read_image(self.exact_path).astype(np.float64)
-        return self._exact
+        return self._exact.image()
 
     def reference(self) -> PythonRenderer:
         return self
 
     def fingerprint(self) -> dict[str, Any]:
-        import hashlib
-
-        exact = hashlib.sha256(self.exact_path.read_bytes()).hexdigest()[:24] if self.exact_path else None
         return {"adapter": "python", "function": self.target, "params": self.params,
-                "source": source_fingerprint(self.function), "exact": exact}
+                "source": source_fingerprint(self.function), "exact": self._exact.digest()}
 
     def describe(self) -> tuple[str, str]:
         params = ", ".join(f"{k}={v}" for k, v in self.params.items())
