@@ -189,9 +189,15 @@ class SamplerTest:
               udim: int | None = None) -> SamplerCheck:
         """Draws ``sample_count`` points from ``sample`` (uniforms of stream ``seed``,
         :data:`SAMPLE_CASE`) and runs the checks of :func:`check_sampler` on them."""
+        _, x = _draw(sample, self.dom, self.n, seed, udim)
+        return self.check_points(x)
+
+    def check_points(self, x: np.ndarray) -> SamplerCheck:
+        """The checks of :func:`check_sampler` on ``sample_count`` points already drawn, (N,)
+        on an interval or (N, point_dim)."""
         dom, n, base = self.dom, self.n, self.base
-        u = rest.points(n, udim or dom.udim, seed=seed, case_id=SAMPLE_CASE)
-        x = _drawn(sample, u, dom)
+        if x.shape[0] != n:
+            raise ValueError(f"expected the {n} points this test was built for, got {x.shape[0]}")
         failures: list[Failure] = []
 
         def fail(check: str, mask: np.ndarray, detail: str, values: np.ndarray | None = None) -> None:
@@ -291,14 +297,11 @@ def check_sampler(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.ndarray
     missing ones against N (1 - total), all Holm-combined at ``alpha``.
     """
     dom = as_domain(domain)
-    n = int(sample_count)
-    u = rest.points(n, udim or dom.udim, seed=seed, case_id=SAMPLE_CASE) if n >= 1000 else None
-    x = _drawn(sample, u, dom) if u is not None else None
-    if total is None and (x is None or np.isfinite(x).all()):
-        return SamplerTest(pdf, dom, sample_count=sample_count, alpha=alpha).check(lambda _u: x, seed=seed,
-                                                                                     udim=udim)
-    return check_with_missing(lambda _u: x, pdf, dom, sample_count=n, seed=seed, alpha=alpha, udim=udim,
-                              total=total)
+    n = _sample_count(sample_count)
+    u, x = _draw(sample, dom, n, seed, udim)
+    if total is None and np.isfinite(x).all():
+        return SamplerTest(pdf, dom, sample_count=n, alpha=alpha).check_points(x)
+    return _check_drawn(u, x, pdf, dom, alpha, total)
 
 
 def failure_pvalue(failed: int, n: int, total: float, total_err: float) -> float:
@@ -329,13 +332,17 @@ def check_with_missing(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.nd
     The tests table holds a "failed samples" row (the count, and its binomial p-value);
     ``normalization`` the cubature's P and its error bound."""
     dom = as_domain(domain)
-    n = int(sample_count)
-    if n < 1000:
-        raise ValueError(f"'sample_count' must be at least 1000, got {sample_count!r}")
+    u, x = _draw(sample, dom, _sample_count(sample_count), seed, udim)
+    return _check_drawn(u, x, pdf, dom, alpha, total)
+
+
+def _check_drawn(u: np.ndarray, x: np.ndarray, pdf: Callable[[np.ndarray], np.ndarray], dom: Domain,
+                 alpha: float, total: float | None) -> SamplerCheck:
+    """check_with_missing on points x already drawn from uniforms u."""
     if total is not None and not (isinstance(total, (int, float)) and 0 < total <= 1):
         raise ValueError(f"'total' must be the pdf's integral over the domain, in (0, 1], got {total!r}")
-    u = rest.points(n, udim or dom.udim, seed=seed, case_id=SAMPLE_CASE)
-    x = _drawn(sample, u, dom).reshape(n, dom.point_dim)
+    n = x.shape[0]
+    x = x.reshape(n, dom.point_dim)
     failed = ~np.all(np.isfinite(x), axis=1)
     produced = x[~failed].reshape((-1,) if dom.point_dim == 1 else (-1, dom.point_dim))
     m = produced.shape[0]
@@ -366,7 +373,7 @@ def check_with_missing(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.nd
             failures.append(Failure("normalization", 1,
                                     f"pdf integrates to {cubature:.6f} ± {cubature_err:.1e} over the "
                                     f"{dom.kind}, more than 1"))
-    shape = raw.for_total(p_total).check(lambda _u: produced, seed=seed, udim=udim)
+    shape = raw.for_total(p_total).check_points(produced)
     index = np.flatnonzero(~failed)  # the shape check's examples index the produced samples
     for f in shape.failures:
         if f.check != "normalization":
@@ -390,6 +397,21 @@ def check_with_missing(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.nd
 
 def _u_examples(u: np.ndarray, mask: np.ndarray, k: int = 5) -> list[dict[str, Any]]:
     return [{"index": int(i), "u": u[i].tolist()} for i in np.flatnonzero(mask)[:k]]
+
+
+def _sample_count(sample_count: Any) -> int:
+    n = int(sample_count)
+    if n < 1000:
+        raise ValueError(f"'sample_count' must be at least 1000, got {sample_count!r}")
+    return n
+
+
+def _draw(sample: Callable[[np.ndarray], Any], dom: Domain, n: int, seed: int,
+          udim: int | None) -> tuple[np.ndarray, np.ndarray]:
+    """The check's uniforms (stream ``seed``, :data:`SAMPLE_CASE`) and the points ``sample``
+    draws from them."""
+    u = rest.points(n, udim or dom.udim, seed=seed, case_id=SAMPLE_CASE)
+    return u, _drawn(sample, u, dom)
 
 
 def _drawn(sample: Callable[[np.ndarray], Any], u: np.ndarray, dom: Domain) -> np.ndarray:
