@@ -59,9 +59,7 @@ def samplers(raw: list[dict[str, Any]], samples: int, first_id: int, base: Path,
         if domain not in DOMAINS:
             raise SuiteError(where.at(table, "domain",
                                       f"expected one of: {', '.join(DOMAINS)}, got {domain!r}"))
-        n = c.get("samples", samples)
-        if n < 1000:
-            raise SuiteError(where.at(table, "samples", f"expected at least 1000 samples, got {n}"))
+        n = _samples(c, samples, where, table)
         ms = c.get("measurements", ["chi_square"])
         for m in ms:
             if m == "weight":
@@ -102,9 +100,7 @@ def _user_sampler(c: dict[str, Any], samples: int, case_id: int, base: Path, whe
     total = float(c["total"]) if "total" in c else user.total
     if total is not None and not 0 < total <= 1:
         raise SuiteError(where.at(table, "total", f"expected the pdf's integral, in (0, 1], got {total}"))
-    n = c.get("samples", samples)
-    if n < 1000:
-        raise SuiteError(where.at(table, "samples", f"expected at least 1000 samples, got {n}"))
+    n = _samples(c, samples, where, table)
     ms = c.get("measurements", ["chi_square"])
     for m in ms:
         if m not in ("chi_square", "mcmc"):
@@ -117,6 +113,14 @@ def _user_sampler(c: dict[str, Any], samples: int, case_id: int, base: Path, whe
     return SamplerCase(target, tuple(sorted(params.items())), domain, n, case_id,
                        tuple(dict.fromkeys(ms)) or ("chi_square",), xfail=xfail_reason(c, where, table),
                        target=target, source=source, total=total, udim=user.udim)
+
+
+def _samples(c: dict[str, Any], samples: int, where: Locator, table: Any) -> int:
+    """A sampler table's ``samples`` (default: the suite's), at least 1000."""
+    n = c.get("samples", samples)
+    if n < 1000:
+        raise SuiteError(where.at(table, "samples", f"expected at least 1000 samples, got {n}"))
+    return n
 
 
 _ADAPTER_SAMPLER_KEYS = {"adapter": str, "plugin": dict, "wi": (int, float, list), "variant": str,
@@ -139,9 +143,7 @@ def _adapter_sampler(c: dict[str, Any], samples: int, case_id: int, where: Locat
     except (ValueError, TypeError, RuntimeError) as e:
         msg = str(e)
         raise SuiteError(where.at(table, named_key(msg, spec) or "plugin", msg.splitlines()[0])) from None
-    n = c.get("samples", samples)
-    if n < 1000:
-        raise SuiteError(where.at(table, "samples", f"expected at least 1000 samples, got {n}"))
+    n = _samples(c, samples, where, table)
     ms = c.get("measurements", ["chi_square"] + (["weight"] if s.kind != "microfacet" else []))
     for m in ms:
         if m not in ("chi_square", "weight"):
