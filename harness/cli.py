@@ -1,5 +1,5 @@
-"""Command line: ``harness run SUITE``, ``harness report``, ``harness show --db PATH`` \
-and ``harness list``."""
+"""Command line: ``harness run SUITE``, ``harness report``, ``harness show --db PATH``, \
+``harness gc --db PATH``, ``harness compare``, ``harness check-sampler`` and ``harness list``."""
 from __future__ import annotations
 
 import argparse
@@ -13,9 +13,10 @@ from tqdm import tqdm
 import reference_estimators as rest
 
 from harness.adapters.base import RenderError
+from harness.suite.execute import ClusterError
 from harness.suite.parse import SuiteError, load_suite
 from harness.suite.run import run_suite
-from harness.suite.store import load
+from harness.suite.store import StoreError, load, runs
 from harness.usercode import UserCodeError
 
 
@@ -30,9 +31,16 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--db", metavar="PATH", help="results database (default: results/<suite name>.sqlite)")
     run.add_argument("--dask", metavar="ADDRESS",
                      help="run on a Dask scheduler at ADDRESS, or 'local' for a LocalCluster")
-    show = sub.add_parser("show", help="print the measurements stored in a results database")
+    run.add_argument("--wait", type=float, default=60, metavar="SECONDS",
+                     help="how long to wait for a lock another process holds on the database (default 60)")
+    show = sub.add_parser("show", help="print the measurements stored in a results database (each suite's "
+                                       "latest finished run)")
     show.add_argument("--db", metavar="PATH", required=True)
     show.add_argument("--suite", help="only this suite")
+    which = show.add_mutually_exclusive_group()
+    which.add_argument("--run", type=int, metavar="N", help="the measurements of run N (see --runs)")
+    which.add_argument("--all", action="store_true", help="every run's measurements, with their run")
+    which.add_argument("--runs", action="store_true", help="list the runs: suite file, revision, times")
     rep = sub.add_parser("report",
                          help="write the stored results as one self-contained HTML page (or CSV, Markdown)")
     rep.add_argument("--db", metavar="PATH", default="results/default.sqlite",
@@ -41,6 +49,14 @@ def main(argv: list[str] | None = None) -> int:
                                                            ".html, .csv or .md)")
     rep.add_argument("--format", choices=["html", "csv", "markdown"], default="html")
     rep.add_argument("--suite", help="only this suite")
+    rep.add_argument("--run", type=int, metavar="N", help="run N instead of each suite's latest "
+                                                         "(harness show --runs lists them)")
+    gc = sub.add_parser("gc", help="remove stored units, images and cached references no suite's latest run "
+                                   "needs; --repair a damaged database")
+    gc.add_argument("--db", metavar="PATH", required=True)
+    gc.add_argument("--dry-run", action="store_true", help="count what would be removed, change nothing")
+    gc.add_argument("--repair", action="store_true",
+                    help="move a damaged database aside and copy every readable row into a new one")
     sub.add_parser("list", help="list the catalogue's integrands, techniques and samplers")
     cmp = sub.add_parser("compare", help="two renderers' replica renders against each other, no "
                                          "reference needed (per-pixel, tile and image-mean Welch tests; "
@@ -70,9 +86,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "list":
         return _list()
     if args.command == "show":
-        return _show(args.db, args.suite)
+        return _show(args)
     if args.command == "report":
-        return _report(args.db, args.output, args.format, args.suite)
+        return _report(args.db, args.output, args.format, args.suite, args.run)
+    if args.command == "gc":
+        return _gc(args)
     if args.command == "check-sampler":
         return _check_sampler(args)
     if args.command == "compare":
@@ -86,10 +104,10 @@ def main(argv: list[str] | None = None) -> int:
         print("harness: --threads must be >= 1", file=sys.stderr)
         return 2
     db = args.db or f"results/{suite.file_name}.sqlite"
-    return _run(suite, db, args.threads, args.csv, args.dask)
+    return _run(suite, db, args.threads, args.csv, args.dask, args.wait)
 
 
-def _run(suite, db: str, threads: int | None, csv: str | None, dask: str | None) -> int:
+def _run(suite, db: str, threads: int | None, csv: str | None, dask: str | None, wait: float) -> int:
     bar = tqdm(total=0, unit="unit", desc=f"{suite.name}", disable=not sys.stderr.isatty(), leave=False)
 
     stored = {"done": 0, "total": 0}
@@ -101,13 +119,16 @@ def _run(suite, db: str, threads: int | None, csv: str | None, dask: str | None)
         stored.update(done=done, total=total)
 
     try:
-        summary = run_suite(suite, db, threads=threads, dask=dask, progress=progress)
+        summary = run_suite(suite, db, threads=threads, dask=dask, progress=progress, wait=wait)
     except KeyboardInterrupt as e:  # Ctrl-C or SIGTERM: say what is kept (entry() prints it)
         what = f"{stored['done']} of {stored['total']} units stored in {db}, rerun to resume"
         raise type(e)(what) from None
     except (RenderError, UserCodeError) as e:  # a render or a user's callable failed: nothing stored for it
         print(f"harness: {e}\nharness: {stored['done']} of {stored['total']} units stored in {db}; fix it "
               "and rerun to resume", file=sys.stderr)
+        return 2
+    except (StoreError, ClusterError) as e:  # the database, the disk or the cluster: one line naming it
+        print(f"harness: {e}", file=sys.stderr)
         return 2
     finally:
         bar.close()
@@ -192,30 +213,49 @@ def _compare(args) -> int:
     return 0 if result.passed else 1
 
 
-def _report(db: str, output: str | None, fmt: str, suite: str | None) -> int:
+def _report(db: str, output: str | None, fmt: str, suite: str | None, run: int | None) -> int:
     from reports import write_report
 
     try:
-        path = write_report(db, output, fmt=fmt, suite=suite)
+        path = write_report(db, output, fmt=fmt, suite=suite, run=run)
     except (FileNotFoundError, ValueError) as e:
         print(f"harness: {e}", file=sys.stderr)
+        return 2
+    except OSError as e:  # the report file cannot be written
+        print(f"harness: {e.filename or output}: {e.strerror or e}", file=sys.stderr)
         return 2
     print(f"report written to {path.resolve()}")
     return 0
 
 
-def _show(db: str, suite: str | None) -> int:
+def _show(args) -> int:
     try:
-        df = load(db, suite)
+        df = runs(args.db) if args.runs else load(args.db, args.suite, run=args.run, all_runs=args.all)
     except (FileNotFoundError, ValueError) as e:
         print(f"harness: {e}", file=sys.stderr)
         return 2
     if df.empty:
-        print(f"no measurements in {db}")
+        print(f"no {'runs' if args.runs else 'measurements'} in {args.db}")
         return 0
-    cols = ["suite", "integrand", "technique", "measurement", "value", "lo", "hi", "n", "pvalue", "alpha",
-            "verdict"]
+    if args.runs:
+        cols = ["run", "suite", "file", "revision", "started", "finished", "units_planned", "units_run",
+                "measurements"]
+        print(df[cols].to_string(index=False))
+        return 0
+    cols = (["run"] if args.all else []) + ["suite", "integrand", "technique", "measurement", "value", "lo",
+                                            "hi", "n", "pvalue", "alpha", "verdict"]
     print(df[cols].to_string(index=False, float_format=lambda v: f"{v:.6g}"))
+    return 0
+
+
+def _gc(args) -> int:
+    from harness.suite.gc import collect_garbage, repair
+
+    try:
+        print(repair(args.db) if args.repair else collect_garbage(args.db, dry_run=args.dry_run))
+    except StoreError as e:
+        print(f"harness: {e}", file=sys.stderr)
+        return 2
     return 0
 
 

@@ -22,13 +22,13 @@ FORMATS = {"html": ".html", "csv": ".csv", "markdown": ".md"}
 
 
 def write_report(db: str | Path, out: str | Path | None = None, *, fmt: str = "html",
-                 suite: str | None = None) -> Path:
-    """Writes the report of ``db`` (optionally one suite) as ``fmt`` ("html", "csv" or
-    "markdown") to ``out`` (default: the database's path with the format's suffix); returns
-    the path written."""
+                 suite: str | None = None, run: int | None = None) -> Path:
+    """Writes the report of ``db`` (each suite's latest finished run, or run ``run``;
+    optionally one suite) as ``fmt`` ("html", "csv" or "markdown") to ``out`` (default: the
+    database's path with the format's suffix); returns the path written."""
     if fmt not in FORMATS:
         raise ValueError(f"'fmt' must be one of {', '.join(FORMATS)}, got {fmt!r}")
-    results = load_results(db, suite)
+    results = load_results(db, suite, run)
     path = Path(out) if out is not None else Path(db).with_suffix(FORMATS[fmt])
     text = {"html": render_html, "csv": to_csv, "markdown": to_markdown}[fmt](results)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -20,7 +20,7 @@ import numpy as np
 
 from harness.adapters.base import read_image
 from harness.stats.compare import ImageComparison
-from harness.suite.store import connect_read_only, image_dir
+from harness.suite.store import connect_read_only, image_dir, read_stored
 from reports import images
 
 __all__ = ["ReplicaSet", "load_replicas", "compare_page"]
@@ -78,8 +78,11 @@ def _from_db(name: str, db: Path) -> ReplicaSet:
             raise ValueError(f"{name!r}: {what} in {db} (its configuration, a key prefix or part of "
                              f"scene/configuration); its render cases: {known or 'none'}")
         key, scene, config = renders[0]
-        rows = con.execute("SELECT replica, payload FROM units WHERE case_key = ? AND kind = 'render' AND "
-                           "stream = 0 ORDER BY replica", (key,)).fetchall()
+        latest = ("" if "planned" not in {t for (t,) in con.execute("SELECT name FROM sqlite_master")} else
+                  " AND EXISTS (SELECT 1 FROM planned p WHERE (p.case_key, p.stream, p.budget, p.replica, "
+                  "p.kind) = (u.case_key, u.stream, u.budget, u.replica, u.kind))")  # the latest run's spp
+        rows = con.execute("SELECT replica, payload FROM units u WHERE case_key = ? AND kind = 'render' AND "
+                           "stream = 0" + latest + " ORDER BY replica", (key,)).fetchall()
         files = {}
         for replica, payload in rows:
             image = json.loads(payload)["image"]
@@ -92,7 +95,7 @@ def _from_db(name: str, db: Path) -> ReplicaSet:
     if not files:
         raise ValueError(f"{scene}/{config} in {db} has no bias-test renders (measurements without 'bias')")
     try:
-        stack = np.stack([read_image(files[r]).astype(np.float64) for r in sorted(files)])
+        stack = np.stack([read_stored(files[r]).astype(np.float64) for r in sorted(files)])
     except OSError as err:
         raise ValueError(str(err)) from None
     return ReplicaSet(f"{scene}/{config}", stack, f"{db} case {key}")

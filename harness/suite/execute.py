@@ -21,7 +21,11 @@ import numpy as np
 
 from harness.suite.plan import Unit
 
-__all__ = ["Job", "JobResult", "run_local", "run_dask", "execute"]
+__all__ = ["Job", "JobResult", "ClusterError", "run_local", "run_dask", "execute"]
+
+
+class ClusterError(RuntimeError):
+    """The Dask scheduler cannot be reached (one line naming its address and the cause)."""
 
 
 @dataclass(frozen=True)
@@ -63,6 +67,9 @@ def run_local(jobs: list[Job], threads: int) -> Iterator[JobResult]:
             yield j.run()
 
 
+_CONNECT_TIMEOUT = "10s"   # how long to try a scheduler's address before giving up
+
+
 def run_dask(jobs: list[Job], address: str, threads: int) -> Iterator[JobResult]:
     """Jobs on a Dask cluster: ``address`` of a scheduler, or "local" for a LocalCluster of
     ``threads`` single-threaded worker processes.  Serial jobs go one at a time."""
@@ -70,7 +77,13 @@ def run_dask(jobs: list[Job], address: str, threads: int) -> Iterator[JobResult]
 
     cluster = LocalCluster(n_workers=max(threads, 1), threads_per_worker=1, processes=True,
                            dashboard_address=None) if address == "local" else None
-    client = Client(cluster if cluster is not None else address)
+    try:
+        client = Client(cluster if cluster is not None else address, timeout=_CONNECT_TIMEOUT)
+    except (OSError, TimeoutError, ValueError) as e:  # unreachable, refused, or not an address
+        if cluster is not None:
+            cluster.close()
+        raise ClusterError(f"cannot reach the Dask scheduler at {address}: "
+                           f"{str(e).splitlines()[0] if str(e) else type(e).__name__}") from None
     try:
         parallel = [j for j in jobs if not j.serial]
         if parallel:

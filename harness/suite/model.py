@@ -135,6 +135,7 @@ class Suite:
     budgets: tuple[int, ...] | None = None
     samplers: tuple[SamplerCase, ...] = ()
     renders: tuple[RenderCase, ...] = ()
+    revision: str = ""                 # SHA-256 of the suite file's text (which edit was run)
 
     @property
     def file_name(self) -> str:

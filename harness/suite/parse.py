@@ -76,6 +76,7 @@ Every mistake is reported as ``file:line: key: what was expected``.
 """
 from __future__ import annotations
 
+import hashlib
 import math
 import tomllib
 from pathlib import Path
@@ -87,6 +88,7 @@ from harness.stats.estimator import POINT_SETS, Contributions
 from harness.suite import parse_renders, parse_samplers
 from harness.suite.locate import Locator
 from harness.suite.model import MEASUREMENTS, Case, RenderCase, SamplerCase, Suite, SuiteError
+from harness.suite.plan import MAX_UNITS, UNIT_CHUNKS, unit_count
 from harness.suite.rules import check_keys, measurements, positive, xfail_reason
 from harness.usercode import UserCodeError, load_attr, source_fingerprint
 
@@ -161,17 +163,38 @@ def loads_suite(text: str, *, path: str | Path = "suite.toml") -> Suite:
                                            and not data.get("render")):
         raise SuiteError(where.at(None, "case",
                                   "expected at least one [[case]], [[sampler]] or [[render]] table"))
-    cases = _cases(raw_cases, samples, batches, suite_measurements, path.parent, where)
+    cases, tables = _cases(raw_cases, samples, batches, suite_measurements, path.parent, where)
     samplers = parse_samplers.samplers(data.get("sampler", []), samples, len(cases), path.parent, where)
     renders = parse_renders.renders(data.get("render", []), suite_measurements, path.parent, where)
-    return Suite(head.get("name", path.stem), path, seed, samples, threads or None, tuple(cases),
-                 float(alpha), batches, replicas, budgets, samplers, renders)
+    suite = Suite(head.get("name", path.stem), path, seed, samples, threads or None, tuple(cases),
+                  float(alpha), batches, replicas, budgets, samplers, renders,
+                  hashlib.sha256(text.encode()).hexdigest())
+    _check_size(suite, [raw_cases[t[1]] for t in tables], tables, where)
+    return suite
+
+
+def _check_size(suite: Suite, raw: list[dict[str, Any]], tables: list[Any], where: Locator) -> None:
+    """Refuses a suite whose estimator cases need more than MAX_UNITS work units (counted, not
+    made), naming the case that needs the most and the key that sets its budget."""
+    counts = [unit_count(suite, c) for c in suite.cases]
+    if sum(counts) <= MAX_UNITS:
+        return
+    i = max(range(len(counts)), key=counts.__getitem__)
+    case, table = suite.cases[i], tables[i]
+    key = "max_samples" if case.max_samples else "samples"
+    per_unit = UNIT_CHUNKS * rest.CHUNK_SIZE
+    raise SuiteError(where.at(table if key in raw[i] else "suite", key,
+                              f"{case.name}: {getattr(case, key):.3g} samples need {counts[i]:,} work "
+                              f"units of up to {per_unit:,} samples ({sum(counts):,} in the suite); a suite "
+                              f"may plan at most {MAX_UNITS:,} (each is held in memory and stored as a "
+                              "database row): lower the samples, batches or replicas"))
 
 
 def _cases(raw: list[dict[str, Any]], samples: int, batches: int, suite_measurements: tuple[str, ...],
-           base: Path, where: Locator) -> tuple[Case, ...]:
+           base: Path, where: Locator) -> tuple[tuple[Case, ...], list[Any]]:
     """[[case]] tables: catalogue integrand x techniques (one case per pair) or a user's
-    estimator; then every ``baseline`` must name the label of another case."""
+    estimator; then every ``baseline`` must name the label of another case.  Returns the
+    cases and each one's table, ("case", index)."""
     cases: list[Case] = []
     tables: list[Any] = []
     for i, c in enumerate(raw):
@@ -230,7 +253,7 @@ def _cases(raw: list[dict[str, Any]], samples: int, batches: int, suite_measurem
                                   **common))
                 tables.append(table)
     _check_labels(cases, tables, where)
-    return tuple(cases)
+    return tuple(cases), tables
 
 
 def user_estimator(c: dict[str, Any], base: Path, where: Locator, table: Any) -> Contributions:

@@ -9,7 +9,8 @@ where an exact value exists (the catalogue's values are exact, some scenes have 
 no renderer or sampler test unless a case asks for one.
 
 Fingerprints (``case_key``, ``sampler_key``, ``render_key``, ``reference_key``) hash what fixes
-a case's numbers; a unit's random stream is keyed by its case, stream and replica.
+a case's numbers, the harness code that computes its units included (harness.fingerprint); a
+unit's random stream depends on its case's settings, stream and replica, never on that code.
 """
 from __future__ import annotations
 
@@ -20,20 +21,26 @@ from typing import Any
 
 import reference_estimators as rest
 
-from harness.suite.parse import Case, RenderCase, SamplerCase, Suite
+from harness.fingerprint import code_fingerprint
+from harness.suite.model import Case, RenderCase, SamplerCase, Suite
 
 __all__ = ["UNIT_CHUNKS", "BIAS_STREAM", "Unit", "case_key", "sampler_key", "sampler_spec", "render_key",
-           "reference_key", "render_seed", "core_case_id", "bias_budget", "bias_stream",
-           "convergence_budgets", "chosen_budgets", "estimator_units", "sampler_units", "render_units",
-           "reference_units", "plan"]
+           "reference_key", "render_stream", "reference_stream", "render_seed", "core_case_id", "bias_budget",
+           "bias_stream", "convergence_budgets", "chosen_budgets", "estimator_units", "sampler_units",
+           "render_units", "reference_units", "plan", "unit_count", "MAX_UNITS"]
 
 UNIT_CHUNKS = 32                     # core chunks (of 65 536 samples) per stored unit
+MAX_UNITS = 1 << 20                  # units a suite may plan: each is held in memory, then a database row
 BIAS_STREAM = 0                      # stream 0: the bias test's batches; 1 + i: convergence budget i;
 TARGET_STREAM = 200                  # 200 + s: the bias test's batches at look s >= 1 of a target
 _FORMAT = 1                          # bump when a unit's meaning changes: old rows stop matching
 _SAMPLER_PAYLOAD = 2                 # sampler-check payloads: 2 adds residual grids and marginals (report)
 _RENDER_FORMAT = 1                   # bump when a render unit's meaning changes
 RENDER = "render"                    # the kind of a render unit
+# the harness code (harness.fingerprint) that computes each kind's units: part of their keys
+_ESTIMATOR_CODE = ("suite/estimators.py", "stats/estimator.py", "usercode.py")
+_SAMPLER_CODE = ("samplers", "adapters", "suite/sampler_checks.py", "usercode.py")
+_RENDER_CODE = ("adapters", "suite/renders.py", "usercode.py")
 
 
 @dataclass(frozen=True, order=True)
@@ -61,14 +68,16 @@ def case_key(suite: Suite, case: Case) -> str:
     what = ({"estimator": case.estimator, "source": case.source, "dim": case.dim, "points": case.points}
             if case.estimator else {"integrand": case.integrand, "technique": case.technique})
     return _hash({**what, "seed": suite.seed, "case_id": case.case_id, "unit_chunks": UNIT_CHUNKS,
-                  "format": _FORMAT, "core": rest.__version__, "build": rest.core_fingerprint()})
+                  "format": _FORMAT, "core": rest.__version__, "build": rest.core_fingerprint(),
+                  "code": code_fingerprint(*_ESTIMATOR_CODE)})
 
 
 def sampler_key(suite: Suite, sc: SamplerCase) -> str:
     """Fingerprint of a sampler check: the sampler, its parameters, domain, samples and seed."""
     definition = {"sampler": sc.name, "params": list(sc.params), "domain": sc.domain, "samples": sc.samples,
                   "seed": suite.seed, "case_id": sc.case_id, "format": _FORMAT, "payload": _SAMPLER_PAYLOAD,
-                  "core": rest.__version__, "build": rest.core_fingerprint()}
+                  "core": rest.__version__, "build": rest.core_fingerprint(),
+                  "code": code_fingerprint(*_SAMPLER_CODE)}
     if sc.target:   # a user's sampler: a change of its source invalidates the check
         definition.update(target=sc.target, source=sc.source, total=sc.total, udim=sc.udim)
     if sc.adapter:  # a renderer's sampler: its library version is part of what is tested
@@ -88,20 +97,33 @@ def sampler_spec(suite: Suite, sc: SamplerCase) -> str:
                        "udim": sc.udim})
 
 
-def render_key(suite: Suite, fingerprint: dict[str, Any]) -> str:
-    """Fingerprint of a render case's images: the renderer's fingerprint and the suite seed."""
+def render_stream(suite: Suite, fingerprint: dict[str, Any]) -> str:
+    """What a render case's seeds derive from: the renderer's fingerprint and the suite seed."""
     return _hash({"renderer": fingerprint, "seed": suite.seed, "format": _RENDER_FORMAT})
 
 
-def reference_key(suite: Suite, rc: RenderCase, fingerprint: dict[str, Any]) -> str:
-    """Fingerprint of a rendered reference: its renderer, budget, parts and the suite seed."""
+def render_key(suite: Suite, fingerprint: dict[str, Any]) -> str:
+    """Fingerprint of a render case's images: its seeds' source (:func:`render_stream`) and the
+    harness's adapter code."""
+    return _hash({"stream": render_stream(suite, fingerprint), "code": code_fingerprint(*_RENDER_CODE)})
+
+
+def reference_stream(suite: Suite, rc: RenderCase, fingerprint: dict[str, Any]) -> str:
+    """What a rendered reference's seeds derive from: its renderer, budget, parts, the suite seed."""
     return _hash({"reference": fingerprint, "spp": rc.reference_spp, "parts": rc.reference_parts,
                   "seed": suite.seed, "format": _RENDER_FORMAT})
 
 
-def render_seed(unit: Unit) -> int:
-    """A render's seed (31 bits): independent streams per case, stream and replica."""
-    return int(hashlib.sha256(f"{unit.case_key}/{unit.stream}/{unit.replica}".encode()).hexdigest()[:8],
+def reference_key(suite: Suite, rc: RenderCase, fingerprint: dict[str, Any]) -> str:
+    """Fingerprint of a rendered reference: its seeds' source and the harness's adapter code."""
+    return _hash({"stream": reference_stream(suite, rc, fingerprint),
+                  "code": code_fingerprint(*_RENDER_CODE)})
+
+
+def render_seed(stream_key: str, unit: Unit) -> int:
+    """A render's seed (31 bits): independent streams per case (``stream_key``: its
+    :func:`render_stream` or :func:`reference_stream`), stream and replica."""
+    return int(hashlib.sha256(f"{stream_key}/{unit.stream}/{unit.replica}".encode()).hexdigest()[:8],
                16) & 0x7FFFFFFF
 
 
@@ -142,6 +164,24 @@ def chosen_budgets(measurements: tuple[str, ...],
 
 
 # --- units -------------------------------------------------------------------------------------
+def _units_of(budget: int) -> int:
+    """How many units one estimate of ``budget`` contributions is stored in."""
+    return -(-(-(-budget // rest.CHUNK_SIZE)) // UNIT_CHUNKS)
+
+
+def unit_count(suite: Suite, case: Case) -> int:
+    """How many units :func:`estimator_units` plans for a case over all its looks, counted
+    without making them (a suite asking for 1e15 samples is refused before any is made)."""
+    wanted = set(case.measurements)
+    n = 0
+    if wanted & {"bias", "variance"}:
+        for look in range(case.looks):
+            n += suite.batches * _units_of(bias_budget(suite, case, look)) + ("bias" in wanted)
+    for _, b in chosen_budgets(case.measurements, convergence_budgets(suite, case)):
+        n += suite.replicas * _units_of(b)
+    return n
+
+
 def _estimate_units(key: str, stream: int, budget: int, replica: int) -> list[Unit]:
     chunks = -(-budget // rest.CHUNK_SIZE)
     return [Unit(key, stream, budget, replica, c, min(c + UNIT_CHUNKS, chunks), "state")

@@ -13,7 +13,9 @@ ConvergenceResult a "convergence_slope" row (with its RMSE table: the report's c
 figure; its integrand keeps the result's, the name becomes its technique, so results of one
 integrand share a figure), an Efficiency a "log10_efficiency" row, a SamplerCheck (check_sampler,
 mcmc_crosscheck) a "chi_square" row with its residual grids and marginals.  A case is keyed
-by suite, name and kind of result: recording it again replaces its rows.  The single tests
+by suite, name and kind of result: recording it again replaces its rows.  Recorded results
+of a suite accumulate in one run (file "harness.record"), which a suite run of the same name
+supersedes.  The single tests
 are judged at their own alpha, not Holm-corrected together (they were not run as a family).
 """
 from __future__ import annotations
@@ -51,9 +53,10 @@ def record(db: str | Path, results: Mapping[str, Any], *, suite: str = "python",
                  for m in measurements]
     store = Store(db)
     try:
-        for key, integrand, technique, definition in cases:
-            store.add_case(key, suite, integrand, technique, definition)
-        store.put_measurements(rows)
+        with store.translated():
+            for key, integrand, technique, definition in cases:
+                store.add_case(key, suite, integrand, technique, definition)
+            store.put_measurements(rows, run=store.record_run(suite))
     finally:
         store.close()
     return len(rows)

@@ -34,7 +34,16 @@ from harness.stats import images as ist
 from harness.suite.execute import JobResult
 from harness.suite.kind import Outcome
 from harness.suite.parse import RenderCase, Suite
-from harness.suite.plan import Unit, reference_key, reference_units, render_key, render_seed, render_units
+from harness.suite.plan import (
+    Unit,
+    reference_key,
+    reference_stream,
+    reference_units,
+    render_key,
+    render_seed,
+    render_stream,
+    render_units,
+)
 from harness.suite.render_tables import failures, judge, render_rows, render_table
 from harness.suite.store import Store, write_exr
 from harness.suite.verdicts import mark_xfail
@@ -58,10 +67,11 @@ def cached_renderer(adapter: str, spec: tuple[tuple[str, Any], ...], *, referenc
 
 @dataclass(frozen=True)
 class RenderJob:
-    """One render: ``unit.budget`` spp at the unit's seed, by the case's renderer (or its
-    reference renderer)."""
+    """One render: ``unit.budget`` spp at the unit's seed (from ``stream``, the case's
+    render_stream or reference_stream), by the case's renderer (or its reference renderer)."""
 
     unit: Unit
+    stream: str
     adapter: str
     spec: tuple[tuple[str, Any], ...]
     reference: bool
@@ -71,7 +81,7 @@ class RenderJob:
     def run(self) -> JobResult:
         u = self.unit
         r = cached_renderer(self.adapter, self.spec, reference=self.reference, base=self.base)
-        out = r.render(u.budget, render_seed(u))
+        out = r.render(u.budget, render_seed(self.stream, u))
         name = f"{u.case_key}/render-s{u.stream}-b{u.budget}-r{u.replica}"
         payload = {"image": name, "spp": out.spp, "faults": image_faults(out.image).to_dict()}
         return JobResult(u, payload, out.seconds, {name: out.image})
@@ -136,6 +146,8 @@ class _Case:
     renderer: Renderer
     ref_key: str | None          # None: the scene has an exact answer
     ref: Renderer | None
+    stream: str                  # what the renders' seeds derive from (plan.render_stream)
+    ref_stream: str | None       # ... the reference's (plan.reference_stream)
 
 
 class RenderKind:
@@ -159,9 +171,13 @@ class RenderKind:
             ref = (cached_renderer(rc.adapter, rc.spec, reference=True, base=rc.base) if r.exact() is None
                    else None)
             ref_key = reference_key(self.suite, rc, ref.fingerprint()) if ref else None
-            self.cases.append(_Case(rc, key, r, ref_key, ref))
+            ref_stream = reference_stream(self.suite, rc, ref.fingerprint()) if ref else None
+            self.cases.append(_Case(rc, key, r, ref_key, ref, render_stream(self.suite, r.fingerprint()),
+                                    ref_stream))
             store.add_case(key, self.suite.name, rc.scene, rc.label,
                            {"adapter": rc.adapter, "spec": dict(rc.spec), "fingerprint": r.fingerprint()})
+            if ref_key:
+                store.use_key(ref_key)
 
     def plan(self, store: Store) -> list[RenderJob]:
         """Every render the measurements need (and the reference's parts, unless it is cached);
@@ -170,10 +186,10 @@ class RenderKind:
         jobs: dict[Unit, RenderJob] = {}
         for c in self.cases:
             for u in render_units(c.rc, c.key):
-                jobs[u] = RenderJob(u, c.rc.adapter, c.rc.spec, False, c.rc.base)
+                jobs[u] = RenderJob(u, c.stream, c.rc.adapter, c.rc.spec, False, c.rc.base)
             if c.ref_key is not None and cache.load(c.ref_key) is None:
                 for u in reference_units(c.rc, c.ref_key):
-                    jobs.setdefault(u, RenderJob(u, c.rc.adapter, c.rc.spec, True, c.rc.base))
+                    jobs.setdefault(u, RenderJob(u, c.ref_stream, c.rc.adapter, c.rc.spec, True, c.rc.base))
         damaged = []
         for key in {u.case_key for u in jobs}:
             for u, p in store.payloads(key).items():

@@ -39,6 +39,7 @@ class RunSummary:
     units_run: int
     seconds: float
     db: Path
+    run: int          # the run's number in the database (its measurements are stored under it)
 
     def __getitem__(self, kind: str) -> Outcome:
         """The outcome of one kind: "estimator", "sampler" or "render"."""
@@ -62,43 +63,57 @@ def kinds_of(suite: Suite) -> list[CaseKind]:
 
 
 def run_suite(suite: Suite, db: str | Path, *, threads: int | None = None, dask: str | None = None,
-              progress: Callable[[int, int], None] | None = None) -> RunSummary:
+              progress: Callable[[int, int], None] | None = None, wait: float = 60) -> RunSummary:
     """Runs what is missing from ``db`` for ``suite`` and measures every case from the store.
-    ``progress(done, total)`` is called as units finish."""
+    ``progress(done, total)`` is called as units finish; ``wait``: seconds to wait for a lock
+    another process holds on the database.  Errors of the database, the disk (full, not
+    writable) or its images raise :class:`~harness.suite.store.StoreError` (one line naming
+    the file and the cause); an unreachable Dask scheduler ClusterError."""
     start = time.perf_counter()
     threads = threads or suite.threads or rest.hardware_threads()
-    store = Store(db)
+    store = Store(db, timeout=wait)   # StoreError naming the file if it cannot be opened
+    finished = False
     try:
-        kinds = kinds_of(suite)
-        for k in kinds:
-            k.register(store)
-        done, last, ran, total = 0, time.perf_counter(), 0, 0
-        planned: set = set()
-
-        def sink(result: JobResult) -> None:
-            nonlocal done, last
-            for name, image in result.images.items():
-                store.put_image(name, image)
-            store.put(result.unit, result.payload, result.seconds)
-            done += 1
-            if result.images or time.perf_counter() - last > _COMMIT_EVERY:
-                store.commit()
-                last = time.perf_counter()
-            if progress:
-                progress(done, total)
-
-        while True:  # one pass, plus one per further look of cases with a precision target
-            jobs = [j for k in kinds for j in k.plan(store)]
-            planned |= {j.unit for j in jobs}
-            stored = store.stored_keys({j.unit.case_key for j in jobs})
-            missing = [j for j in jobs if j.unit not in stored]
-            total, done = len(planned), len(planned) - len(missing)
-            ran += execute(missing, sink, threads=threads, dask=dask) if missing else 0
-            store.commit()
-            if not any([k.advance(store) for k in kinds]):
-                break
-        outcomes = tuple(k.outcome(store) for k in kinds)
-        store.put_measurements([row for o in outcomes for row in o.rows])
-        return RunSummary(outcomes, total, ran, time.perf_counter() - start, Path(db))
+        with store.translated():
+            summary = _run(suite, store, threads, dask, progress, start)
+        finished = True
+        return summary
     finally:
-        store.close()
+        store.close(quiet=not finished)
+
+
+def _run(suite: Suite, store: Store, threads: int, dask: str | None,
+         progress: Callable[[int, int], None] | None, start: float) -> RunSummary:
+    run = store.start_run(suite.name, str(suite.path), suite.revision)
+    kinds = kinds_of(suite)
+    for k in kinds:
+        k.register(store)
+    done, last, ran, total = 0, time.perf_counter(), 0, 0
+    planned: set = set()
+
+    def sink(result: JobResult) -> None:
+        nonlocal done, last
+        for name, image in result.images.items():
+            store.put_image(name, image)
+        store.put(result.unit, result.payload, result.seconds)
+        done += 1
+        if result.images or time.perf_counter() - last > _COMMIT_EVERY:
+            store.commit()
+            last = time.perf_counter()
+        if progress:
+            progress(done, total)
+
+    while True:  # one pass, plus one per further look of cases with a precision target
+        jobs = [j for k in kinds for j in k.plan(store)]
+        store.plan_units(suite.name, {j.unit for j in jobs} - planned)
+        planned |= {j.unit for j in jobs}
+        stored = store.stored_keys({j.unit.case_key for j in jobs})
+        missing = [j for j in jobs if j.unit not in stored]
+        total, done = len(planned), len(planned) - len(missing)
+        ran += execute(missing, sink, threads=threads, dask=dask) if missing else 0
+        store.commit()
+        if not any([k.advance(store) for k in kinds]):
+            break
+    outcomes = tuple(k.outcome(store) for k in kinds)
+    store.finish_run(run, [row for o in outcomes for row in o.rows], total, ran)
+    return RunSummary(outcomes, total, ran, time.perf_counter() - start, store.path, run)

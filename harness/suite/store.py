@@ -3,20 +3,27 @@
 A unit's row holds its complete accumulator state (JSON; Python's float repr round-trips
 every double exactly) and is written inside a transaction under a UNIQUE key, so a run killed
 at any point leaves only whole rows, and a rerun skips exactly the units already stored.
-Measurements computed from the units go to their own table, replaced per case on each run.
-Images (renders, references) are EXR files (float32, via OpenImageIO) in a folder beside the
-database, each written to a temporary name and renamed before its row is committed, so a
-row always points at a complete file.
+Each run of a suite is a row of ``runs`` (the suite file's revision, the harness that ran it,
+when it started and finished); the measurements it computed are stored under its number, so
+the readers (``load``, ``harness show``, ``harness report``) show each suite's latest finished
+run, and older runs stay as history (``run=``, ``all_runs=``).  ``planned`` holds the units
+the latest run of each suite needs: ``harness gc`` removes every other unit and image.
+Images (renders, references) are files in a folder beside the database, lossless in the
+precision they were computed in (EXR via OpenImageIO for float32, .npy otherwise), each written
+to a temporary name and renamed before its row is committed, so a row always points at a
+complete file; the row holds the file's size and SHA-256, so a damaged file is detected.
 """
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
 import os
 import re
 import sqlite3
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -24,9 +31,11 @@ import numpy as np
 import pandas as pd
 
 from harness.adapters.base import read_image
+from harness.fingerprint import harness_fingerprint
 from harness.suite.plan import Unit
 
-__all__ = ["Store", "load", "connect_read_only", "image_dir", "write_exr", "read_exr"]
+__all__ = ["Store", "StoreError", "RECORDED", "explain", "load", "runs", "run_filter", "connect_read_only",
+           "reading", "image_dir", "write_exr", "read_exr", "read_stored"]
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS cases (
@@ -56,9 +65,38 @@ CREATE TABLE IF NOT EXISTS images (
     width   INTEGER NOT NULL,
     channels INTEGER NOT NULL,
     finished REAL NOT NULL,
-    sha256   TEXT                  -- of the EXR file's bytes: a damaged or replaced file is detected
+    sha256   TEXT,                 -- of the file's bytes: a damaged or replaced file is detected
+    bytes    INTEGER               -- the file's size
+);
+CREATE TABLE IF NOT EXISTS runs (
+    run      INTEGER PRIMARY KEY,  -- 1, 2, ... in the order the runs started
+    suite    TEXT NOT NULL,
+    file     TEXT NOT NULL,        -- the suite file as given (or how the results were recorded)
+    revision TEXT NOT NULL,        -- SHA-256 of the suite file's text: which edit of it was measured
+    harness  TEXT NOT NULL,        -- the harness version and code fingerprint that ran it
+    started  REAL NOT NULL,
+    finished REAL,                 -- NULL while it runs, or if it was interrupted
+    units_planned INTEGER,
+    units_run     INTEGER
+);
+CREATE TABLE IF NOT EXISTS planned (  -- the units the latest run of each suite needs
+    suite       TEXT NOT NULL,
+    case_key    TEXT NOT NULL,
+    stream      INTEGER NOT NULL,
+    budget      INTEGER NOT NULL,
+    replica     INTEGER NOT NULL,
+    chunk_begin INTEGER NOT NULL,
+    chunk_end   INTEGER NOT NULL,
+    kind        TEXT NOT NULL,
+    UNIQUE (suite, case_key, stream, budget, replica, chunk_begin, chunk_end, kind)
+);
+CREATE TABLE IF NOT EXISTS run_keys (  -- the case keys each run registered (references included)
+    run      INTEGER NOT NULL,
+    case_key TEXT NOT NULL,
+    UNIQUE (run, case_key)
 );
 CREATE TABLE IF NOT EXISTS measurements (
+    run         INTEGER NOT NULL,  -- the run that computed it (runs.run)
     case_key    TEXT NOT NULL,
     suite       TEXT NOT NULL,
     integrand   TEXT NOT NULL,
@@ -72,37 +110,137 @@ CREATE TABLE IF NOT EXISTS measurements (
     alpha       REAL,
     verdict     TEXT,
     detail      TEXT,
-    UNIQUE (case_key, measurement)
+    UNIQUE (run, case_key, measurement)
 );
 """
 
+RECORDED = "harness.record"   # the runs table's file of results recorded from Python
 _UNIT_COLUMNS = "case_key, stream, budget, replica, chunk_begin, chunk_end, kind"
 
 
+class StoreError(RuntimeError):
+    """A results database or image folder that cannot be used: one line naming the file and
+    the cause (locked, disk full, corrupt, not writable)."""
+
+
+def explain(error: BaseException, path: str | Path, timeout: float = 60) -> str:
+    """One line naming ``path`` and what went wrong with it, from an SQLite or OS error."""
+    msg = str(error)
+    if isinstance(error, sqlite3.OperationalError) and ("locked" in msg or "busy" in msg):
+        return (f"{path}: locked by another process for {timeout:g} s (another harness run on it?); "
+                "wait for it to end or use another --db")
+    if "disk is full" in msg or getattr(error, "errno", None) == errno.ENOSPC:
+        return f"{path}: disk full ({msg}); free some space and rerun to resume"
+    if isinstance(error, sqlite3.DatabaseError) and "not a database" in msg:
+        return (f"{path} is not a results database, or it is damaged ({msg}): check the path, or run "
+                f"`harness gc --repair --db {path}` (or delete it)")
+    if isinstance(error, sqlite3.DatabaseError) and "malformed" in msg:
+        return (f"{path}: corrupt results database ({msg}); run `harness gc --repair --db {path}` "
+                "or delete it")
+    if isinstance(error, OSError) and error.filename:
+        return f"{error.filename}: {error.strerror or msg}"
+    return f"{path}: {msg}"
+
+
 class Store:
-    """One SQLite database file; safe to reopen after a crash."""
+    """One SQLite database file; safe to reopen after a crash.  Every SQLite or file-system
+    error of opening it is a :class:`StoreError` naming the file; use :meth:`translated`
+    around work on it for the same."""
 
-    def __init__(self, path: str | Path):
+    def __init__(self, path: str | Path, *, timeout: float = 60):
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.db = sqlite3.connect(self.path, isolation_level=None, timeout=60)
-        self.db.execute("PRAGMA journal_mode=WAL")
-        # WAL: a crash loses at most the last commits, never corrupts
-        self.db.execute("PRAGMA synchronous=NORMAL")
-        self.db.executescript(_SCHEMA)
-        if "sha256" not in {r[1] for r in self.db.execute("PRAGMA table_info(images)")}:  # older databases
-            self.db.execute("ALTER TABLE images ADD COLUMN sha256 TEXT")
+        self.timeout = timeout
         self._open = False
+        self.run: int | None = None   # the run in progress (start_run), if any
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as e:  # a parent that is a file, a read-only folder
+            what = "a file, not a folder" if e.errno in (errno.EEXIST, errno.ENOTDIR) else e.strerror or e
+            raise StoreError(f"{self.path}: cannot make its folder {self.path.parent}: {what}") from None
+        with self.translated():
+            self.db = sqlite3.connect(self.path, isolation_level=None, timeout=timeout)
+            try:
+                self.db.execute("PRAGMA journal_mode=WAL")
+                # WAL: a crash loses at most the last commits, never corrupts
+                self.db.execute("PRAGMA synchronous=NORMAL")
+                _migrate(self.db)
+                self.db.executescript(_SCHEMA)
+            except BaseException:
+                self.db.close()
+                raise
 
-    def close(self) -> None:
+    @contextmanager
+    def translated(self) -> Iterator[None]:
+        """SQLite and file-system errors inside become one-line :class:`StoreError`s."""
+        try:
+            yield
+        except (sqlite3.Error, OSError) as e:  # the database, its images folder, the disk
+            raise StoreError(explain(e, self.path, self.timeout)) from None
+
+    def close(self, *, quiet: bool = False) -> None:
+        """Commits what is open and closes; ``quiet``: after another error, never raise (an
+        SQLite error that rolled the transaction back must not hide the first one)."""
+        try:
+            with self.translated():
+                self.commit()
+        except StoreError:
+            if not quiet:
+                raise
+        finally:
+            self.db.close()
+
+    # --- runs ------------------------------------------------------------------------------
+    def start_run(self, suite: str, file: str, revision: str) -> int:
+        """Records a run of ``suite`` starting now; its planned units replace the suite's
+        previous plan.  Returns the run's number."""
         self.commit()
-        self.db.close()
+        self.db.execute("BEGIN")
+        self.db.execute("DELETE FROM planned WHERE suite = ?", (suite,))
+        cur = self.db.execute("INSERT INTO runs (suite, file, revision, harness, started) "
+                              "VALUES (?, ?, ?, ?, ?)",
+                              (suite, file, revision, harness_fingerprint(), time.time()))
+        self.db.execute("COMMIT")
+        self.run = int(cur.lastrowid)
+        return self.run
+
+    def record_run(self, suite: str) -> int:
+        """The run that results recorded from Python (harness.record) go to: the suite's latest
+        run if it is a recording, else a new one."""
+        row = self.db.execute("SELECT run, file FROM runs WHERE suite = ? ORDER BY run DESC LIMIT 1",
+                              (suite,)).fetchone()
+        if row is not None and row[1] == RECORDED:
+            self.db.execute("UPDATE runs SET finished = ? WHERE run = ?", (time.time(), row[0]))
+            return int(row[0])
+        run = self.start_run(suite, RECORDED, "")
+        self.db.execute("UPDATE runs SET finished = ? WHERE run = ?", (time.time(), run))
+        return run
+
+    def plan_units(self, suite: str, units: Iterable[Unit]) -> None:
+        """Adds units to the suite's current plan (kept by ``harness gc``)."""
+        self.commit()
+        self.db.execute("BEGIN")
+        self.db.executemany("INSERT OR IGNORE INTO planned VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                            [(suite, u.case_key, u.stream, u.budget, u.replica, u.chunk_begin, u.chunk_end,
+                              u.kind) for u in units])
+        self.db.execute("COMMIT")
+
+    def finish_run(self, run: int, rows: list[dict[str, Any]], planned: int, ran: int) -> None:
+        """Stores the run's measurements under its number and marks it finished."""
+        self.put_measurements(rows, run=run)
+        self.db.execute("UPDATE runs SET finished = ?, units_planned = ?, units_run = ? WHERE run = ?",
+                        (time.time(), planned, ran, run))
 
     # --- cases and units -------------------------------------------------------------------
     def add_case(self, case_key: str, suite: str, integrand: str, technique: str,
                  definition: dict[str, Any]) -> None:
         self.db.execute("INSERT OR IGNORE INTO cases VALUES (?, ?, ?, ?, ?)",
                         (case_key, suite, integrand, technique, json.dumps(definition, sort_keys=True)))
+        self.use_key(case_key)
+
+    def use_key(self, case_key: str) -> None:
+        """Records that the current run reads units, images or cached data under ``case_key``."""
+        if self.run is not None:
+            self.db.execute("INSERT OR IGNORE INTO run_keys VALUES (?, ?)", (self.run, case_key))
 
     def stored_keys(self, case_keys: Iterable[str]) -> set[Unit]:
         """The stored units of these cases."""
@@ -123,8 +261,9 @@ class Store:
 
     def commit(self) -> None:
         if self._open:
-            self.db.execute("COMMIT")
             self._open = False
+            if self.db.in_transaction:  # SQLite rolls back by itself on some errors (disk full)
+                self.db.execute("COMMIT")
 
     def payloads(self, case_key: str) -> dict[Unit, dict[str, Any]]:
         """The payload of each of the case's stored units."""
@@ -142,40 +281,48 @@ class Store:
         return image_dir(self.path)
 
     def put_image(self, name: str, image: np.ndarray) -> Path:
-        """Stores a float image (height, width[, channels]) as EXR and records it; returns the file."""
+        """Stores a float image (height, width[, channels]) losslessly and records it with its
+        size and checksum; returns the file.  Float32 values (what renderers produce, float64
+        arrays of float32 values included) go to EXR; others, a float64 mean say, to .npy."""
         self.image_dir.mkdir(parents=True, exist_ok=True)
-        file = re.sub(r"[^A-Za-z0-9._-]", "_", name) + ".exr"
+        a = np.asarray(image)
+        a = a[:, :, None] if a.ndim == 2 else a
+        exact32 = np.array_equal(a.astype(np.float32).astype(a.dtype), a, equal_nan=True)
+        file = re.sub(r"[^A-Za-z0-9._-]", "_", name) + (".exr" if exact32 else ".npy")
         final = self.image_dir / file
-        a = write_exr(final, image)
+        a = write_exr(final, a) if exact32 else _write_npy(final, a)
         self.commit()
         self.db.execute("INSERT OR REPLACE INTO images (name, file, height, width, channels, finished, "
-                        "sha256) VALUES (?, ?, ?, ?, ?, ?, ?)",
-                        (name, file, a.shape[0], a.shape[1], a.shape[2], time.time(), _sha256(final)))
+                        "sha256, bytes) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                        (name, file, a.shape[0], a.shape[1], a.shape[2], time.time(), _sha256(final),
+                         final.stat().st_size))
         return final
 
     def image_problem(self, name: str) -> str | None:
-        """Why a stored image cannot be used (its file missing, or not the bytes written), naming
-        the file; None if it is intact or was never stored."""
-        row = self.db.execute("SELECT file, sha256 FROM images WHERE name = ?", (name,)).fetchone()
+        """Why a stored image cannot be used (its file missing, truncated, or not the bytes
+        written), naming the file; None if it is intact or was never stored."""
+        row = self.db.execute("SELECT file, sha256, bytes FROM images WHERE name = ?", (name,)).fetchone()
         if row is None:
             return None
         path = self.image_dir / row[0]
         if not path.is_file():
             return f"{path}: image missing"
+        if row[2] is not None and path.stat().st_size != row[2]:
+            return f"{path}: image damaged ({path.stat().st_size} bytes, {row[2]} stored)"
         if row[1] is not None and _sha256(path) != row[1]:
             return f"{path}: image damaged (not the bytes stored)"
         return None
 
     def image(self, name: str) -> np.ndarray | None:
-        """The stored image (height, width, channels) as float32, or None if none was stored;
-        a missing or damaged file raises OSError naming it."""
+        """The stored image (height, width, channels) in the precision it was stored in, or
+        None if none was stored; a missing or damaged file raises OSError naming it."""
         row = self.db.execute("SELECT file FROM images WHERE name = ?", (name,)).fetchone()
         if row is None:
             return None
         problem = self.image_problem(name)
         if problem:
             raise OSError(f"{problem}; rerun the suite to compute it again")
-        return read_exr(self.image_dir / row[0])
+        return read_stored(self.image_dir / row[0])
 
     def drop_units(self, units: Iterable[Unit]) -> None:
         """Removes stored units (a damaged render, say), so the next plan computes them again."""
@@ -185,17 +332,47 @@ class Store:
                             (u.case_key, u.stream, u.budget, u.replica, u.chunk_begin, u.chunk_end, u.kind))
 
     # --- measurements ------------------------------------------------------------------------
-    def put_measurements(self, rows: list[dict[str, Any]]) -> None:
+    def put_measurements(self, rows: list[dict[str, Any]], *, run: int) -> None:
+        """Stores measurement rows under run ``run`` (a row of a case and measurement already
+        stored in that run is replaced)."""
         self.commit()
         self.db.execute("BEGIN")
         for r in rows:
             self.db.execute("INSERT OR REPLACE INTO measurements "
-                            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                            (r["case_key"], r["suite"], r["integrand"], r["technique"], r["measurement"],
+                            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                            (run, r["case_key"], r["suite"], r["integrand"], r["technique"], r["measurement"],
                              r.get("value"), r.get("lo"), r.get("hi"), r.get("n"), r.get("pvalue"),
                              r.get("alpha"), r.get("verdict"),
                              json.dumps(r.get("detail", {}), sort_keys=True, default=str)))
         self.db.execute("COMMIT")
+
+
+def _table(name: str) -> str:
+    """The CREATE TABLE statement of one table of the schema."""
+    return re.search(rf"CREATE TABLE IF NOT EXISTS {name} \(.*?\n\);", _SCHEMA, re.S).group(0)
+
+
+def _migrate(db: sqlite3.Connection) -> None:
+    """Brings a database written before runs were recorded up to the current schema: its
+    measurements become one run per suite (file "(before runs were recorded)"); images get
+    their checksum column."""
+    columns = {t: {r[1] for r in db.execute(f"PRAGMA table_info({t})")} for t in ("measurements", "images")}
+    for column, kind in (("sha256", "TEXT"), ("bytes", "INTEGER")):
+        if columns["images"] and column not in columns["images"]:
+            db.execute(f"ALTER TABLE images ADD COLUMN {column} {kind}")
+    if not columns["measurements"] or "run" in columns["measurements"]:
+        return
+    db.execute("BEGIN")
+    db.execute("ALTER TABLE measurements RENAME TO measurements_before_runs")
+    db.execute(_table("measurements"))
+    db.execute(_table("runs"))
+    for (suite,) in db.execute("SELECT DISTINCT suite FROM measurements_before_runs").fetchall():
+        run = db.execute("INSERT INTO runs (suite, file, revision, harness, started, finished) "
+                         "VALUES (?, '(before runs were recorded)', '', '', 0, 0)", (suite,)).lastrowid
+        db.execute("INSERT INTO measurements SELECT ?, * FROM measurements_before_runs WHERE suite = ? "
+                   "ORDER BY rowid", (run, suite))
+    db.execute("DROP TABLE measurements_before_runs")
+    db.execute("COMMIT")
 
 
 def write_exr(path: Path, image: np.ndarray) -> np.ndarray:
@@ -226,6 +403,25 @@ def read_exr(path: Path) -> np.ndarray:
     return read_image(path)
 
 
+def _write_npy(path: Path, a: np.ndarray) -> np.ndarray:
+    """Writes an array as .npy: to a temporary name, then renamed.  Returns it."""
+    tmp = path.with_name(path.name + ".partial.npy")
+    np.save(tmp, a)
+    os.replace(tmp, path)
+    return a
+
+
+def read_stored(path: Path) -> np.ndarray:
+    """A stored image (EXR as float32, .npy in its own precision), (height, width, channels);
+    OSError naming a missing or damaged file."""
+    if path.suffix != ".npy":
+        return read_exr(path)
+    try:
+        return np.load(path, allow_pickle=False)
+    except (OSError, ValueError, EOFError) as e:
+        raise OSError(f"cannot read image {path}: {e}") from None
+
+
 def _sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
@@ -252,22 +448,71 @@ def connect_read_only(db: str | Path) -> sqlite3.Connection:
             return con
         except sqlite3.DatabaseError as e:
             con.close()
-            if not isinstance(e, sqlite3.OperationalError):  # not a database at all
-                raise ValueError(f"{path} is not a results database ({e})") from None
+            if not isinstance(e, sqlite3.OperationalError):  # not a database at all, or damaged
+                raise ValueError(explain(e, path)) from None
             error = e
     raise ValueError(f"cannot read {path}: {error}")
 
 
-def load(db: str | Path, suite: str | None = None) -> pd.DataFrame:
-    """The stored measurements as a DataFrame: one row per case and measurement with its
-    value, interval (lo, hi), sample count n, p-value, alpha and verdict.  Opens the database
-    read-only: it never changes it."""
+def run_filter(con: sqlite3.Connection, db: str | Path, *, suite: str | None = None, run: int | None = None,
+               all_runs: bool = False) -> tuple[str, tuple[Any, ...]]:
+    """A WHERE clause (and its parameters) choosing measurement rows ``m``: of each suite's
+    latest finished run by default, of run ``run``, or of every run (``all_runs``); of one
+    suite if ``suite`` is given.  ValueError naming the runs there are for an unknown run."""
+    tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+    if "measurements" not in tables:
+        raise ValueError(f"{db} is not a results database (no measurements table)")
+    where: list[str] = []
+    params: list[Any] = []
+    if suite:
+        where.append("m.suite = ?")
+        params.append(suite)
+    if "runs" in tables and run is not None:
+        if con.execute("SELECT 1 FROM runs WHERE run = ?", (run,)).fetchone() is None:
+            known = [r for (r,) in con.execute("SELECT run FROM runs ORDER BY run")]
+            raise ValueError(f"{db} has no run {run}; its runs: {', '.join(map(str, known)) or 'none'}")
+        where.append("m.run = ?")
+        params.append(run)
+    elif "runs" in tables and not all_runs:
+        where.append("m.run IN (SELECT MAX(run) FROM runs WHERE finished IS NOT NULL GROUP BY suite)")
+    return (" WHERE " + " AND ".join(where) if where else ""), tuple(params)
+
+
+@contextmanager
+def reading(db: str | Path) -> Iterator[sqlite3.Connection]:
+    """A read-only connection (:func:`connect_read_only`), closed after; an SQLite error while
+    reading (a truncated or corrupt file) becomes a ValueError naming the file and the cause."""
     con = connect_read_only(db)
     try:
-        tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
-        if "measurements" not in tables:
-            raise ValueError(f"{db} is not a results database (no measurements table)")
-        query = "SELECT * FROM measurements" + (" WHERE suite = ?" if suite else "") + " ORDER BY rowid"
-        return pd.read_sql_query(query, con, params=(suite,) if suite else ())
+        yield con
+    except sqlite3.Error as e:
+        raise ValueError(explain(e, db)) from None
     finally:
         con.close()
+
+
+def load(db: str | Path, suite: str | None = None, *, run: int | None = None,
+         all_runs: bool = False) -> pd.DataFrame:
+    """The stored measurements as a DataFrame: one row per case and measurement with its
+    value, interval (lo, hi), sample count n, p-value, alpha, verdict and the run that
+    measured it.  By default each suite's latest finished run only (what the suite file
+    measures now); ``run=`` one run, ``all_runs=True`` the whole history.  Opens the database
+    read-only: it never changes it."""
+    with reading(db) as con:
+        where, params = run_filter(con, db, suite=suite, run=run, all_runs=all_runs)
+        return pd.read_sql_query(f"SELECT * FROM measurements m{where} ORDER BY m.rowid", con, params=params)
+
+
+def runs(db: str | Path) -> pd.DataFrame:
+    """The runs a database has seen: number, suite, file, revision, harness, started and
+    finished (UTC; finished empty for a run that was interrupted or still runs), units
+    planned and computed, measurements stored.  Read-only."""
+    with reading(db) as con:
+        if con.execute("SELECT 1 FROM sqlite_master WHERE name = 'runs'").fetchone() is None:
+            return pd.DataFrame()
+        df = pd.read_sql_query("SELECT r.*, (SELECT COUNT(*) FROM measurements m WHERE m.run = r.run) AS "
+                               "measurements FROM runs r ORDER BY r.run", con)
+    for col in ("started", "finished"):
+        df[col] = pd.to_datetime(df[col], unit="s", utc=True).dt.strftime("%Y-%m-%d %H:%M:%S").fillna("")
+    df["revision"] = df["revision"].str[:12]
+    return df

@@ -92,10 +92,11 @@ def report(tmp_path_factory) -> dict:
     # an "earlier run" of gaussian/uniform under another build: same definition, older rows
     store = Store(db)
     store.add_case("0" * 24, "tiny", "gaussian", "uniform", {"seed": 3, "case_id": 0, "samples": 65536})
-    store.put_measurements([{"case_key": "0" * 24, "suite": "tiny",
-                             "integrand": "gaussian", "technique": "uniform",
-                             "measurement": "bias", "value": 1.0, "n": 65536, "pvalue": 1e-9, "alpha": 0.01,
-                             "verdict": "biased", "detail": {"estimate": STALE_ESTIMATE, "stderr": 0.1}}])
+    earlier = store.start_run("tiny", str(suite_file), "an earlier revision")
+    store.finish_run(earlier, [{"case_key": "0" * 24, "suite": "tiny", "integrand": "gaussian",
+                                "technique": "uniform", "measurement": "bias", "value": 1.0, "n": 65536,
+                                "pvalue": 1e-9, "alpha": 0.01, "verdict": "biased",
+                                "detail": {"estimate": STALE_ESTIMATE, "stderr": 0.1}}], 0, 0)
     store.close()
     run = run_suite(suite, db, threads=2)
 
@@ -111,7 +112,8 @@ def report(tmp_path_factory) -> dict:
         store.add_case(key, "tiny", "toy_scene", technique, {"adapter": "test", "spp": 64})
         store.put_image(f"{key}/reference", ref)
         store.put_image(f"{key}/estimate", est)
-        store.put_measurements(_render_rows(key, technique, scale, "integrator=path, variant=test"))
+        store.put_measurements(_render_rows(key, technique, scale, "integrator=path, variant=test"),
+                               run=run.run)
         renders[key] = (ref, est)
     store.close()
 

@@ -147,17 +147,44 @@ def test_a_stored_image_is_replaced_under_its_name(tmp_path):
     again.close()
 
 
+def test_images_are_stored_losslessly_in_their_precision_with_size_and_checksum(tmp_path):
+    store = Store(tmp_path / "r.sqlite")
+    mean = np.random.default_rng(1).random((3, 5, 3))             # a float64 mean: kept as float64
+    rendered = mean.astype(np.float32).astype(np.float64)        # float32 values in a float64 array
+    rendered[0, 0, 0] = np.nan
+    files = [store.put_image(n, a) for n, a in (("k/mean", mean), ("k/render", rendered))]
+    assert [f.suffix for f in files] == [".npy", ".exr"]
+    assert store.image("k/mean").dtype == np.float64 and np.array_equal(store.image("k/mean"), mean)
+    assert np.array_equal(store.image("k/render"), rendered, equal_nan=True)
+    files[0].write_bytes(files[0].read_bytes()[:-8])
+    assert store.image_problem("k/mean") == f"{files[0]}: image damaged ({files[0].stat().st_size} bytes, " \
+                                            f"{files[0].stat().st_size + 8} stored)"
+    with pytest.raises(OSError, match="image damaged"):
+        store.image("k/mean")
+    store.close()
+
+
 # --- measurements ------------------------------------------------------------------------------
 def row(measurement: str, value: float, suite: str = "s", key: str = "case-a", **extra) -> dict:
     return {"case_key": key, "suite": suite, "integrand": "gaussian", "technique": "uniform",
             "measurement": measurement, "value": value, **extra}
 
 
+def finished_run(store: Store, rows: list[dict], suite: str = "s") -> int:
+    """Stores rows as one finished run of ``suite``; returns its number."""
+    run = store.start_run(suite, f"{suite}.toml", "revision")
+    store.finish_run(run, rows, 0, 0)
+    return run
+
+
 def test_measurements_are_replaced_per_case_and_measurement(tmp_path):
     store = Store(tmp_path / "r.sqlite")
+    run = store.start_run("s", "s.toml", "revision")
     store.put_measurements([row("bias", 0.1, lo=-0.2, hi=0.4, n=1000, pvalue=0.5, alpha=0.01,
-                                verdict="unbiased", detail={"z": 1, "a": [2]}), row("variance", 2.0)])
-    store.put_measurements([row("bias", 1 / 3, verdict="biased"), row("bias", 5.0, suite="t", key="case-b")])
+                                verdict="unbiased", detail={"z": 1, "a": [2]}), row("variance", 2.0)],
+                           run=run)
+    store.finish_run(run, [row("bias", 1 / 3, verdict="biased")], 0, 0)
+    finished_run(store, [row("bias", 5.0, suite="t", key="case-b")], suite="t")
     store.close()
     df = load(tmp_path / "r.sqlite", "s")
     assert list(df["measurement"]) == ["variance", "bias"]   # the replaced row is a new one
@@ -169,7 +196,7 @@ def test_measurements_are_replaced_per_case_and_measurement(tmp_path):
 
 def test_measurement_details_are_stored_as_sorted_json(tmp_path):
     store = Store(tmp_path / "r.sqlite")
-    store.put_measurements([row("bias", 0.0, detail={"z": 1, "a": [2], "p": Path("x")})])
+    finished_run(store, [row("bias", 0.0, detail={"z": 1, "a": [2], "p": Path("x")})])
     store.close()
     assert load(tmp_path / "r.sqlite")["detail"].tolist() == ['{"a": [2], "p": "x", "z": 1}']
 
@@ -218,8 +245,8 @@ def test_load_and_show_never_change_a_database(tmp_path):
 def test_load_reads_a_results_database_without_writing_it(tmp_path):
     db = tmp_path / "r.sqlite"
     store = Store(db)
-    store.put_measurements([{"case_key": "k", "suite": "s", "integrand": "gaussian", "technique": "uniform",
-                             "measurement": "bias", "value": 0.5, "n": 10}])
+    finished_run(store, [{"case_key": "k", "suite": "s", "integrand": "gaussian", "technique": "uniform",
+                          "measurement": "bias", "value": 0.5, "n": 10}])
     store.close()
     for extra in tmp_path.glob("r.sqlite-*"):  # checkpointed and closed: only the main file matters
         extra.unlink()
