@@ -88,7 +88,7 @@ from harness.stats.estimator import POINT_SETS, Contributions
 from harness.suite import parse_renders, parse_samplers
 from harness.suite.locate import Locator
 from harness.suite.model import MEASUREMENTS, Case, RenderCase, SamplerCase, Suite, SuiteError
-from harness.suite.plan import MAX_UNITS, UNIT_CHUNKS, unit_count
+from harness.suite.plan import MAX_UNITS, UNIT_CHUNKS, render_unit_count, unit_count
 from harness.suite.rules import check_keys, measurements, positive, xfail_reason
 from harness.usercode import UserCodeError, load_attr, source_fingerprint
 
@@ -174,20 +174,27 @@ def loads_suite(text: str, *, path: str | Path = "suite.toml") -> Suite:
 
 
 def _check_size(suite: Suite, raw: list[dict[str, Any]], tables: list[Any], where: Locator) -> None:
-    """Refuses a suite whose estimator cases need more than MAX_UNITS work units (counted, not
-    made), naming the case that needs the most and the key that sets its budget."""
+    """Refuses a suite whose cases need more than MAX_UNITS work units (counted, not made),
+    naming the case that needs the most and the key that sets its budget."""
     counts = [unit_count(suite, c) for c in suite.cases]
-    if sum(counts) <= MAX_UNITS:
+    renders = [render_unit_count(rc) for rc in suite.renders]
+    total = sum(counts) + sum(renders) + sum(len(sc.measurements) for sc in suite.samplers)
+    if total <= MAX_UNITS:
         return
+    limit = (f"({total:,} in the suite); a suite may plan at most {MAX_UNITS:,} (each is held in memory "
+             "and stored as a database row)")
+    if renders and max(renders) >= max(counts, default=0):
+        rc = suite.renders[max(range(len(renders)), key=renders.__getitem__)]
+        raise SuiteError(where.at(None, "render", f"{rc.scene} {rc.label}: {max(renders):,} renders {limit}: "
+                                                  "lower its replicas or budgets"))
     i = max(range(len(counts)), key=counts.__getitem__)
     case, table = suite.cases[i], tables[i]
     key = "max_samples" if case.max_samples else "samples"
     per_unit = UNIT_CHUNKS * rest.CHUNK_SIZE
     raise SuiteError(where.at(table if key in raw[i] else "suite", key,
                               f"{case.name}: {getattr(case, key):.3g} samples need {counts[i]:,} work "
-                              f"units of up to {per_unit:,} samples ({sum(counts):,} in the suite); a suite "
-                              f"may plan at most {MAX_UNITS:,} (each is held in memory and stored as a "
-                              "database row): lower the samples, batches or replicas"))
+                              f"units of up to {per_unit:,} samples {limit}: lower the samples, batches or "
+                              "replicas"))
 
 
 def _cases(raw: list[dict[str, Any]], samples: int, batches: int, suite_measurements: tuple[str, ...],

@@ -38,6 +38,7 @@ def renders(raw: list[dict[str, Any]], suite_measurements: tuple[str, ...], base
                                       f"the entry-point group 'harness.adapters'), got {adapter!r}"))
         spp = c.get("spp", 64)
         positive(spp, where, table, "spp")
+        _sample_count(spp, where, table, "spp")
         replicas = c.get("replicas", 16)
         if replicas < 4:
             raise SuiteError(where.at(table, "replicas", f"expected at least 4 replicas, got {replicas}"))
@@ -45,6 +46,7 @@ def renders(raw: list[dict[str, Any]], suite_measurements: tuple[str, ...], base
         budgets = c.get("budgets", [max(1, spp >> k) for k in (6, 4, 2, 0)])
         if any(isinstance(b, bool) or not isinstance(b, int) or b <= 0 for b in budgets):
             raise SuiteError(where.at(table, "budgets", f"expected positive integer budgets, got {budgets}"))
+        _sample_count(max(budgets), where, table, "budgets")
         if len(set(budgets)) < 3 and set(ms) & {"convergence", "error_vs_time", "efficiency"}:
             key = "budgets" if "budgets" in c else "spp"
             raise SuiteError(where.at(table, key, f"expected at least 3 distinct budgets for "
@@ -56,6 +58,7 @@ def renders(raw: list[dict[str, Any]], suite_measurements: tuple[str, ...], base
             raise SuiteError(where.at(table, "reference_parts",
                                       f"expected at least 2 independent parts, got {parts}"))
         ref_spp = c.get("reference_spp", 64 * max(budgets[-1], spp))
+        _sample_count(ref_spp // max(parts, 1), where, table, "reference_spp")
         if ref_spp < parts or ref_spp % parts:
             raise SuiteError(where.at(table, "reference_spp", f"expected a multiple of reference_parts = "
                                       f"{parts}, got {ref_spp}"))
@@ -83,3 +86,13 @@ def renders(raw: list[dict[str, Any]], suite_measurements: tuple[str, ...], base
                                   ref_spp, parts, ms, expect, xfail_reason(c, where, table), str(base),
                                   scene, config))
     return tuple(out)
+
+
+MAX_SPP = 2**31 - 1   # renderers take 32-bit signed sample counts (Mitsuba's spp, most command lines)
+
+
+def _sample_count(spp: int, where: Locator, table: Any, key: str) -> None:
+    """A render's samples per pixel must fit the renderers' 32-bit sample counts."""
+    if spp > MAX_SPP:
+        raise SuiteError(where.at(table, key, f"expected at most {MAX_SPP:,} samples per pixel per render "
+                                              f"(renderers take 32-bit sample counts), got {spp:,}"))

@@ -27,7 +27,7 @@ from harness.suite.model import Case, RenderCase, SamplerCase, Suite
 __all__ = ["UNIT_CHUNKS", "BIAS_STREAM", "Unit", "case_key", "sampler_key", "sampler_spec", "render_key",
            "reference_key", "render_stream", "reference_stream", "render_seed", "core_case_id", "bias_budget",
            "bias_stream", "convergence_budgets", "chosen_budgets", "estimator_units", "sampler_units",
-           "render_units", "reference_units", "plan", "unit_count", "MAX_UNITS"]
+           "render_units", "reference_units", "plan", "unit_count", "render_unit_count", "MAX_UNITS"]
 
 UNIT_CHUNKS = 32                     # core chunks (of 65 536 samples) per stored unit
 MAX_UNITS = 1 << 20                  # units a suite may plan: each is held in memory, then a database row
@@ -180,6 +180,12 @@ def unit_count(suite: Suite, case: Case) -> int:
     for _, b in chosen_budgets(case.measurements, convergence_budgets(suite, case)):
         n += suite.replicas * _units_of(b)
     return n
+
+
+def render_unit_count(rc: RenderCase) -> int:
+    """How many units :func:`render_units` and :func:`reference_units` plan, counted."""
+    bias = bool(set(rc.measurements) & {"bias", "variance"})
+    return rc.replicas * (bias + len(chosen_budgets(rc.measurements, rc.budgets))) + rc.reference_parts
 
 
 def _estimate_units(key: str, stream: int, budget: int, replica: int) -> list[Unit]:

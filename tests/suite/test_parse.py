@@ -241,6 +241,18 @@ MISTAKES = {
     "one reference part": (
         HEAD + '[[render]]\nadapter = "mitsuba"\nreference_parts = 1\n',
         8, "reference_parts", "expected at least 2 independent parts, got 1"),
+    "spp beyond 32 bits": (
+        HEAD + '[[render]]\nadapter = "mitsuba"\nspp = 1_000_000_000_000\n',
+        8, "spp", "expected at most 2,147,483,647 samples per pixel per render"),
+    "render budgets beyond 32 bits": (
+        HEAD + '[[render]]\nadapter = "mitsuba"\nbudgets = [1, 2, 4294967296]\n',
+        8, "budgets", "expected at most 2,147,483,647 samples per pixel per render"),
+    "more renders than a suite may plan": (
+        HEAD + '[[render]]\nadapter = "mitsuba"\nscene = "furnace"\nreplicas = 2_000_000\n',
+        6, "render", "10,000,008 renders (10,000,008 in the suite); a suite may plan at most 1,048,576"),
+    "more samples than a suite may plan": (
+        '[suite]\nsamples = 1_000_000_000_000_000\n\n' + CASE,
+        2, "samples", "1e+15 samples need "),
     "reference spp not a multiple": (
         HEAD + '[[render]]\nadapter = "mitsuba"\nreference_spp = 100\n' 'reference_parts = 8\n',
         8, "reference_spp", "expected a multiple of reference_parts = 8, got 100"),
