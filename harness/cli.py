@@ -16,7 +16,7 @@ from harness.adapters.base import RenderError
 from harness.suite.execute import ClusterError
 from harness.suite.parse import SuiteError, load_suite
 from harness.suite.run import run_suite
-from harness.suite.store import StoreError, load, runs
+from harness.suite.store import StoreError, load, plan_progress, runs
 from harness.usercode import UserCodeError
 
 
@@ -110,22 +110,21 @@ def main(argv: list[str] | None = None) -> int:
 def _run(suite, db: str, threads: int | None, csv: str | None, dask: str | None, wait: float) -> int:
     bar = tqdm(total=0, unit="unit", desc=f"{suite.name}", disable=not sys.stderr.isatty(), leave=False)
 
-    stored = {"done": 0, "total": 0}
-
     def progress(done: int, total: int) -> None:
         bar.total = total
         bar.n = done
         bar.refresh()
-        stored.update(done=done, total=total)
+
+    def stored() -> str:  # counted in the database: exact whenever the signal came
+        done, total = plan_progress(db, suite.name)
+        return f"{done} of {total} units stored in {db}"
 
     try:
         summary = run_suite(suite, db, threads=threads, dask=dask, progress=progress, wait=wait)
     except KeyboardInterrupt as e:  # Ctrl-C or SIGTERM: say what is kept (entry() prints it)
-        what = f"{stored['done']} of {stored['total']} units stored in {db}, rerun to resume"
-        raise type(e)(what) from None
+        raise type(e)(f"{stored()}, rerun to resume") from None
     except (RenderError, UserCodeError) as e:  # a render or a user's callable failed: nothing stored for it
-        print(f"harness: {e}\nharness: {stored['done']} of {stored['total']} units stored in {db}; fix it "
-              "and rerun to resume", file=sys.stderr)
+        print(f"harness: {e}\nharness: {stored()}; fix it and rerun to resume", file=sys.stderr)
         return 2
     except (StoreError, ClusterError) as e:  # the database, the disk or the cluster: one line naming it
         print(f"harness: {e}", file=sys.stderr)
@@ -133,9 +132,13 @@ def _run(suite, db: str, threads: int | None, csv: str | None, dask: str | None,
     finally:
         bar.close()
     what = ", ".join(f"{len(o.names)} {o.noun}" for o in summary.outcomes if o.names)
-    print(f"suite {suite.name!r} ({suite.path}): {what}; seed {suite.seed}, family-wise alpha "
-          f"{suite.alpha:g} (Holm)" + (f", {suite.batches} batches per bias test, {suite.replicas} replicas "
-                                      "per budget" if suite.cases else ""))
+    families = suite.families
+    split = (f"{suite.family_alpha:.3g} for each of {len(families)} families ({', '.join(families)}), Holm "
+             "within each" if len(families) > 1 else "Holm")
+    sizes = (f"; {suite.batches} batches per bias test, {suite.replicas} replicas per budget" if suite.cases
+             else "")
+    print(f"suite {suite.name!r} ({suite.path}): {what}; seed {suite.seed}; false-alarm rate of the whole "
+          f"run alpha {suite.alpha:g} ({split}){sizes}")
     print("\n\n".join(o.text for o in summary.outcomes if o.text))
     print(f"\n{what} in {summary.seconds:.1f} s: {summary.units_run} of {summary.units_planned} work units "
           f"computed, the rest read from {summary.db}.")

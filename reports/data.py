@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -35,6 +36,7 @@ class Results:
     image_pairs: dict[str, tuple[str, str]]
     superseded: int                       # case keys hidden because a later run replaced them
     labels: dict[str, tuple[str, str]] = field(default_factory=dict)  # case key -> (integrand, technique)
+    runs: list[dict[str, Any]] = field(default_factory=list)  # the runs shown: run, suite, alpha, families
 
     @property
     def cases(self) -> pd.DataFrame:
@@ -79,6 +81,10 @@ def load_results(db: str | Path, suite: str | None = None, run: int | None = Non
         tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
         names = [r[0] for r in con.execute("SELECT name FROM images")] if "images" in tables else []
         labels = {r[0]: (r[1], r[2]) for r in con.execute("SELECT case_key, integrand, technique FROM cases")}
+        shown = sorted(set(int(r) for r in m["run"])) if "run" in m else []
+        runs = ([{"run": r[0], "suite": r[1], "alpha": r[2], "families": json.loads(r[3] or "[]")}
+                 for r in con.execute(f"SELECT run, suite, alpha, families FROM runs WHERE run IN "
+                                      f"({','.join('?' * len(shown))})", shown)] if "runs" in tables else [])
 
     m["detail"] = [json.loads(d) if isinstance(d, str) and d else {} for d in m["detail"]]
     keep_keys = set(m["case_key"])
@@ -97,4 +103,4 @@ def load_results(db: str | Path, suite: str | None = None, run: int | None = Non
             pairs[key] = (name, f"{key}/estimate")
     order = {k: i for i, k in enumerate(dict.fromkeys(m["case_key"]))}  # the suite's order of cases
     pairs = dict(sorted(pairs.items(), key=lambda kv: order.get(kv[0], len(order))))
-    return Results(path, m, pairs, len(all_keys - keep_keys), labels)
+    return Results(path, m, pairs, len(all_keys - keep_keys), labels, runs)

@@ -272,6 +272,19 @@ def _render_section(results: Results) -> str:
     return "".join(parts)
 
 
+def _alpha_text(results: Results, alphas: list[float]) -> str:
+    """What the verdicts are held at: each shown run's false-alarm rate and its split over
+    families where the run recorded them, else the stored rows' alphas."""
+    told = [r for r in results.runs if r["alpha"] is not None and r["families"]]
+    if not told:
+        return f"family-wise α = {', '.join(f'{a:g}' for a in alphas) or '—'} (Holm)"
+    return "; ".join(
+        f"{r['suite']}: α = {r['alpha']:g} for the whole run"
+        + (f", {r['alpha'] / len(r['families']):.3g} for each of {len(r['families'])} families "
+           f"({', '.join(r['families'])}), Holm within each" if len(r["families"]) > 1 else " (Holm)")
+        for r in told)
+
+
 def render_html(results: Results) -> str:
     """The report page for ``results`` (see the module docstring)."""
     problems, known = _counts(results)
@@ -312,7 +325,7 @@ def render_html(results: Results) -> str:
 <style>{_CSS}</style></head>
 <body><header><h1>Monte Carlo comparison report <span class="muted">{e(", ".join(suites))}</span></h1>
 <p class="meta">{e(str(results.db))} · {e(holds or "nothing stored")}
- · family-wise α = {e(", ".join(f"{a:g}" for a in alphas) or "—")} (Holm) · generated {when}{e(stale)}</p>
+ · {e(_alpha_text(results, alphas))} · generated {when}{e(stale)}</p>
 <nav>{nav}</nav></header><main>{status}{"".join(sections)}</main>
 <footer>Written by <code>harness report</code> from the stored measurements; \
 nothing here is recomputed from samples.

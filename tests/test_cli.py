@@ -27,7 +27,10 @@ def test_main_job_prints_every_case_of_the_default_suite(root, tmp_path):
     suite = load_suite(root / "suites" / "default.toml")
     lines = r.stdout.splitlines()
     header = next(line for line in lines if line.startswith("integrand"))
-    for col in ("technique", "n", "estimate ± stderr", "exact", "t", "p", "bias (Holm, α=0.01)",
+    assert suite.family_alpha == 0.01 / 5   # five families share the run's alpha
+    assert "alpha 0.01 (0.002 for each of 5 families (estimator bias, estimator convergence, sampler " \
+           "checks, render bias, render convergence), Holm within each)" in lines[0]
+    for col in ("technique", "n", "estimate ± stderr", "exact", "t", "p", "bias (Holm, α=0.002)",
                 "RMSE slope [95% CI]", "1/(V·T) vs baseline [95% CI]", "notes"):
         assert col in header, col
     rows = {}

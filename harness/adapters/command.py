@@ -30,9 +30,12 @@ change of the renderer's source invalidates its stored renders.
 """
 from __future__ import annotations
 
+import contextlib
 import json
+import os
 import re
 import shlex
+import signal
 import subprocess
 import sys
 import tempfile
@@ -146,8 +149,7 @@ class CommandRenderer:
                                   height=self.spec.get("height", ""))
             start = time.perf_counter()
             try:
-                proc = subprocess.run(line, shell=True, cwd=self.base, capture_output=True, text=True,
-                                      timeout=self.timeout)
+                proc = _run_group(line, self.base, self.timeout)
             except subprocess.TimeoutExpired as e:
                 raise RenderError(f"command {line!r} timed out after {self.timeout:g} s"
                                   + _tail(e.stderr)) from None
@@ -210,3 +212,19 @@ def _tail(text: str | bytes | None, name: str = "stderr", lines: int = 8) -> str
         text = text.decode(errors="replace")
     tail = text.strip().splitlines()[-lines:]
     return f"; {name} ends:\n    " + "\n    ".join(tail) if tail else ""
+
+
+def _run_group(line: str, cwd: Path | None, timeout: float) -> subprocess.CompletedProcess:
+    """Runs a shell command line in its own process group, capturing its output; on a timeout
+    or an interrupt (Ctrl-C, SIGTERM) the whole group is killed, so a renderer the shell
+    started never outlives the run (``subprocess.run`` would kill only the shell)."""
+    proc = subprocess.Popen(line, shell=True, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    try:
+        stdout, stderr = proc.communicate(timeout=timeout)
+    except BaseException:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        raise
+    return subprocess.CompletedProcess(line, proc.returncode, stdout, stderr)

@@ -49,7 +49,10 @@ class UnbiasedResult:
     infinite or unreliable, ``heavy_tail``, so no level can be claimed) or "invalid" (the
     contributions contained NaN, infinities or other faults: ``failures`` says which, with
     counts and first examples; nothing else was computed).  ``passed`` is True for
-    "consistent" and "inconclusive": a CI run does not fail on them.
+    "consistent" and "inconclusive": a CI run does not fail on them.  When every contribution
+    is equal and differs from the reference (zero hits of a rare event), the verdict is
+    "inconclusive" with no statistic (``undecided``; t NaN, p 1) and the rule-of-three bound
+    in ``flags``: an unseen spread is no evidence of bias.
     """
 
     verdict: str
@@ -82,6 +85,12 @@ class UnbiasedResult:
     @property
     def passed(self) -> bool:
         return self.verdict in ("consistent", "inconclusive")
+
+    @property
+    def undecided(self) -> bool:
+        """No test could be made: every contribution was equal, and not to the reference (a rare
+        value never drawn, or a wrong constant); ``flags`` gives the rule-of-three bound."""
+        return self.verdict == "inconclusive" and math.isnan(self.statistic)
 
     @property
     def bias(self) -> float:
@@ -181,13 +190,15 @@ def check_unbiased(contributions: Callable[[np.ndarray], np.ndarray], dim: int, 
 
 
 def _decide(parts: list[list[tuple[int, float, float]]], tails: TailSample, max_abs: float, reference: float,
-            alpha: float) -> UnbiasedResult:
+            alpha: float, *, iid: bool = True) -> UnbiasedResult:
     """The verdict from batches, each a list of (n, mean, stderr) pieces, and the tails, as
     documented in check_unbiased.  Works in units of 2^e ~ max |Y|, so that contributions
-    near 1e+-300 square without over- or underflow (the scaling is exact)."""
+    near 1e+-300 (or beyond 2^1023) square without over- or underflow (the scaling is exact).
+    ``iid``: the pieces' standard errors describe i.i.d. contributions (else only the batch
+    means count)."""
     e = math.frexp(max_abs)[1] if max_abs > 0 else 0
     sc = math.ldexp(1.0, -e)
-    ref = reference * sc
+    ref = float(np.ldexp(reference, -e))
     means, sizes, m2 = [], [], []
     for pieces in parts:
         nk, mk, s2 = chan_merge((ni, mi * sc, (se * sc) ** 2 * ni if ni > 1 else 0.0)
@@ -213,7 +224,13 @@ def _decide(parts: list[list[tuple[int, float, float]]], tails: TailSample, max_
         flags.append(f"batch means skewed ({skew:+.2f})"
                      + ("" if heavy else ": Chebyshev p-value instead of Student's t"))
     rounding = 16 * _EPS * max_abs * sc
-    if spread == 0 or stderr <= rounding:
+    verdict = ""
+    if iid and math.sqrt(variance) <= rounding and abs(estimate - ref) > rounding:
+        # every contribution equal, and not to the reference: a rare value never drawn, or a
+        # wrong constant.  An unseen spread proves nothing, so no level can be claimed.
+        t, p, verdict = math.nan, 1.0, "inconclusive"   # t NaN: no statistic (see ``undecided``)
+        flags.append(_unseen(total, float(np.ldexp(estimate, e)), reference, alpha))
+    elif spread == 0 or stderr <= rounding:
         # (near) zero variance: the estimate is exact up to rounding, or it is wrong
         t = 0.0 if abs(estimate - ref) <= rounding else math.copysign(math.inf, estimate - ref)
         p = 1.0 if t == 0 else 0.0
@@ -221,11 +238,25 @@ def _decide(parts: list[list[tuple[int, float, float]]], tails: TailSample, max_
         t = (estimate - ref) / stderr
         # Skewed batch means with a finite variance: Chebyshev, P(|t| >= k) <= 1/k^2, needs
         # no normality; the factor 4 allows the standard error to be underestimated by 2x.
-        p = min(1.0, 4 / (t * t)) if skewed and not heavy else float(2 * stats.t.sf(abs(t), batches - 1))
-    verdict = "consistent" if p >= alpha else ("inconclusive" if heavy else "biased")
-    unscale = math.ldexp(1.0, e)
-    return UnbiasedResult(verdict, t, p, batches - 1, estimate * unscale, stderr * unscale, reference, total,
-                          alpha, batches, variance * unscale * unscale, tail, skew, tuple(flags), heavy)
+        p = (min(1.0, 4 / (t * t)) if t != 0 else 1.0) if skewed and not heavy else \
+            float(2 * stats.t.sf(abs(t), batches - 1))
+    verdict = verdict or ("consistent" if p >= alpha else ("inconclusive" if heavy else "biased"))
+    with np.errstate(over="ignore"):  # a variance beyond 1.8e308 is inf, not an error
+        variance = float(np.ldexp(variance, 2 * e))
+    return UnbiasedResult(verdict, t, p, batches - 1, float(np.ldexp(estimate, e)),
+                          float(np.ldexp(stderr, e)), reference, total, alpha, batches, variance, tail, skew,
+                          tuple(flags), heavy)
+
+
+def _unseen(n: int, value: float, reference: float, alpha: float) -> str:
+    """Why n equal contributions cannot decide: the rule of three's bound (at level alpha) on
+    the probability of any other value, and the values that could make up the difference."""
+    q = -math.log(alpha) / n   # P(no other value in n draws) = (1 - q)^n <= alpha beyond this
+    gap = reference - value
+    return (f"all {n} contributions equal {value:.10g}, not the reference {reference:.10g}: a value not "
+            f"drawn in {n} samples has probability < {q:.2g} (rule of three at alpha = {alpha:g}), and "
+            f"values of {gap / q:+.3g} or beyond at that probability would make up the difference of "
+            f"{gap:+.3g}; no bias can be claimed or excluded: sample more (the bound falls as 1/n)")
 
 
 def check_technique(integrand: str | rest.Integrand, technique: str | rest.Technique, sample_count: int, *,
@@ -262,4 +293,4 @@ def judge_batches(estimates: Sequence[rest.Estimate], tails: TailSample, referen
     tail sample of their contributions; for non-iid point sets only the batch means count."""
     max_abs = max(max(abs(e.min), abs(e.max)) for e in estimates)
     return _decide([[(e.n, e.mean, e.stderr if iid else 0.0)] for e in estimates], tails, max_abs, reference,
-                   alpha)
+                   alpha, iid=iid)

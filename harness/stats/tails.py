@@ -16,7 +16,7 @@ __all__ = ["TailSample"]
 
 
 class TailSample:
-    """The largest deviations above and below a centre (the first values' median), kept
+    """The largest deviations above and below a centre (the first values' upper median), kept
     across calls, for the tail estimates."""
 
     def __init__(self, keep: int):
@@ -30,8 +30,8 @@ class TailSample:
 
     def add(self, y: np.ndarray) -> None:
         """Takes the finite values ``y`` of one block into the kept extremes."""
-        if self.center is None:
-            self.center = float(np.median(y))
+        if self.center is None:  # a middle value, not an average of two: finite up to 1.8e308
+            self.center = float(np.partition(y, y.size // 2)[y.size // 2])
         self.upper = self._top(np.concatenate([self.upper, self._top(y - self.center)]))
         self.lower = self._top(np.concatenate([self.lower, self._top(self.center - y)]))
 

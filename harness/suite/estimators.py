@@ -148,13 +148,13 @@ class EstimatorKind:
         suite = self.suite
         results = [_measure(suite, c, store.payloads(k), self.looks.get(k, 0))
                    for k, c in self.case_of.items()]
-        table = results_table(results, suite.alpha)
+        table = results_table(results, suite.family_alpha)
         verdicts = [{"bias": v, "convergence": cv} for v, cv in zip(table.get("verdict", ()),
                                                                    table.get("convergence", ()))]
-        failures = [_failure(r, v, suite.alpha, len(results)) for r, v in zip(results, verdicts)]
-        text = (format_table(table, suite.alpha) + f"\nt: Student t of {suite.batches} batch means against "
-                "the exact value; RMSE slope: log-log fit over budgets (expected -0.5 for Monte Carlo); "
-                "1/(V·T): efficiency (background eq. 5) against uniform MC on the same integrand."
+        failures = [_failure(r, v, suite.family_alpha, len(results)) for r, v in zip(results, verdicts)]
+        text = (format_table(table, suite.family_alpha) + f"\nt: Student t of {suite.batches} batch means "
+                "against the exact value; RMSE slope: log-log fit over budgets (expected -0.5 for Monte "
+                "Carlo); 1/(V·T): efficiency (background eq. 5) against uniform MC on the same integrand."
                 if results else "")
         return Outcome(self.name, "cases", tuple(self.names()), tuple(results), tuple(verdicts),
                        tuple(failures),
@@ -195,15 +195,15 @@ def _measure(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int = 0
             if faults:
                 first = next(e for e in batches if e.issues)
                 bias = stats.UnbiasedResult.invalid(faults, first.examples, reference=est.reference,
-                                                    n=b * suite.batches, alpha=suite.alpha,
+                                                    n=b * suite.batches, alpha=suite.family_alpha,
                                                     batches=suite.batches)
             else:
-                bias = stats.judge_batches(batches, tails, est.reference, suite.alpha, iid=est.iid)
-            if case.looks > 1 and bias.verdict != "invalid":
+                bias = stats.judge_batches(batches, tails, est.reference, suite.family_alpha, iid=est.iid)
+            if case.looks > 1 and bias.verdict != "invalid" and not bias.undecided:
                 # alpha spent over the looks a target may take (Bonferroni: any dependence, any
                 # stopping rule): the final look's p-value times the number of looks
                 p = min(1.0, bias.pvalue * case.looks)
-                verdict = ("consistent" if p >= suite.alpha else
+                verdict = ("consistent" if p >= suite.family_alpha else
                            "inconclusive" if bias.heavy_tail else "biased")
                 bias = dataclasses.replace(bias, pvalue=p, verdict=verdict)
         if "variance" in wanted and not faults and est.iid:
@@ -266,7 +266,7 @@ def _judge_bias(results: list[CaseResult], alpha: float) -> list[str]:
             out.append("not measured")
         elif r.bias.verdict == "invalid":
             out.append("invalid")
-        elif rej and r.bias.heavy_tail:
+        elif r.bias.undecided or (rej and r.bias.heavy_tail):
             out.append("inconclusive")
         elif rej:
             out.append("biased (expected)" if r.estimator.biased else "biased")
@@ -281,7 +281,7 @@ def _failure(r: CaseResult, verdicts: dict[str, str], alpha: float, family: int)
     b = r.bias
     if b is not None and verdicts["bias"] in ("biased", "bias missed", "invalid"):
         head = (f"bias: estimate {b.estimate:.10g} ± {b.stderr:.3g} (n = {b.n}), exact {b.reference:.10g}, "
-                f"t = {b.statistic:+.2f}, p = {b.pvalue:.3g}, family-wise alpha = {alpha} "
+                f"t = {b.statistic:+.2f}, p = {b.pvalue:.3g}, family-wise alpha = {alpha:.3g} "
                 f"(Holm over {family} cases)")
         if math.isfinite(b.stderr):
             lo, hi = b.confidence_interval(1 - alpha)
@@ -292,7 +292,7 @@ def _failure(r: CaseResult, verdicts: dict[str, str], alpha: float, family: int)
                         + (f"\n  flags: {'; '.join(b.flags)}" if b.flags else ""))
     c = r.convergence
     if verdicts["convergence"] == "slower than expected":
-        problems.append(f"convergence: {c}; one-sided p = {c.pvalue:.3g}, family-wise alpha = {alpha} "
+        problems.append(f"convergence: {c}; one-sided p = {c.pvalue:.3g}, family-wise alpha = {alpha:.3g} "
                         f"(Holm)\n{c.table.to_string(index=False)}")
     return "\n".join(problems)
 
@@ -303,7 +303,7 @@ def _rows(suite: Suite, results: list[CaseResult], table: pd.DataFrame) -> list[
     rows = []
     for r, row in zip(results, table.to_dict("records")):
         base = {"case_key": r.key, "suite": suite.name, "integrand": r.case.integrand,
-                "technique": r.case.technique, "alpha": suite.alpha}
+                "technique": r.case.technique, "alpha": suite.family_alpha}
         if r.bias is not None:
             b = r.bias
             lo, hi = b.confidence_interval(0.95) if math.isfinite(b.stderr) else (math.nan, math.nan)
@@ -421,7 +421,7 @@ def format_table(df: pd.DataFrame, alpha: float) -> str:
         "exact": (df["exact"].map(lambda v: f"{v:.9g}"), ">"),
         "t": (df["z"].map(lambda z: f"{z:+.2f}" if math.isfinite(z) else str(z)), ">"),
         "p": (df["pvalue"].map(lambda p: f"{p:.2g}"), ">"),
-        f"bias (Holm, α={alpha:g})": (df["verdict"], "<"),
+        f"bias (Holm, α={alpha:.3g})": (df["verdict"], "<"),
         "RMSE slope [95% CI]": ([interval(v, lo, hi, "+.2f")
                                  + (" slower!" if cv == "slower than expected" else "")
                                  for v, lo, hi, cv in zip(df["slope"], df["slope_lo"], df["slope_hi"],

@@ -138,6 +138,25 @@ class Suite:
     revision: str = ""                 # SHA-256 of the suite file's text (which edit was run)
 
     @property
+    def families(self) -> tuple[str, ...]:
+        """The families of tests the suite's definition holds (not its data): estimator bias,
+        estimator convergence, sampler checks, render bias, render convergence."""
+        wants = [("estimator bias", self.cases, ("bias",)),
+                 ("estimator convergence", self.cases, ("convergence",)),
+                 ("sampler checks", self.samplers, None),
+                 ("render bias", self.renders, ("bias",)),
+                 ("render convergence", self.renders, ("convergence",))]
+        return tuple(name for name, cases, ms in wants
+                     if any(ms is None or set(ms) & set(c.measurements) for c in cases))
+
+    @property
+    def family_alpha(self) -> float:
+        """The level each family is held at: ``alpha`` split evenly over :attr:`families`
+        (Bonferroni across families, Holm within each), so a whole run's verdicts raise a
+        false alarm with probability at most ``alpha`` for any dependence between them."""
+        return self.alpha / max(len(self.families), 1)
+
+    @property
     def file_name(self) -> str:
         """The name as a safe file name (results/<file_name>.sqlite): letters, digits, '.', '_'
         and '-' only, never a path (``../../x`` becomes ``x``)."""

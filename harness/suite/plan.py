@@ -38,7 +38,7 @@ _SAMPLER_PAYLOAD = 2                 # sampler-check payloads: 2 adds residual g
 _RENDER_FORMAT = 1                   # bump when a render unit's meaning changes
 RENDER = "render"                    # the kind of a render unit
 # the harness code (harness.fingerprint) that computes each kind's units: part of their keys
-_ESTIMATOR_CODE = ("suite/estimators.py", "stats/estimator.py", "usercode.py")
+_ESTIMATOR_CODE = ("suite/estimators.py", "stats/estimator.py", "stats/tails.py", "usercode.py")
 _SAMPLER_CODE = ("samplers", "adapters", "suite/sampler_checks.py", "usercode.py")
 _RENDER_CODE = ("adapters", "suite/renders.py", "usercode.py")
 

@@ -67,7 +67,7 @@ def failures(results: list[RenderResult], verdicts: list[dict[str, str]], alpha:
             text = f"bias: {verdict}; expected {what}"
             if b is not None:
                 text += (f"; p = {b.pvalue:.3g} (pixels {b.pvalue_pixels:.3g}, image mean "
-                         f"{b.pvalue_mean:.3g}) at family-wise alpha {alpha} (Holm over {len(results)} "
+                         f"{b.pvalue_mean:.3g}) at family-wise alpha {alpha:.3g} (Holm over {len(results)} "
                          f"configurations), {b.replicas} replicas x {b.spp} spp, {b.tested} pixel-channels "
                          f"tested; worst pixel (row, col, channel) {b.worst_pixel} t = {b.worst_t:+.2f}; "
                          f"image-mean bias {b.bias_mean:+.3g} ± {b.bias_mean_se:.2g}")
@@ -79,7 +79,7 @@ def failures(results: list[RenderResult], verdicts: list[dict[str, str]], alpha:
             lo, hi = c.confidence_interval()
             problems.append(f"convergence: sqrt(relMSE) slope {c.slope:+.2f} [{lo:+.2f}, {hi:+.2f}], "
                             f"expected {c.expected:+.2f} or faster (one-sided p = {c.pvalue:.3g}, Holm at "
-                            f"alpha {alpha})\n{c.table.to_string(index=False)}")
+                            f"alpha {alpha:.3g})\n{c.table.to_string(index=False)}")
         out.append("\n".join(problems))
     return out
 
@@ -149,7 +149,7 @@ def render_rows(suite: Suite, results: list[RenderResult],
             b = r.bias
             rows.append({**common, "measurement": "bias", "value": b.bias_mean,
                          "lo": b.bias_mean - 1.96 * b.bias_mean_se, "hi": b.bias_mean + 1.96 * b.bias_mean_se,
-                         "n": b.replicas * b.spp, "pvalue": b.pvalue, "alpha": suite.alpha,
+                         "n": b.replicas * b.spp, "pvalue": b.pvalue, "alpha": suite.family_alpha,
                          "verdict": v["bias"],
                          "detail": {"pvalue_pixels": b.pvalue_pixels, "pvalue_mean": b.pvalue_mean,
                                     "worst_pixel": list(b.worst_pixel), "worst_t": b.worst_t,

@@ -45,7 +45,7 @@ from harness.suite.plan import (
     render_units,
 )
 from harness.suite.render_tables import failures, judge, render_rows, render_table
-from harness.suite.store import Store, write_exr
+from harness.suite.store import Store, write_exr, write_npy
 from harness.suite.verdicts import mark_xfail
 
 __all__ = ["RenderJob", "RenderResult", "RenderKind", "ReferenceCache", "cached_renderer"]
@@ -128,9 +128,7 @@ class ReferenceCache:
     def save(self, key: str, ref: ist.Reference, meta: dict[str, Any]) -> None:
         self.folder.mkdir(parents=True, exist_ok=True)
         for what, a in (("mean", ref.mean), ("variance", ref.variance)):
-            tmp = self._path(key, f"{what}.partial.npy")
-            np.save(tmp, np.asarray(a, dtype=np.float64))
-            os.replace(tmp, self._path(key, f"{what}.npy"))
+            write_npy(self._path(key, f"{what}.npy"), np.asarray(a, dtype=np.float64))
             write_exr(self._path(key, f"{what}.exr"), a)
         meta_p = self._path(key, "meta.json")
         tmp = meta_p.with_suffix(".json.partial")
@@ -216,7 +214,7 @@ class RenderKind:
             results.append(_measure(c.rc, c.key, store, reference, label))
             if hasattr(c.renderer, "notes"):  # what the adapter says a reader must know (how it timed)
                 results[-1].notes.extend(c.renderer.notes())
-        alpha = self.suite.alpha
+        alpha = self.suite.family_alpha
         verdicts = judge(results, alpha)
         frame = render_table(results, verdicts)
         text = ""
@@ -224,9 +222,9 @@ class RenderKind:
             notes = [f"\n  {r.case.scene} {r.case.label}: {n}" for r in results for n in r.notes]
             table = frame.to_string(index=False, float_format=lambda v: f"{v:.3g}")
             text = (f"renders (per-pixel bias test, Holm over {len(results)} configurations at alpha "
-                    f"{alpha:g}; relMSE = mean (x - ref)^2 / (ref^2 + 0.01); efficiency 1/(relMSE·T) against "
-                    "the first configuration of the same scene and reference; relMSE at the longest time all "
-                    "of those reached):\n" + table + "".join(notes))
+                    f"{alpha:.3g}; relMSE = mean (x - ref)^2 / (ref^2 + 0.01); efficiency 1/(relMSE·T) "
+                    "against the first configuration of the same scene and reference; relMSE at the longest "
+                    "time all of those reached):\n" + table + "".join(notes))
         return Outcome(self.name, "render configurations", tuple(self.names()), tuple(results),
                        tuple(verdicts),
                        tuple(failures(results, verdicts, alpha)),

@@ -84,7 +84,7 @@ def run_suite(suite: Suite, db: str | Path, *, threads: int | None = None, dask:
 
 def _run(suite: Suite, store: Store, threads: int, dask: str | None,
          progress: Callable[[int, int], None] | None, start: float) -> RunSummary:
-    run = store.start_run(suite.name, str(suite.path), suite.revision)
+    run = store.start_run(suite.name, str(suite.path), suite.revision, suite.alpha, suite.families)
     kinds = kinds_of(suite)
     for k in kinds:
         k.register(store)

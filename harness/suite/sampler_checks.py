@@ -110,14 +110,14 @@ class SamplerKind:
         suite = self.suite
         results = [SamplerResult(sc, k, {u.kind: p for u, p in store.payloads(k).items()})
                    for k, sc in self.sampler_of.items()]
-        verdicts, adjusted = _judge(results, suite.alpha)
-        failures = [_failure(r, v, adj, suite.alpha) for r, v, adj in zip(results, verdicts, adjusted)]
+        verdicts, adjusted = _judge(results, suite.family_alpha)
+        failures = [_failure(r, v, adj, suite.family_alpha) for r, v, adj in zip(results, verdicts, adjusted)]
         frame = pd.DataFrame([{"sampler": r.case.label, "domain": r.case.domain, "n": r.case.samples,
                                **{f"{m}_pvalue": c["pvalue"] for m, c in r.checks.items()},
                                **{f"{m}_verdict": v[m] for m in r.checks}}
                               for r, v in zip(results, verdicts)])
         text = ("sampler checks (chi-square and friends; MCMC cross-check):\n"
-                + _format_table(results, verdicts, suite.alpha) if results else "")
+                + _format_table(results, verdicts, suite.family_alpha) if results else "")
         return Outcome(self.name, "sampler checks", tuple(self.names()), tuple(results), tuple(verdicts),
                        tuple(failures),
                        tuple(mark_xfail(_rows(suite, results, verdicts),
@@ -151,7 +151,7 @@ def _failure(r: SamplerResult, verdicts: dict[str, str], adjusted: dict[str, flo
         fails = "".join(f"\n  {f['check']}: {f['count']} ({f['detail']}), e.g. {f['examples'][:2]}"
                         for f in c["failures"])
         problems.append(f"{m}: p = {c['pvalue']:.3g} (Holm-adjusted over the suite: {adjusted[m]:.3g}), "
-                        f"family-wise alpha = {alpha}, {r.case.samples} samples on the {r.case.domain}; "
+                        f"family-wise alpha = {alpha:.3g}, {r.case.samples} samples on the {r.case.domain}; "
                         f"expected: the sampler draws what its pdf claims{fails}\n{tests}")
     return "\n".join(problems)
 
@@ -162,7 +162,8 @@ def _rows(suite: Suite, results: list[SamplerResult], verdicts: list[dict[str, s
         for m, c in r.checks.items():
             rows.append({"case_key": r.key, "suite": suite.name, "integrand": f"sampler:{r.case.label}",
                          "technique": r.case.domain, "measurement": m, "value": c["pvalue"],
-                         "n": r.case.samples, "pvalue": c["pvalue"], "alpha": suite.alpha, "verdict": v[m],
+                         "n": r.case.samples, "pvalue": c["pvalue"], "alpha": suite.family_alpha,
+                         "verdict": v[m],
                          "detail": {"tests": c["tests"], "failures": c["failures"],
                                     "normalization": c["normalization"], "residuals": c.get("residuals", {}),
                                     "marginals": c.get("marginals", {})}})
@@ -173,7 +174,7 @@ def _format_table(results: list[SamplerResult], verdicts: list[dict[str, str]], 
     """Sampler checks as aligned text: p-values (within-check Holm), suite verdicts (Holm)."""
     width = max([34] + [len(r.case.label) for r in results])
     lines = [f"{'sampler':{width}s} {'domain':10s} {'n':>7s}  {'chi-square p':>12s}  {'mcmc p':>8s}  "
-             f"{'weight':>8s}  verdict (Holm, α={alpha:g})"]
+             f"{'weight':>8s}  verdict (Holm, α={alpha:.3g})"]
     for r, v in zip(results, verdicts):
         cs, mc = r.checks.get("chi_square"), r.checks.get("mcmc")
         verdict = "failed" if "failed" in v.values() else "passed"

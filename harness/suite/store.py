@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import errno
 import hashlib
+import io
 import json
 import os
 import re
@@ -35,7 +36,7 @@ from harness.fingerprint import harness_fingerprint
 from harness.suite.plan import Unit
 
 __all__ = ["Store", "StoreError", "RECORDED", "explain", "load", "runs", "run_filter", "connect_read_only",
-           "reading", "image_dir", "write_exr", "read_exr", "read_stored"]
+           "reading", "image_dir", "write_exr", "read_exr", "write_npy", "read_stored", "plan_progress"]
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS cases (
@@ -77,7 +78,9 @@ CREATE TABLE IF NOT EXISTS runs (
     started  REAL NOT NULL,
     finished REAL,                 -- NULL while it runs, or if it was interrupted
     units_planned INTEGER,
-    units_run     INTEGER
+    units_run     INTEGER,
+    alpha    REAL,                 -- the false-alarm rate of the whole run ...
+    families TEXT                  -- ... split evenly over these families of tests (JSON list)
 );
 CREATE TABLE IF NOT EXISTS planned (  -- the units the latest run of each suite needs
     suite       TEXT NOT NULL,
@@ -137,6 +140,8 @@ def explain(error: BaseException, path: str | Path, timeout: float = 60) -> str:
     if isinstance(error, sqlite3.DatabaseError) and "malformed" in msg:
         return (f"{path}: corrupt results database ({msg}); run `harness gc --repair --db {path}` "
                 "or delete it")
+    if "readonly" in msg or isinstance(error, PermissionError):
+        return f"{path}: not writable ({msg}); store the results elsewhere with --db"
     if isinstance(error, OSError) and error.filename:
         return f"{error.filename}: {error.strerror or msg}"
     return f"{path}: {msg}"
@@ -190,15 +195,17 @@ class Store:
             self.db.close()
 
     # --- runs ------------------------------------------------------------------------------
-    def start_run(self, suite: str, file: str, revision: str) -> int:
-        """Records a run of ``suite`` starting now; its planned units replace the suite's
-        previous plan.  Returns the run's number."""
+    def start_run(self, suite: str, file: str, revision: str, alpha: float | None = None,
+                  families: tuple[str, ...] = ()) -> int:
+        """Records a run of ``suite`` starting now (``alpha``: its false-alarm rate, split over
+        ``families``); its planned units replace the suite's previous plan.  Returns its number."""
         self.commit()
         self.db.execute("BEGIN")
         self.db.execute("DELETE FROM planned WHERE suite = ?", (suite,))
-        cur = self.db.execute("INSERT INTO runs (suite, file, revision, harness, started) "
-                              "VALUES (?, ?, ?, ?, ?)",
-                              (suite, file, revision, harness_fingerprint(), time.time()))
+        cur = self.db.execute("INSERT INTO runs (suite, file, revision, harness, started, alpha, families) "
+                              "VALUES (?, ?, ?, ?, ?, ?, ?)",
+                              (suite, file, revision, harness_fingerprint(), time.time(), alpha,
+                               json.dumps(list(families))))
         self.db.execute("COMMIT")
         self.run = int(cur.lastrowid)
         return self.run
@@ -290,7 +297,7 @@ class Store:
         exact32 = np.array_equal(a.astype(np.float32).astype(a.dtype), a, equal_nan=True)
         file = re.sub(r"[^A-Za-z0-9._-]", "_", name) + (".exr" if exact32 else ".npy")
         final = self.image_dir / file
-        a = write_exr(final, a) if exact32 else _write_npy(final, a)
+        a = write_exr(final, a) if exact32 else write_npy(final, a)
         self.commit()
         self.db.execute("INSERT OR REPLACE INTO images (name, file, height, width, channels, finished, "
                         "sha256, bytes) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
@@ -357,9 +364,11 @@ def _migrate(db: sqlite3.Connection) -> None:
     measurements become one run per suite (file "(before runs were recorded)"); images get
     their checksum column."""
     columns = {t: {r[1] for r in db.execute(f"PRAGMA table_info({t})")} for t in ("measurements", "images")}
-    for column, kind in (("sha256", "TEXT"), ("bytes", "INTEGER")):
-        if columns["images"] and column not in columns["images"]:
-            db.execute(f"ALTER TABLE images ADD COLUMN {column} {kind}")
+    columns["runs"] = {r[1] for r in db.execute("PRAGMA table_info(runs)")}
+    for table, column, kind in (("images", "sha256", "TEXT"), ("images", "bytes", "INTEGER"),
+                                ("runs", "alpha", "REAL"), ("runs", "families", "TEXT")):
+        if columns[table] and column not in columns[table]:
+            db.execute(f"ALTER TABLE {table} ADD COLUMN {column} {kind}")
     if not columns["measurements"] or "run" in columns["measurements"]:
         return
     db.execute("BEGIN")
@@ -403,10 +412,13 @@ def read_exr(path: Path) -> np.ndarray:
     return read_image(path)
 
 
-def _write_npy(path: Path, a: np.ndarray) -> np.ndarray:
-    """Writes an array as .npy: to a temporary name, then renamed.  Returns it."""
+def write_npy(path: Path, a: np.ndarray) -> np.ndarray:
+    """Writes an array as .npy: serialised in memory, written to a temporary name, then
+    renamed.  (np.save on a file turns a Ctrl-C inside its write into a TypeError.)  Returns it."""
+    buffer = io.BytesIO()
+    np.save(buffer, a, allow_pickle=False)
     tmp = path.with_name(path.name + ".partial.npy")
-    np.save(tmp, a)
+    tmp.write_bytes(buffer.getvalue())
     os.replace(tmp, path)
     return a
 
@@ -476,6 +488,22 @@ def run_filter(con: sqlite3.Connection, db: str | Path, *, suite: str | None = N
     elif "runs" in tables and not all_runs:
         where.append("m.run IN (SELECT MAX(run) FROM runs WHERE finished IS NOT NULL GROUP BY suite)")
     return (" WHERE " + " AND ".join(where) if where else ""), tuple(params)
+
+
+def plan_progress(db: str | Path, suite: str) -> tuple[int, int]:
+    """(units stored, units planned) of the current plan of ``suite`` in ``db``, counted in
+    the database (what an interrupted run leaves); (0, 0) if nothing was planned yet."""
+    try:
+        with reading(db) as con:
+            planned = con.execute("SELECT COUNT(*) FROM planned WHERE suite = ?", (suite,)).fetchone()[0]
+            stored = con.execute(
+                "SELECT COUNT(*) FROM planned p WHERE p.suite = ? AND EXISTS (SELECT 1 FROM units u WHERE "
+                "(u.case_key, u.stream, u.budget, u.replica, u.chunk_begin, u.chunk_end, u.kind) = "
+                "(p.case_key, p.stream, p.budget, p.replica, p.chunk_begin, p.chunk_end, p.kind))",
+                (suite,)).fetchone()[0]
+    except (FileNotFoundError, ValueError):
+        return 0, 0
+    return int(stored), int(planned)
 
 
 @contextmanager

@@ -204,6 +204,8 @@ def test_report_in_chromium(report):
             assert page.locator(".summary-table .badge.good").count() >= len(TECHNIQUES) + 2
             content = page.content()
             assert str(STALE_ESTIMATE) not in content and "1 superseded case" in content
+            assert ("tiny: α = 0.01 for the whole run, 0.00333 for each of 3 families (estimator bias, "
+                    "estimator convergence, sampler checks), Holm within each") in page.inner_text("header")
             samplers = page.inner_text("#sampler-table")
             assert "cosine_hemisphere" in samplers and "linear" in samplers and "passed" in samplers
 
@@ -266,7 +268,7 @@ def test_csv_has_every_case_with_stored_numbers(report):
                       & (stored["measurement"] == "bias") & (stored["case_key"] == row["case_key"])].iloc[0]
         assert (row["bias"] == want["value"] and row["bias_pvalue"] == want["pvalue"]
                 and row["bias_n"] == want["n"])
-        assert row["bias_verdict"] == "unbiased" and row["alpha"] == 0.01
+        assert row["bias_verdict"] == "unbiased" and row["alpha"] == 0.01 / 3   # 3 families share alpha
     assert (df["case_key"] != "0" * 24).all()           # the superseded run is left out
 
 

@@ -86,10 +86,35 @@ def test_same_seed_same_verdict_other_seed_other_numbers():
     assert a == b and a.estimate != c.estimate
 
 
-def test_zero_variance_estimators_are_judged_exactly():
+def test_zero_variance_estimators_are_judged_exactly_and_an_unseen_spread_is_no_evidence():
+    """Equal contributions equal to the reference: exact.  Equal but not the reference: a wrong
+    constant, or a rare value never drawn; no level can be claimed either way, so the verdict is
+    "inconclusive" with the rule of three's bound (at alpha) on what was not seen."""
     ok = hs.check_unbiased(lambda u: np.full(u.shape[0], 0.25), 2, 0.25, sample_count=4096)
     off = hs.check_unbiased(lambda u: np.full(u.shape[0], 0.25 + 1e-12), 2, 0.25, sample_count=4096)
-    assert ok.verdict == "consistent" and off.verdict == "biased" and off.pvalue == 0.0
+    assert ok.verdict == "consistent" and ok.pvalue == 1.0
+    assert off.verdict == "inconclusive" and off.undecided and off.passed and math.isnan(off.statistic)
+    assert "all 4096 contributions equal 0.25" in off.flags[-1]
+    assert f"probability < {-math.log(0.01) / 4096:.2g} (rule of three at alpha = 0.01)" in off.flags[-1]
+
+
+def test_a_rare_event_estimator_never_crashes_and_holds_alpha():
+    """Y = 1{u < 3e-5} / 3e-5 at n = 1e5: no hit 5 % of the time, exactly 3 hits (t = 0) 22 %:
+    over 200 seeds no crash, and "biased" no more often than alpha allows (Binomial(200, 0.01)
+    exceeds 5 with probability 0.0005); the zero-hit seeds are "inconclusive"."""
+    verdicts = [hs.check_unbiased(lambda u: (u[:, 0] < 3e-5) / 3e-5, 1, 1.0, sample_count=10**5, seed=s)
+                for s in range(200)]
+    assert sum(r.verdict == "biased" for r in verdicts) <= 5
+    zero = [r for r in verdicts if r.estimate == 0]
+    assert zero and all(r.undecided for r in zero)
+    assert any(r.statistic == 0 and r.pvalue == 1.0 for r in verdicts)   # 3 hits: t = 0, no division
+
+
+def test_contributions_beyond_two_to_the_1023_are_scaled_not_overflowed():
+    big = 2.0**1023
+    r = hs.check_unbiased(lambda u: big * (1 + u[:, 0]), 1, 1.5 * big, sample_count=65536)
+    assert r.verdict == "consistent" and math.isfinite(r.estimate) and math.isfinite(r.stderr)
+    assert r.variance == math.inf   # (2^1023)^2 / 12 is beyond double range: inf, said as such
 
 
 def test_nan_contributions_make_the_test_invalid_with_examples():

@@ -365,3 +365,15 @@ def test_a_suite_name_becomes_a_safe_file_name(tmp_path, name, file_name):
 
 def test_suite_errors_are_value_errors():
     assert issubclass(SuiteError, ValueError)  # callers that catch ValueError see them too
+
+
+def test_the_runs_alpha_is_split_over_the_families_its_definition_holds(tmp_path):
+    """One α for a whole run: Bonferroni over the families the suite file defines (never over
+    what the data turn out to be), Holm within each."""
+    mixed = load_suite(write(tmp_path, HEAD.replace("batches", "alpha = 0.02\nbatches") + CASE
+                             + '[[sampler]]\nname = "ggx"\n'
+                             '[[render]]\nadapter = "mitsuba"\nscene = "furnace"\nmeasurements = ["bias"]\n'))
+    assert mixed.families == ("estimator bias", "estimator convergence", "sampler checks", "render bias")
+    assert mixed.family_alpha == 0.02 / 4
+    only = load_suite(write(tmp_path, '[[sampler]]\nname = "ggx"\n'))
+    assert only.families == ("sampler checks",) and only.family_alpha == only.alpha == 0.01

@@ -2,13 +2,16 @@
 
 The runs table (which suite revision each run measured; show --runs / --all / --run), a
 database written before runs were recorded, and the fault matrix of the store: a --db whose
-parent is a file, a garbage and a truncated database (refused with the advice to repair,
+parent is a file, a read-only results folder (show and report read it unchanged), a garbage
+and a truncated database (refused with the advice to repair,
 repaired by ``harness gc --repair``, then rerun to the numbers of an undamaged run), a lock
 held by another process, a full disk, an unreachable Dask scheduler; ``harness gc`` removes
 half-written files and keeps what other databases in the folder may use.
 """
 from __future__ import annotations
 
+import ctypes
+import os
 import sqlite3
 import subprocess
 import sys
@@ -115,6 +118,38 @@ def test_a_database_from_before_runs_were_recorded_is_migrated(tmp_path, suite_f
     again = run_suite(load_suite(suite_file), db, threads=2)
     assert again.run == 2 and set(harness.load(db)["run"]) == {2}
     assert len(harness.load(db, all_runs=True)) == len(harness.load(db)) + 1
+
+
+def _as_if_unprivileged() -> None:
+    """preexec_fn: a root process loses the capabilities that bypass file permissions
+    (CAP_DAC_OVERRIDE, CAP_DAC_READ_SEARCH), so a read-only folder is read-only to it too."""
+    if os.geteuid() == 0:
+        libc = ctypes.CDLL(None, use_errno=True)
+        for cap in (1, 2):
+            if libc.prctl(24, cap, 0, 0, 0) != 0:   # PR_CAPBSET_DROP
+                raise OSError(ctypes.get_errno(), "prctl(PR_CAPBSET_DROP)")
+
+
+def test_a_read_only_results_folder_is_read_and_a_run_there_is_one_line(tmp_path, suite_file):
+    folder = tmp_path / "results"
+    run_suite(load_suite(suite_file), folder / "r.sqlite", threads=2)
+    before = {f.name: f.read_bytes() for f in folder.iterdir()}
+    for f in folder.iterdir():
+        f.chmod(0o444)
+    folder.chmod(0o555)
+    try:
+        def cli_ro(*args: str) -> subprocess.CompletedProcess:
+            return subprocess.run([HARNESS, *args], capture_output=True, text=True, cwd=tmp_path, timeout=120,
+                                  preexec_fn=_as_if_unprivileged)
+
+        shown = cli_ro("show", "--db", "results/r.sqlite")
+        assert shown.returncode == 0 and "gaussian" in shown.stdout, shown.stderr
+        report = cli_ro("report", "--db", "results/r.sqlite", "-o", "r.html")
+        assert report.returncode == 0 and (tmp_path / "r.html").stat().st_size > 10_000, report.stderr
+        one_line_error(cli_ro("run", str(suite_file), "--db", "results/r.sqlite"), "results/r.sqlite")
+        assert {f.name: f.read_bytes() for f in folder.iterdir()} == before   # nothing changed
+    finally:
+        folder.chmod(0o755)
 
 
 def test_a_db_whose_parent_is_a_file(tmp_path, suite_file):
