@@ -141,7 +141,8 @@ def integrand_curves(results: Results) -> dict[tuple[str, str], Group]:
                                     error))
             eff = rows.get("efficiency_ratio") or (rows.get("efficiency") if "baseline" in
                                                    (rows.get("efficiency") or {}).get("detail", {}) else None)
-            if eff is not None and eff["value"] is not None and math.isfinite(eff["value"]):
+            if eff is not None and all(v is not None and math.isfinite(v) for v in (eff["value"], eff["lo"],
+                                                                                     eff["hi"])):
                 base = str(eff["detail"].get("baseline", ""))
                 ratios.append(Ratio(tech, eff["value"], eff["lo"], eff["hi"], int(eff["n"] or 0),
                                     short.get(base, base), str(eff["detail"].get("definition", "1/(V·T)"))))

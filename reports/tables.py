@@ -182,6 +182,8 @@ def _value_column(k: str) -> Column:
             notes.append(f"expected {fmt_num(row[f'{k}_expected'], '+.2f')}")
         if value_of(row, f"{k}_baseline") is not None:
             notes.append(f"vs {row[f'{k}_baseline']}")
+        if value_of(row, f"{k}_verdict") in ("infinite variance", "unreliable"):   # no interval, and why
+            notes.append(str(row[f"{k}_verdict"]))
         # the value on the first line, its interval under it (unbroken), so the table fits a screen
         v, lo, hi = value_of(row, k), value_of(row, f"{k}_lo"), value_of(row, f"{k}_hi")
         if _finite(v) and _finite(lo) and _finite(hi):

@@ -126,12 +126,16 @@ class EstimatorKind:
             store.add_case(key, self.suite.name, c.integrand, c.technique, definition)
 
     def plan(self, store: Store) -> list[EstimateJob]:
+        """The cases' units, interleaved: replica r of every case at one budget, then replica
+        r + 1, ..., so a drift of the machine's speed during the run falls on every case alike
+        instead of on whichever ran last (the efficiency compares their wall times)."""
         jobs = []
         base = str(self.suite.path.parent)
-        for key, c in self.case_of.items():
+        for i, (key, c) in enumerate(self.case_of.items()):
             for u in estimator_units(self.suite, c, self.looks.get(key, 0)):
-                jobs.append(EstimateJob(u, c, base, self.suite.seed, core_case_id(c, u.stream)))
-        return jobs
+                jobs.append((u.stream, u.replica, i, u.chunk_begin,
+                             EstimateJob(u, c, base, self.suite.seed, core_case_id(c, u.stream))))
+        return [job for *_, job in sorted(jobs, key=lambda j: j[:4])]
 
     def advance(self, store: Store) -> bool:
         """Moves each case with an unreached precision target to its next look."""
@@ -219,7 +223,8 @@ def _measure(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int = 0
     if reps_by_budget:
         top = reps_by_budget[max(reps_by_budget)]
         if top.rmse > 0 and "efficiency" in wanted:
-            eff = stats.efficiency(top)
+            tail = bias.tail_index if bias is not None and bias.verdict != "invalid" else None
+            eff = stats.efficiency(top, tail_index=tail, finite_variance=est.finite_variance)
         if "convergence" in wanted and len(reps_by_budget) >= 3 and top.rmse > 0:
             conv = stats.fit_convergence(list(reps_by_budget.values()), seed=suite.seed)
         if "error_vs_time" in wanted:
@@ -333,12 +338,13 @@ def _rows(suite: Suite, results: list[CaseResult], table: pd.DataFrame) -> list[
         if r.efficiency is not None:
             e = r.efficiency
             z = 1.96 * e.log_se / math.log(10)
+            said = {"verdict": e.verdict} if e.reason else {}   # "infinite variance", "unreliable"
             rows.append({**base, "measurement": "log10_efficiency", "value": e.log10_value,
-                         "lo": e.log10_value - z, "hi": e.log10_value + z, "n": e.n,
-                         "detail": {"seconds": e.seconds}})
+                         "lo": e.log10_value - z, "hi": e.log10_value + z, "n": e.n, **said,
+                         "detail": {"seconds": e.seconds, "reason": e.reason}})
             rows.append({**base, "measurement": "efficiency_ratio", "value": row["efficiency_ratio"],
-                         "lo": row["ratio_lo"], "hi": row["ratio_hi"], "n": e.n,
-                         "detail": {"baseline": row["efficiency_baseline"]}})
+                         "lo": row["ratio_lo"], "hi": row["ratio_hi"], "n": e.n, **said,
+                         "detail": {"baseline": row["efficiency_baseline"], "reason": e.reason}})
         if r.error_vs_time is not None:
             top = r.error_vs_time.iloc[-1]
             rows.append({**base, "measurement": "rmse", "value": top["rmse"], "lo": top["rmse_lo"],
@@ -399,6 +405,9 @@ def _notes(r: CaseResult) -> str:
         notes.append("infinite variance (analytic)")
     if r.bias and r.bias.stderr == 0:
         notes.append("zero variance")
+    if r.efficiency is not None and r.efficiency.reason:
+        zero = "0, " if r.efficiency.value == 0 else ""
+        notes.append(f"efficiency {zero}no interval: {r.efficiency.reason}")
     if r.case.target is not None:
         hw = r.target_half_width
         reached = hw <= r.case.target
@@ -411,7 +420,9 @@ def _notes(r: CaseResult) -> str:
 def format_table(df: pd.DataFrame, alpha: float) -> str:
     """The table as aligned text."""
     def interval(v, lo, hi, fmt):
-        return "—" if not math.isfinite(v) else f"{v:{fmt}} [{lo:{fmt}}, {hi:{fmt}}]"
+        if not math.isfinite(v):
+            return "—"
+        return f"{v:{fmt}} [{lo:{fmt}}, {hi:{fmt}}]" if math.isfinite(lo) else f"{v:{fmt}} (no interval)"
 
     columns = {
         "integrand": (df["integrand"], "<"),

@@ -196,7 +196,10 @@ class RenderKind:
                     warnings.warn(f"{problem}: rendering it again", stacklevel=2)
                     damaged.append(u)
         store.drop_units(damaged)
-        return [jobs[u] for u in sorted(jobs)]
+        # interleaved: replica r of every configuration, then r + 1, ...: a drift of the machine's
+        # speed falls on all of them alike (their wall times are compared)
+        order = {k: i for i, k in enumerate(dict.fromkeys(k for c in self.cases for k in (c.key, c.ref_key)))}
+        return [jobs[u] for u in sorted(jobs, key=lambda u: (u.stream, u.replica, order[u.case_key], u))]
 
     def advance(self, store: Store) -> bool:
         return False

@@ -243,6 +243,36 @@ def test_efficiency_ratio_of_importance_sampling_over_uniform():
     assert a.verdict == "measured" and a.passed
 
 
+def test_an_infinite_variance_has_efficiency_zero_and_no_interval():
+    """singularity/uniform: V infinite (analytic), whatever a finite sample's spread says; a
+    tail index below 2 says the same, one in [2, 3) gives a value without an interval."""
+    r = hs.replicate("singularity", "uniform", 100_000, 8, seed=0)
+    e = hs.efficiency(r)
+    assert e.verdict == "infinite variance" and e.value == 0 and e.log10_value == -math.inf
+    assert all(math.isnan(x) for x in e.confidence_interval()) and "no interval" in str(e)
+    g = hs.replicate("gaussian", "uniform", 100_000, 8, seed=0)
+    base = hs.efficiency(g)
+    ratio, interval = hs.efficiency_ratio(e, base)
+    assert ratio == 0.0 and all(math.isnan(x) for x in interval)
+    assert math.isnan(hs.efficiency_ratio(base, e)[0])   # against an efficiency of 0: no ratio
+    assert hs.efficiency(g, tail_index=1.5).verdict == "infinite variance"
+    shaky = hs.efficiency(g, tail_index=2.5)
+    assert shaky.verdict == "unreliable" and math.isfinite(shaky.log10_value)
+    assert all(math.isnan(x) for x in shaky.confidence_interval())
+    assert hs.efficiency(g, tail_index=3.5).verdict == "measured"
+
+
+def test_the_time_error_comes_from_the_spread_between_blocks_of_replicas():
+    """32 replicas whose times drift from 1.0 to 1.31 s (the machine slowing down), each block
+    of 4 alike: the spread within blocks is nearly nothing, the block medians spread: the
+    standard error is theirs, SD(block medians) / sqrt(8)."""
+    t = np.repeat(1.0 + 0.04 * np.arange(8), 4) + np.tile([0, 1e-4, 2e-4, 3e-4], 8)
+    med, se = hs.median_time(t)
+    blocks = np.median(t.reshape(8, 4), axis=1)
+    assert med == np.median(t) and se == pytest.approx(np.std(blocks, ddof=1) / math.sqrt(8))
+    assert se > 1.2533 * 1.4826 * np.median(np.abs(t - med)) / math.sqrt(32)   # the within-replica rule
+
+
 def test_efficiency_survives_huge_integrands():
     e = hs.efficiency(hs.replicate("huge", "uniform", 50_000, 8, seed=0))
     assert e.value == 0.0 and -600 < e.log10_value < -580  # 1/(V T) ~ 1e-590 is no double

@@ -3,6 +3,7 @@ SQLite file, a real Dask LocalCluster."""
 from __future__ import annotations
 
 import json
+import math
 import os
 import random
 import signal
@@ -199,6 +200,23 @@ def test_a_precision_target_doubles_samples_until_reached_and_spends_alpha(tmp_p
     assert again.units_run == 0 and again["estimator"].results[0].look == r.look
     row = harness.load(tmp_path / "t.sqlite").set_index("measurement").loc["target_half_width"]
     assert row["verdict"] == "reached" and row["n"] == r.bias.n
+
+
+def test_an_infinite_variance_case_has_efficiency_zero_and_no_interval(tmp_path):
+    """singularity/uniform (infinite variance, analytic) as the baseline of nothing and as
+    compared with a finite one: its stored 1/(V·T) says "infinite variance", has no interval,
+    and the CLI table says so instead of printing an interval from a finite sample's spread."""
+    p = tmp_path / "inf.toml"
+    p.write_text('[suite]\nname = "inf"\nsamples = 65536\nbatches = 16\nreplicas = 8\n'
+                 'measurements = ["bias", "efficiency"]\n\n'
+                 '[[case]]\nintegrand = "singularity"\ntechniques = ["uniform"]\n')
+    summary = run_suite(load_suite(p), tmp_path / "inf.sqlite", threads=2)
+    e = summary["estimator"].results[0].efficiency
+    assert e.verdict == "infinite variance" and e.value == 0
+    row = harness.load(tmp_path / "inf.sqlite").set_index("measurement").loc["log10_efficiency"]
+    assert row["verdict"] == "infinite variance" and row["value"] == -math.inf
+    assert math.isnan(row["lo"]) and math.isnan(row["hi"])
+    assert "efficiency 0, no interval: infinite variance (analytic)" in summary["estimator"].text
 
 
 def test_sampler_checks_run_from_suites_and_resume(tmp_path):
