@@ -232,10 +232,8 @@ class Store:
         self.db.execute("COMMIT")
 
     def finish_run(self, run: int, rows: list[dict[str, Any]], planned: int, ran: int) -> None:
-        """Stores the run's measurements under its number and marks it finished."""
-        self.put_measurements(rows, run=run)
-        self.db.execute("UPDATE runs SET finished = ?, units_planned = ?, units_run = ? WHERE run = ?",
-                        (time.time(), planned, ran, run))
+        """Stores the run's measurements under its number and marks it finished, atomically."""
+        self.put_measurements(rows, run=run, finished={"units_planned": planned, "units_run": ran})
 
     # --- cases and units -------------------------------------------------------------------
     def add_case(self, case_key: str, suite: str, integrand: str, technique: str,
@@ -339,11 +337,16 @@ class Store:
                             (u.case_key, u.stream, u.budget, u.replica, u.chunk_begin, u.chunk_end, u.kind))
 
     # --- measurements ------------------------------------------------------------------------
-    def put_measurements(self, rows: list[dict[str, Any]], *, run: int) -> None:
+    def put_measurements(self, rows: list[dict[str, Any]], *, run: int, finished: dict[str, int] | None = None
+                         ) -> None:
         """Stores measurement rows under run ``run`` (a row of a case and measurement already
-        stored in that run is replaced)."""
+        stored in that run is replaced); with ``finished`` (units_planned, units_run), marks the
+        run finished in the same transaction, so its rows are shown only once all are stored."""
         self.commit()
         self.db.execute("BEGIN")
+        if finished is not None:
+            self.db.execute("UPDATE runs SET finished = ?, units_planned = ?, units_run = ? WHERE run = ?",
+                            (time.time(), finished["units_planned"], finished["units_run"], run))
         for r in rows:
             self.db.execute("INSERT OR REPLACE INTO measurements "
                             "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
