@@ -88,7 +88,14 @@ from harness.stats.estimator import POINT_SETS, Contributions
 from harness.suite import parse_renders, parse_samplers
 from harness.suite.locate import Locator
 from harness.suite.model import MEASUREMENTS, Case, RenderCase, SamplerCase, Suite, SuiteError
-from harness.suite.plan import MAX_UNITS, UNIT_CHUNKS, render_unit_count, unit_count
+from harness.suite.plan import (
+    MAX_TAIL_BATCH,
+    MAX_UNITS,
+    UNIT_CHUNKS,
+    bias_budget,
+    render_unit_count,
+    unit_count,
+)
 from harness.suite.rules import check_keys, measurements, positive, xfail_reason
 from harness.usercode import UserCodeError, load_attr, source_fingerprint
 
@@ -175,7 +182,16 @@ def loads_suite(text: str, *, path: str | Path = "suite.toml") -> Suite:
 
 def _check_size(suite: Suite, raw: list[dict[str, Any]], tables: list[Any], where: Locator) -> None:
     """Refuses a suite whose cases need more than MAX_UNITS work units (counted, not made),
-    naming the case that needs the most and the key that sets its budget."""
+    naming the case that needs the most and the key that sets its budget, or a bias test whose
+    batch (held whole for the tail index) exceeds MAX_TAIL_BATCH contributions."""
+    for case, table, r in zip(suite.cases, tables, raw):
+        batch = bias_budget(suite, case, case.looks - 1)
+        if "bias" in case.measurements and batch > MAX_TAIL_BATCH:
+            key = "max_samples" if case.max_samples else "samples"
+            raise SuiteError(where.at(table if key in r else "suite", key,
+                                      f"{case.name}: the bias test's tail sample holds one batch of "
+                                      f"{batch:,} contributions in memory; at most {MAX_TAIL_BATCH:,} "
+                                      "(2 GiB): raise batches or lower the samples"))
     counts = [unit_count(suite, c) for c in suite.cases]
     renders = [render_unit_count(rc) for rc in suite.renders]
     total = sum(counts) + sum(renders) + sum(len(sc.measurements) for sc in suite.samplers)

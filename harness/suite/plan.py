@@ -27,10 +27,12 @@ from harness.suite.model import Case, RenderCase, SamplerCase, Suite
 __all__ = ["UNIT_CHUNKS", "BIAS_STREAM", "Unit", "case_key", "sampler_key", "sampler_spec", "render_key",
            "reference_key", "render_stream", "reference_stream", "render_seed", "core_case_id", "bias_budget",
            "bias_stream", "convergence_budgets", "chosen_budgets", "estimator_units", "sampler_units",
-           "render_units", "reference_units", "plan", "unit_count", "render_unit_count", "MAX_UNITS"]
+           "render_units", "reference_units", "plan", "unit_count", "render_unit_count", "MAX_UNITS",
+           "MAX_TAIL_BATCH"]
 
 UNIT_CHUNKS = 32                     # core chunks (of 65 536 samples) per stored unit
 MAX_UNITS = 1 << 20                  # units a suite may plan: each is held in memory, then a database row
+MAX_TAIL_BATCH = 1 << 28             # contributions of the batch a tail unit holds in memory (2 GiB)
 BIAS_STREAM = 0                      # stream 0: the bias test's batches; 1 + i: convergence budget i;
 TARGET_STREAM = 200                  # 200 + s: the bias test's batches at look s >= 1 of a target
 _FORMAT = 1                          # bump when a unit's meaning changes: old rows stop matching

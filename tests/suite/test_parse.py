@@ -250,8 +250,12 @@ MISTAKES = {
     "more renders than a suite may plan": (
         HEAD + '[[render]]\nadapter = "mitsuba"\nscene = "furnace"\nreplicas = 2_000_000\n',
         6, "render", "10,000,008 renders (10,000,008 in the suite); a suite may plan at most 1,048,576"),
+    "a bias batch too big to hold": (
+        '[suite]\nsamples = 20_000_000_000\nmeasurements = ["bias"]\n\n' + CASE,
+        2, "samples", "the bias test's tail sample holds one batch of 312,500,000 contributions in memory; "
+                      "at most 268,435,456"),
     "more samples than a suite may plan": (
-        '[suite]\nsamples = 1_000_000_000_000_000\n\n' + CASE,
+        '[suite]\nsamples = 1_000_000_000_000_000\nmeasurements = ["convergence"]\n\n' + CASE,
         2, "samples", "1e+15 samples need "),
     "reference spp not a multiple": (
         HEAD + '[[render]]\nadapter = "mitsuba"\nreference_spp = 100\n' 'reference_parts = 8\n',
