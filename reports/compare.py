@@ -20,7 +20,7 @@ import numpy as np
 
 from harness.adapters.base import read_image
 from harness.stats.compare import ImageComparison
-from harness.suite.store import connect_read_only, image_dir, read_stored
+from harness.suite.store import connect_read_only, image_dir, read_stored, same_unit
 from reports import images
 
 __all__ = ["ReplicaSet", "load_replicas", "compare_page"]
@@ -78,9 +78,9 @@ def _from_db(name: str, db: Path) -> ReplicaSet:
             raise ValueError(f"{name!r}: {what} in {db} (its configuration, a key prefix or part of "
                              f"scene/configuration); its render cases: {known or 'none'}")
         key, scene, config = renders[0]
+        # only the renders the latest run planned (its spp, its replicas)
         latest = ("" if "planned" not in {t for (t,) in con.execute("SELECT name FROM sqlite_master")} else
-                  " AND EXISTS (SELECT 1 FROM planned p WHERE (p.case_key, p.stream, p.budget, p.replica, "
-                  "p.kind) = (u.case_key, u.stream, u.budget, u.replica, u.kind))")  # the latest run's spp
+                  f" AND EXISTS (SELECT 1 FROM planned p WHERE {same_unit('p', 'u')})")
         rows = con.execute("SELECT replica, payload FROM units u WHERE case_key = ? AND kind = 'render' AND "
                            "stream = 0" + latest + " ORDER BY replica", (key,)).fetchall()
         files = {}

@@ -22,13 +22,11 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from harness.suite.store import Store, StoreError
+from harness.suite.store import Store, StoreError, same_unit
 
 __all__ = ["Collected", "Repaired", "collect_garbage", "repair"]
 
-_UNPLANNED = ("FROM units WHERE NOT EXISTS (SELECT 1 FROM planned p WHERE (p.case_key, p.stream, p.budget, "
-              "p.replica, p.chunk_begin, p.chunk_end, p.kind) = (units.case_key, units.stream, units.budget, "
-              "units.replica, units.chunk_begin, units.chunk_end, units.kind))")
+_UNPLANNED = f"FROM units WHERE NOT EXISTS (SELECT 1 FROM planned p WHERE {same_unit('p', 'units')})"
 
 
 @dataclass(frozen=True)

@@ -15,6 +15,7 @@ complete file; the row holds the file's size and SHA-256, so a damaged file is d
 """
 from __future__ import annotations
 
+import dataclasses
 import errno
 import hashlib
 import io
@@ -36,7 +37,8 @@ from harness.fingerprint import harness_fingerprint
 from harness.suite.plan import Unit
 
 __all__ = ["Store", "StoreError", "RECORDED", "explain", "load", "runs", "run_filter", "connect_read_only",
-           "reading", "image_dir", "write_exr", "read_exr", "write_npy", "read_stored", "plan_progress"]
+           "reading", "image_dir", "write_exr", "read_exr", "write_npy", "read_stored", "plan_progress",
+           "same_unit"]
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS cases (
@@ -119,6 +121,11 @@ CREATE TABLE IF NOT EXISTS measurements (
 
 RECORDED = "harness.record"   # the runs table's file of results recorded from Python
 _UNIT_COLUMNS = "case_key, stream, budget, replica, chunk_begin, chunk_end, kind"
+
+
+def same_unit(a: str, b: str) -> str:
+    """SQL: the rows aliased ``a`` and ``b`` (of ``units`` or ``planned``) name the same unit."""
+    return " AND ".join(f"{a}.{c} = {b}.{c}" for c in _UNIT_COLUMNS.split(", "))
 
 
 class StoreError(RuntimeError):
@@ -227,13 +234,18 @@ class Store:
         self.commit()
         self.db.execute("BEGIN")
         self.db.executemany("INSERT OR IGNORE INTO planned VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-                            [(suite, u.case_key, u.stream, u.budget, u.replica, u.chunk_begin, u.chunk_end,
-                              u.kind) for u in units])
+                            [(suite, *dataclasses.astuple(u)) for u in units])
         self.db.execute("COMMIT")
 
     def finish_run(self, run: int, rows: list[dict[str, Any]], planned: int, ran: int) -> None:
-        """Stores the run's measurements under its number and marks it finished, atomically."""
-        self.put_measurements(rows, run=run, finished={"units_planned": planned, "units_run": ran})
+        """Stores the run's measurements under its number and marks it finished, in one
+        transaction, so its rows are shown only once all are stored."""
+        self.commit()
+        self.db.execute("BEGIN")
+        self.db.execute("UPDATE runs SET finished = ?, units_planned = ?, units_run = ? WHERE run = ?",
+                        (time.time(), planned, ran, run))
+        self._write_measurements(rows, run)
+        self.db.execute("COMMIT")
 
     # --- cases and units -------------------------------------------------------------------
     def add_case(self, case_key: str, suite: str, integrand: str, technique: str,
@@ -337,16 +349,15 @@ class Store:
                             (u.case_key, u.stream, u.budget, u.replica, u.chunk_begin, u.chunk_end, u.kind))
 
     # --- measurements ------------------------------------------------------------------------
-    def put_measurements(self, rows: list[dict[str, Any]], *, run: int, finished: dict[str, int] | None = None
-                         ) -> None:
+    def put_measurements(self, rows: list[dict[str, Any]], *, run: int) -> None:
         """Stores measurement rows under run ``run`` (a row of a case and measurement already
-        stored in that run is replaced); with ``finished`` (units_planned, units_run), marks the
-        run finished in the same transaction, so its rows are shown only once all are stored."""
+        stored in that run is replaced)."""
         self.commit()
         self.db.execute("BEGIN")
-        if finished is not None:
-            self.db.execute("UPDATE runs SET finished = ?, units_planned = ?, units_run = ? WHERE run = ?",
-                            (time.time(), finished["units_planned"], finished["units_run"], run))
+        self._write_measurements(rows, run)
+        self.db.execute("COMMIT")
+
+    def _write_measurements(self, rows: list[dict[str, Any]], run: int) -> None:
         for r in rows:
             self.db.execute("INSERT OR REPLACE INTO measurements "
                             "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
@@ -354,7 +365,6 @@ class Store:
                              r.get("value"), r.get("lo"), r.get("hi"), r.get("n"), r.get("pvalue"),
                              r.get("alpha"), r.get("verdict"),
                              json.dumps(r.get("detail", {}), sort_keys=True, default=str)))
-        self.db.execute("COMMIT")
 
 
 def _table(name: str) -> str:
@@ -499,11 +509,8 @@ def plan_progress(db: str | Path, suite: str) -> tuple[int, int]:
     try:
         with reading(db) as con:
             planned = con.execute("SELECT COUNT(*) FROM planned WHERE suite = ?", (suite,)).fetchone()[0]
-            stored = con.execute(
-                "SELECT COUNT(*) FROM planned p WHERE p.suite = ? AND EXISTS (SELECT 1 FROM units u WHERE "
-                "(u.case_key, u.stream, u.budget, u.replica, u.chunk_begin, u.chunk_end, u.kind) = "
-                "(p.case_key, p.stream, p.budget, p.replica, p.chunk_begin, p.chunk_end, p.kind))",
-                (suite,)).fetchone()[0]
+            stored = con.execute("SELECT COUNT(*) FROM planned p WHERE p.suite = ? AND EXISTS (SELECT 1 FROM "
+                                 f"units u WHERE {same_unit('u', 'p')})", (suite,)).fetchone()[0]
     except (FileNotFoundError, ValueError):
         return 0, 0
     return int(stored), int(planned)

@@ -22,13 +22,12 @@ from pathlib import Path
 import pytest
 
 import harness
+from harness.suite.store import image_dir, read_stored
+from tests.suite.test_stale_results import TIMED, _untimed
 
 HARNESS = str(Path(sys.executable).with_name("harness"))
 OWN_RENDERER = Path(__file__).resolve().parents[2] / "examples" / "own-renderer"
 
-# measurements and detail fields that depend on wall times (as in test_stale_results.py)
-TIMED = {"log10_efficiency", "efficiency_ratio", "efficiency", "equal_time_relmse"}
-TIMING_DETAIL = {"seconds", "seconds_se", "error_vs_time", "rows", "log10_value"}
 
 SIGNALS = [pytest.param(signal.SIGKILL, id="SIGKILL"), pytest.param(signal.SIGINT, id="SIGINT"),
            pytest.param(signal.SIGTERM, id="SIGTERM")]
@@ -111,8 +110,13 @@ reference_spp = 8192
 
 
 # --- reading a results database --------------------------------------------------------------
-def _connect(db: Path) -> sqlite3.Connection:
-    return sqlite3.connect(f"file:{db}?mode=ro", uri=True)
+def _rows(db: Path, sql: str) -> list[tuple]:
+    """The rows of a query on the database, opened read-only."""
+    con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
+    try:
+        return con.execute(sql).fetchall()
+    finally:
+        con.close()
 
 
 def stored_count(db: Path) -> int:
@@ -120,11 +124,7 @@ def stored_count(db: Path) -> int:
     if not db.exists():
         return 0
     try:
-        con = _connect(db)
-        try:
-            return con.execute("SELECT COUNT(*) FROM units").fetchone()[0]
-        finally:
-            con.close()
+        return _rows(db, "SELECT COUNT(*) FROM units")[0][0]
     except sqlite3.Error:
         return 0
 
@@ -132,90 +132,44 @@ def stored_count(db: Path) -> int:
 def units_table(db: Path) -> list[tuple]:
     """Every unit row but its wall time and finishing time (seconds, finished); the payload as the
     stored text, so equal means bitwise equal."""
-    con = _connect(db)
-    try:
-        return con.execute("SELECT case_key, stream, budget, replica, chunk_begin, chunk_end, kind, payload "
-                           "FROM units ORDER BY 1, 2, 3, 4, 5, 6, 7").fetchall()
-    finally:
-        con.close()
+    return _rows(db, "SELECT case_key, stream, budget, replica, chunk_begin, chunk_end, kind, payload "
+                     "FROM units ORDER BY 1, 2, 3, 4, 5, 6, 7")
 
 
 def other_tables(db: Path) -> dict[str, list[tuple]]:
     """The cases, and the images without their finishing times and file digests
     (an EXR file holds the time it was written: its bytes differ from run to run, its pixels must not)."""
-    con = _connect(db)
-    try:
-        return {"cases": con.execute("SELECT * FROM cases ORDER BY case_key").fetchall(),
-                "images": con.execute("SELECT name, file, height, width, channels FROM images "
-                                      "ORDER BY name").fetchall()}
-    finally:
-        con.close()
+    return {"cases": _rows(db, "SELECT * FROM cases ORDER BY case_key"),
+            "images": _rows(db, "SELECT name, file, height, width, channels FROM images ORDER BY name")}
 
 
 def plan(db: Path) -> tuple[int, int]:
     """(units the latest run planned, how many of them are stored).  A run after the one that
     cached a rendered reference plans no parts of it: their units stay stored, outside the plan."""
-    con = _connect(db)
-    try:
-        return con.execute("SELECT COUNT(*), COUNT(u.case_key) FROM planned p LEFT JOIN units u USING "
-                           "(case_key, stream, budget, replica, chunk_begin, chunk_end, kind)").fetchone()
-    finally:
-        con.close()
+    return _rows(db, "SELECT COUNT(*), COUNT(u.case_key) FROM planned p LEFT JOIN units u USING "
+                     "(case_key, stream, budget, replica, chunk_begin, chunk_end, kind)")[0]
 
 
 def runs_table(db: Path) -> list[tuple]:
     """Per run: (finished?, units planned, units computed, measurements stored)."""
-    con = _connect(db)
-    try:
-        return con.execute("SELECT finished IS NOT NULL, units_planned, units_run, (SELECT COUNT(*) FROM "
-                           "measurements m WHERE m.run = r.run) FROM runs r ORDER BY run").fetchall()
-    finally:
-        con.close()
+    return _rows(db, "SELECT finished IS NOT NULL, units_planned, units_run, (SELECT COUNT(*) FROM "
+                     "measurements m WHERE m.run = r.run) FROM runs r ORDER BY run")
 
 
 def last_run_keys(db: Path) -> list[str]:
     """The case keys (references included) the latest run registered."""
-    con = _connect(db)
-    try:
-        return [k for (k,) in con.execute("SELECT case_key FROM run_keys WHERE run = (SELECT MAX(run) FROM "
-                                          "runs) ORDER BY case_key")]
-    finally:
-        con.close()
+    return [k for (k,) in _rows(db, "SELECT case_key FROM run_keys WHERE run = (SELECT MAX(run) FROM runs) "
+                                    "ORDER BY case_key")]
 
 
 def pixels(db: Path) -> dict[str, bytes]:
     """Every stored image's values (EXR as float32, .npy in its own precision), by name."""
-    import numpy as np
-    import OpenImageIO as oiio
-
-    out = {}
-    for name, file, *_ in other_tables(db)["images"]:
-        path = db.with_name(db.name + ".images") / file
-        if path.suffix == ".npy":
-            out[name] = np.load(path, allow_pickle=False).tobytes()
-            continue
-        image = oiio.ImageInput.open(str(path))
-        assert image is not None, f"{path}: {oiio.geterror()}"
-        try:
-            out[name] = image.read_image("float").tobytes()
-        finally:
-            image.close()
-    return out
+    return {name: read_stored(image_dir(db) / file).tobytes()
+            for name, file, *_ in other_tables(db)["images"]}
 
 
 def _image_digests(db: Path) -> dict[str, tuple[str, str]]:
-    con = _connect(db)
-    try:
-        return {name: (file, sha) for name, file, sha in con.execute("SELECT name, file, sha256 FROM images")}
-    finally:
-        con.close()
-
-
-def _untimed(d):
-    """A stored detail without its wall-time fields, at any depth."""
-    if isinstance(d, dict):
-        return {k: _untimed(v) for k, v in d.items() if k not in TIMING_DETAIL}
-    return [_untimed(v) for v in d] if isinstance(d, list) else d
+    return {name: (file, sha) for name, file, sha in _rows(db, "SELECT name, file, sha256 FROM images")}
 
 
 def measured(db: Path) -> tuple[set, dict]:
@@ -255,7 +209,7 @@ def check_consistent(db: Path, full: int) -> None:
         if r[6] == "render":
             assert p["image"] in images, f"render unit {r[:7]} without its image row"
             file, sha = images[p["image"]]
-            path = db.with_name(db.name + ".images") / file
+            path = image_dir(db) / file
             assert path.is_file() and hashlib.sha256(path.read_bytes()).hexdigest() == sha, path
 
 
