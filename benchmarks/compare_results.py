@@ -14,7 +14,7 @@ import json
 import math
 import sys
 
-from harness.suite.store import connect_read_only
+from harness.suite.readers import connect_read_only
 
 TIMED = {"log10_efficiency", "efficiency_ratio", "efficiency", "equal_time_relmse"}
 TIMING_FIELDS = {"seconds", "seconds_se", "error_vs_time", "rows", "log10_value", "notes"}

@@ -23,8 +23,8 @@ import numpy as np
 
 from harness.stats import median_time
 from harness.suite.parse import loads_suite
+from harness.suite.readers import load, reading
 from harness.suite.run import run_suite
-from harness.suite.store import load, reading
 
 SUITE = """\
 [suite]

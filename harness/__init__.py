@@ -29,9 +29,9 @@ from harness.stats import (
 from harness.stats.images import ImageBias
 from harness.suite.kind import Outcome
 from harness.suite.parse import Case, Suite, SuiteError, load_suite, loads_suite
+from harness.suite.readers import load
 from harness.suite.record import record
 from harness.suite.run import RunSummary, run_suite
-from harness.suite.store import load
 
 __all__ = ["check_unbiased", "check_sampler", "mcmc_crosscheck", "load", "load_suite", "loads_suite",
            "record", "run_suite", "Contributions", "Suite", "Case", "SuiteError", "RunSummary", "Outcome",

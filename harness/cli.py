@@ -15,8 +15,9 @@ import reference_estimators as rest
 from harness.adapters.base import RenderError
 from harness.suite.execute import ClusterError
 from harness.suite.parse import SuiteError, load_suite
+from harness.suite.readers import load, plan_progress, runs
 from harness.suite.run import run_suite
-from harness.suite.store import StoreError, load, plan_progress, runs
+from harness.suite.store import StoreError
 from harness.usercode import UserCodeError
 
 

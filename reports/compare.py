@@ -20,7 +20,8 @@ import numpy as np
 
 from harness.adapters.base import read_image
 from harness.stats.compare import ImageComparison
-from harness.suite.store import connect_read_only, image_dir, read_stored, same_unit
+from harness.suite.readers import connect_read_only
+from harness.suite.store import image_dir, read_stored, same_unit
 from reports import images
 
 __all__ = ["ReplicaSet", "load_replicas", "compare_page"]

@@ -14,7 +14,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from harness.suite.store import connect_read_only, image_dir, read_stored, reading, run_filter
+from harness.suite.readers import connect_read_only, reading, run_filter
+from harness.suite.store import image_dir, read_stored
 
 __all__ = ["Results", "load_results", "SAMPLER_PREFIX"]
 

@@ -17,8 +17,8 @@ from scipy import stats as sps
 from harness.adapters import image_faults, renderer
 from harness.stats.images import Reference, pixel_bias_test, relmse
 from harness.suite.parse import SuiteError, load_suite
+from harness.suite.readers import load
 from harness.suite.run import run_suite
-from harness.suite.store import load
 
 VARIANTS = ["scalar_rgb", "llvm_ad_rgb"]
 

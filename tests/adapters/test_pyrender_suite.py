@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from harness.suite.parse import SuiteError, load_suite
+from harness.suite.readers import load
 from harness.suite.run import run_suite
-from harness.suite.store import load
 
 SUITE = """\
     [suite]

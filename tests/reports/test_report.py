@@ -19,8 +19,9 @@ from playwright.sync_api import sync_playwright
 
 from harness.cli import main
 from harness.suite.parse import load_suite
+from harness.suite.readers import load
 from harness.suite.run import run_suite
-from harness.suite.store import Store, load
+from harness.suite.store import Store
 from reports import images, load_results
 
 CHROMIUM = "/usr/bin/chromium"

@@ -17,7 +17,8 @@ import pandas as pd
 import pytest
 
 from harness.suite.plan import Unit
-from harness.suite.store import Store, load, read_exr, write_exr
+from harness.suite.readers import load
+from harness.suite.store import Store, read_exr, write_exr
 
 A = Unit("case-a", 0, 4096, 3, 0, 1, "state")
 B = Unit("case-a", 0, 4096, 0, 0, 0, "tail")

@@ -25,6 +25,7 @@ import harness
 from harness.suite import plan
 from harness.suite.gc import collect_garbage, repair
 from harness.suite.parse import load_suite, loads_suite
+from harness.suite.readers import runs
 from harness.suite.run import run_suite
 from harness.suite.store import Store, StoreError
 from tests.suite.test_stale_results import _measured
@@ -74,10 +75,10 @@ def test_each_run_is_recorded_with_the_suite_revision_it_measured(tmp_path, suit
     suite_file.write_text(SUITE.replace("[[sampler]]", "[[sampler]]\nmeasurements = [\"chi_square\"]"))
     second = run_suite(load_suite(suite_file), db, threads=2)
     assert (first.run, second.run) == (1, 2)
-    runs = harness.suite.store.runs(db)
-    assert list(runs["run"]) == [1, 2] and list(runs["suite"]) == ["tiny", "tiny"]
-    assert runs["revision"][0] != runs["revision"][1] and all(runs["finished"])
-    assert list(runs["units_run"]) == [first.units_run, second.units_run]
+    table = runs(db)
+    assert list(table["run"]) == [1, 2] and list(table["suite"]) == ["tiny", "tiny"]
+    assert table["revision"][0] != table["revision"][1] and all(table["finished"])
+    assert list(table["units_run"]) == [first.units_run, second.units_run]
 
     shown = cli("show", "--db", str(db), "--runs", cwd=tmp_path)
     assert shown.returncode == 0 and str(suite_file) in shown.stdout
@@ -98,7 +99,7 @@ def test_an_interrupted_run_leaves_the_last_finished_one_shown(tmp_path, suite_f
     store.start_run("tiny", str(suite_file), "an edit that was interrupted")   # never finished
     store.close()
     assert _measured(db) == shown
-    assert harness.suite.store.runs(db)["finished"].tolist()[-1] == ""
+    assert runs(db)["finished"].tolist()[-1] == ""
 
 
 def test_a_database_from_before_runs_were_recorded_is_migrated(tmp_path, suite_file):
@@ -114,7 +115,7 @@ def test_a_database_from_before_runs_were_recorded_is_migrated(tmp_path, suite_f
     Store(db).close()
     old = harness.load(db)
     assert old[["run", "suite", "value"]].values.tolist() == [[1, "tiny", 0.5]]
-    assert harness.suite.store.runs(db)["file"].tolist() == ["(before runs were recorded)"]
+    assert runs(db)["file"].tolist() == ["(before runs were recorded)"]
     again = run_suite(load_suite(suite_file), db, threads=2)
     assert again.run == 2 and set(harness.load(db)["run"]) == {2}
     assert len(harness.load(db, all_runs=True)) == len(harness.load(db)) + 1

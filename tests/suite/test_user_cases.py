@@ -103,7 +103,7 @@ def test_user_estimators_are_measured_compared_and_xfailed(repo, monkeypatch):
 def test_user_cases_are_bitwise_reproducible_and_need_no_file(repo):
     """Two fresh runs store the same bits; a suite given as text (loads_suite) runs the same."""
     from harness.suite.parse import loads_suite
-    from harness.suite.store import load
+    from harness.suite.readers import load
 
     run_suite(load_suite(repo / "suite.toml"), repo / "one.sqlite", threads=2)
     run_suite(loads_suite(SUITE, path=repo / "suite.toml"), repo / "two.sqlite", threads=1)
