@@ -6,15 +6,14 @@ Runs the same two-case suite (gaussian: uniform MC and importance sampling, effi
 ``repeats`` times, each into a fresh database with its own seed, as `harness run` does (the
 cases' replicas interleaved), and asks of each case's 1/(V·T) and of their ratio: how often
 does a run's 95 % interval contain the median of all runs' values?  Nominal: about 95 %
-(a little more, since the median of the runs is itself uncertain).  Beside it, the same
-coverage with the time's standard error taken as before (1.2533 x 1.4826 MAD / sqrt(R) over
-the replicas, as if their times were independent), from the same stored times.  Prints the
-CPU, the repeats and each run's figures.
+(a little more, since the median of the runs is itself uncertain).  The intervals take the
+time's standard error from the spread between blocks of 4 replicas, with Student's t on the
+blocks' degrees of freedom.  Prints the CPU, the repeats and each run's figures, and each
+run's block medians of the time (the drift within and between runs).
 """
 from __future__ import annotations
 
 import argparse
-import math
 import platform
 import tempfile
 from pathlib import Path
@@ -79,31 +78,25 @@ def main() -> None:
                          if r.measurement == "efficiency_ratio" and r.technique == "importance:linear")
             runs.append((eff, ratio, _times(db)))
     rows = {"uniform": [], "importance:linear": [], "ratio": []}
-    for eff, ratio, times in runs:
+    for eff, ratio, _ in runs:
         for t in ("uniform", "importance:linear"):
-            v, lo, hi = eff[t]
-            # the same interval with the old time error: log10 half-width from the two relative errors
-            med, se_new = median_time(times[t])
-            se_old = 1.2533 * 1.4826 * float(np.median(np.abs(times[t] - med))) / math.sqrt(times[t].size)
-            half = hi - v
-            var_rel = math.sqrt(max((half / 1.96 * math.log(10)) ** 2 - (se_new / med) ** 2, 0.0))
-            half_old = 1.96 * math.hypot(var_rel, se_old / med) / math.log(10)
-            rows[t].append((v, lo, hi, v - half_old, v + half_old))
-        rows["ratio"].append(ratio + (math.nan, math.nan))
-    print(f"{'figure':<22} {'covered (new)':>14} {'covered (old time s.e.)':>24} {'median':>10}")
+            rows[t].append(eff[t])
+        rows["ratio"].append(ratio)
+    print(f"{'figure':<34} {'covered':>10} {'median':>10}")
     for name, rs in rows.items():
         a = np.array(rs, dtype=float)
         med = float(np.median(a[:, 0]))
-        new = int(np.sum((a[:, 1] <= med) & (med <= a[:, 2])))
-        old = int(np.sum((a[:, 3] <= med) & (med <= a[:, 4]))) if np.isfinite(a[:, 3]).all() else None
+        covered = int(np.sum((a[:, 1] <= med) & (med <= a[:, 2])))
         label = f"log10 1/(V·T) {name}" if name != "ratio" else "ratio importance/uniform"
-        print(f"{label:<22} {new:>8}/{len(rs):<5} {(f'{old}/{len(rs)}' if old is not None else '—'):>24} "
-              f"{med:>10.4g}")
-    print("\nper run: log10 efficiency [95% CI] uniform; importance; ratio [95% CI]")
-    for i in range(len(runs)):
+        print(f"{label:<34} {covered:>6}/{len(rs):<3} {med:>10.4g}")
+    print("\nper run: log10 efficiency [95% CI] uniform; importance; ratio [95% CI]; median time per "
+          "estimate ± s.e. (ms) uniform, importance")
+    for i, (_, _, times) in enumerate(runs):
         u, s, r = rows["uniform"][i], rows["importance:linear"][i], rows["ratio"][i]
+        tu, ti = (median_time(times[t]) for t in ("uniform", "importance:linear"))
         print(f"  {i:2d}: {u[0]:.4f} [{u[1]:.4f}, {u[2]:.4f}]; {s[0]:.4f} [{s[1]:.4f}, {s[2]:.4f}]; "
-              f"{r[0]:.3f} [{r[1]:.3f}, {r[2]:.3f}]")
+              f"{r[0]:.3f} [{r[1]:.3f}, {r[2]:.3f}]; {1e3 * tu[0]:.3f} ± {1e3 * tu[1]:.3f}, "
+              f"{1e3 * ti[0]:.3f} ± {1e3 * ti[1]:.3f}")
 
 
 if __name__ == "__main__":

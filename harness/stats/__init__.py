@@ -1,12 +1,12 @@
 """Statistics of Monte Carlo estimates, one job a module:
 
-``bias``      is an estimator unbiased (check_unbiased, check_technique, judge_batches);
-``tails``     the tail index of the contributions (TailSample);
+``bias``      is an estimator unbiased (check_unbiased, check_technique, judge_batches, batch_points);
+``tails``     the tail index of the contributions and how a tail ends: clamp, truncation (TailSample);
 ``multiple``  multiple testing (holm);
 ``estimator`` what estimates come from: a catalogue pair or a user's contributions callable;
 ``replicas``  replicas, convergence rates, efficiency, error against time;
 ``results``   the result family every check returns (ConfidenceInterval, Failure);
-``merge``     Chan's merge of (count, mean, variance) summaries;
+``merge``     Chan's merge of (count, mean, variance) summaries, with the third moment;
 ``validate``  argument validators shared across the harness;
 ``images``    image statistics (imported as ``harness.stats.images``);
 ``zoo``       the calibration zoo of correct and subtly wrong estimators (``harness.stats.zoo``).
@@ -14,7 +14,7 @@
 Every figure here carries its uncertainty and its sample count; every test states its
 false-alarm rate and what it detects.
 """
-from harness.stats.bias import UnbiasedResult, check_technique, check_unbiased, judge_batches
+from harness.stats.bias import UnbiasedResult, batch_points, check_technique, check_unbiased, judge_batches
 from harness.stats.estimator import CatalogueEstimator, Contributions, Estimator, estimator
 from harness.stats.multiple import holm
 from harness.stats.replicas import (
@@ -34,7 +34,8 @@ from harness.stats.tails import TailSample
 
 __all__ = [
     "Estimator", "CatalogueEstimator", "Contributions", "estimator",
-    "UnbiasedResult", "check_unbiased", "check_technique", "judge_batches", "TailSample", "holm",
+    "UnbiasedResult", "check_unbiased", "check_technique", "judge_batches", "batch_points", "TailSample",
+    "holm",
     "Replicates", "replicate", "median_time", "ConvergenceResult", "convergence_rate", "fit_convergence",
     "Efficiency", "efficiency", "efficiency_ratio", "error_vs_time",
     "ConfidenceInterval", "Failure", "failure_counts", "failures_from_counts",

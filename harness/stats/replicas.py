@@ -26,6 +26,12 @@ __all__ = ["Replicates", "replicate", "median_time", "ConvergenceResult", "conve
            "fit_convergence", "Efficiency", "efficiency", "efficiency_ratio", "error_vs_time"]
 
 
+# An RMSE this many ulp of the estimates is rounding (of the contributions and of their sum),
+# not Monte Carlo error: 2.3e-13 relative, which a Monte Carlo error reaches only beyond ~1e24
+# samples per unit of relative standard deviation
+_ROUNDING_ULPS = 1024
+
+
 def median_time(seconds: np.ndarray) -> tuple[float, float]:
     """Wall time of one estimate (s) from R replicas' times, in the order they ran: the median,
     and its standard error from the spread between blocks of 4 consecutive replicas (at least
@@ -38,9 +44,23 @@ def median_time(seconds: np.ndarray) -> tuple[float, float]:
     med = float(np.median(t))
     if t.size < 2:
         return med, math.nan
-    blocks = max(2, t.size // 4)
+    blocks = _time_blocks(t.size)
     medians = np.array([np.median(b) for b in np.array_split(t, blocks)])
     return med, float(np.std(medians, ddof=1) / math.sqrt(blocks))
+
+
+def _time_blocks(replicas: int) -> int:
+    """How many blocks of consecutive replicas :func:`median_time` compares: the time's standard
+    error has ``_time_blocks - 1`` degrees of freedom."""
+    return max(2, replicas // 4)
+
+
+def _satterthwaite(parts: Sequence[tuple[float, float]]) -> float:
+    """Degrees of freedom of a sum of independent squared standard errors, each given as
+    (standard error, its degrees of freedom): the Welch-Satterthwaite approximation."""
+    num = sum(s * s for s, _ in parts) ** 2
+    den = sum(s ** 4 / df for s, df in parts if s > 0)
+    return num / den if den > 0 else math.inf
 
 
 # --- replicas ----------------------------------------------------------------------------------
@@ -205,6 +225,13 @@ class ConvergenceResult:
     expected: float
     tolerance: float
     failures: list[Failure] = field(default_factory=list)
+    rounding_floor: float = 0.0   # an RMSE at or below this is rounding: 1024 ulp of the largest estimate
+
+    @property
+    def at_rounding_level(self) -> bool:
+        """The error at the largest budget is at the rounding level (a zero-variance technique):
+        it cannot fall further, so no rate is judged ("as expected", p = 1)."""
+        return bool(self.table["rmse"].iloc[-1] <= self.rounding_floor)
 
     @property
     def alpha(self) -> float:
@@ -217,7 +244,8 @@ class ConvergenceResult:
     @property
     def verdict(self) -> str:
         low = self.confidence_interval(self.confidence_level).low
-        return "slower than expected" if low > self.expected + self.tolerance else "as expected"
+        slow = low > self.expected + self.tolerance and not self.at_rounding_level
+        return "slower than expected" if slow else "as expected"
 
     @property
     def passed(self) -> bool:
@@ -234,7 +262,9 @@ class ConvergenceResult:
     def pvalue(self) -> float:
         """One-sided p-value of H0 "slope <= expected + tolerance" (normal approximation with
         the bootstrap standard error): small when the error falls measurably too slowly.  For
-        many cases at once, correct these with holm()."""
+        many cases at once, correct these with holm().  1 at the rounding level."""
+        if self.at_rounding_level:
+            return 1.0
         if not self.slope_se > 0:
             return 1.0 if self.slope <= self.expected + self.tolerance else 0.0
         return float(stats.norm.sf((self.slope - self.expected - self.tolerance) / self.slope_se))
@@ -248,7 +278,9 @@ class ConvergenceResult:
         return (f"{self.verdict}: {self.integrand}/{self.technique}: RMSE ~ n^{self.slope:+.3f} "
                 f"({100 * self.confidence_level:g} % CI [{lo:+.3f}, {hi:+.3f}]), "
                 f"expected {self.expected:+.2f} or faster (tolerance {self.tolerance:g}), "
-                f"one-sided p = {self.pvalue:.3g}, {self.n} replicas over {len(self.table)} budgets")
+                f"one-sided p = {self.pvalue:.3g}, {self.n} replicas over {len(self.table)} budgets"
+                + (f"; RMSE at the rounding level (<= {self.rounding_floor:.3g}): no rate to judge"
+                   if self.at_rounding_level else ""))
 
 
 def _judgeable(est: Estimator) -> Estimator:
@@ -276,8 +308,8 @@ def convergence_rate(integrand: Any, technique: Any = None, budgets: Sequence[in
 
     The slope's interval comes from a bootstrap over replicas within each budget (percentile,
     ``bootstrap`` resamples from a generator seeded by ``seed``), so it needs no normality.
-    Budgets should span at least a factor 16.  Zero-variance estimators give RMSE at the
-    rounding level and a slope near 0; compare with ``expected`` accordingly.
+    Budgets should span at least a factor 16.  Zero-variance estimators give an RMSE at the
+    rounding level and a slope near 0: ``at_rounding_level``, judged "as expected" (p = 1).
     """
     est = _judgeable(estimator(integrand, technique, dim=dim, reference=reference))
     b = sorted({count(x, "budgets") for x in budgets or ()})
@@ -315,8 +347,10 @@ def fit_convergence(reps: Sequence[Replicates], *, expected: float = -0.5, toler
         lo, hi = r.rmse_interval(confidence_level)
         rows.append({"n": r.n, "rmse": r.rmse, "rmse_lo": lo, "rmse_hi": hi, "seconds": r.time[0],
                      "replicas": r.replicas})
+    largest = max(max(float(np.max(np.abs(r.estimates))), abs(r.reference)) for r in reps)
     return ConvergenceResult(reps[0].integrand, reps[0].technique, pd.DataFrame(rows), slope,
-                             float(np.std(boot, ddof=1)), boot, confidence_level, expected, tolerance)
+                             float(np.std(boot, ddof=1)), boot, confidence_level, expected, tolerance,
+                             rounding_floor=_ROUNDING_ULPS * np.finfo(float).eps * largest)
 
 
 # --- efficiency ----------------------------------------------------------------------------
@@ -326,7 +360,9 @@ class Efficiency:
     confidence interval; a member of the result family (:mod:`harness.stats.results`).
 
     V from :attr:`Replicates.log10_estimator_variance`, T the median wall time of one estimate;
-    their relative errors are combined on the log scale (independent, delta method).  Kept
+    their relative errors are combined on the log scale (independent, delta method), and the
+    interval takes Student's t with their Welch-Satterthwaite degrees of freedom (``df``: the
+    time's error comes from a few blocks of consecutive replicas).  Kept
     as log10, since 1/(V T) of an integrand near 1e300 is about 1e-590.  For techniques
     converging faster than n^-1/2 the efficiency grows with the budget: it belongs to ``budget``.
 
@@ -349,6 +385,7 @@ class Efficiency:
     seconds: float
     failures: list[Failure] = field(default_factory=list)
     reason: str = ""          # why no interval: "infinite variance" or "unreliable (tail index ...)"
+    df: float = math.inf      # degrees of freedom of log_se (Welch-Satterthwaite of variance and time)
 
     @property
     def value(self) -> float:
@@ -384,12 +421,16 @@ class Efficiency:
     def alpha(self) -> float:
         return math.nan
 
-    def confidence_interval(self, confidence_level: float = 0.95) -> ConfidenceInterval:
-        """Normal interval of the log of the value, mapped back: value x exp(+-z log_se)."""
+    def log10_half_width(self, confidence_level: float = 0.95) -> float:
+        """Half-width of the interval of log10 of the value: Student's t quantile with ``df``
+        degrees of freedom (the time's error comes from a few blocks of replicas) x log_se."""
         check_confidence_level(confidence_level)
-        z = stats.norm.ppf(0.5 + confidence_level / 2)
-        return ConfidenceInterval(float(self.value * math.exp(-z * self.log_se)),
-                                  float(self.value * math.exp(z * self.log_se)))
+        return float(stats.t.ppf(0.5 + confidence_level / 2, self.df) * self.log_se / math.log(10))
+
+    def confidence_interval(self, confidence_level: float = 0.95) -> ConfidenceInterval:
+        """Student-t interval of the log of the value, mapped back: value x 10^(+-half-width)."""
+        h = self.log10_half_width(confidence_level)
+        return ConfidenceInterval(float(self.value * 10.0 ** -h), float(self.value * 10.0 ** h))
 
     def __str__(self) -> str:
         lo, hi = self.confidence_interval()
@@ -419,13 +460,15 @@ def efficiency(r: Replicates, *, tail_index: float | None = None,
                           lv, t)
     unreliable = tail_index is not None and tail_index < 3
     reason = f"unreliable (tail index {tail_index:.2f} < 3)" if unreliable else ""
+    parts = [(v_rel, r.replicas - 1), (t_se / t, _time_blocks(r.replicas) - 1)]
     return Efficiency(r.technique, -lv - math.log10(t), math.nan if reason else math.hypot(v_rel, t_se / t),
-                      r.n, r.replicas, lv, t, reason=reason)
+                      r.n, r.replicas, lv, t, reason=reason, df=_satterthwaite(parts))
 
 
 def efficiency_ratio(a: Efficiency, b: Efficiency,
                      confidence_level: float = 0.95) -> tuple[float, ConfidenceInterval]:
-    """eff(a) / eff(b) with its interval (independent measurements, log-scale delta method):
+    """eff(a) / eff(b) with its interval (independent measurements, log-scale delta method,
+    Student's t with the Welch-Satterthwaite degrees of freedom of both time errors):
     0 without an interval where a's variance is infinite and b's is not; no interval where
     either is unreliable; NaN where b's is not finite and positive."""
     check_confidence_level(confidence_level)
@@ -440,7 +483,7 @@ def efficiency_ratio(a: Efficiency, b: Efficiency,
     se = math.hypot(a.log_se, b.log_se)
     if not math.isfinite(se):
         return ratio, none
-    z = stats.norm.ppf(0.5 + confidence_level / 2)
+    z = stats.t.ppf(0.5 + confidence_level / 2, _satterthwaite([(a.log_se, a.df), (b.log_se, b.df)]))
     return ratio, ConfidenceInterval(float(ratio * math.exp(-z * se)), float(ratio * math.exp(z * se)))
 
 

@@ -12,7 +12,6 @@ doubles its bias test's samples (a new "look") until its interval is narrow enou
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from dataclasses import dataclass
@@ -65,6 +64,7 @@ class EstimateJob:
     base: str          # the suite file's folder: where a user's estimator is loaded from
     seed: int
     core_case: int
+    batches: int       # of the bias test: a tail unit keeps the order statistics of all of them
 
     @property
     def serial(self) -> bool:
@@ -78,9 +78,9 @@ class EstimateJob:
             payload = est.state(u.budget, u.chunk_begin, u.chunk_end, seed=self.seed, case_id=self.core_case,
                                 replica=u.replica)
         else:
-            tails = stats.TailSample.for_count(u.budget)
+            tails = stats.TailSample.for_count(u.budget * self.batches)
             tails.add(est.values(u.budget, seed=self.seed, case_id=self.core_case, replica=u.replica))
-            payload = {"center": tails.center, "upper": tails.upper.tolist(), "lower": tails.lower.tolist()}
+            payload = tails.state()
         return JobResult(u, payload, time.perf_counter() - start)
 
 
@@ -133,8 +133,8 @@ class EstimatorKind:
         base = str(self.suite.path.parent)
         for i, (key, c) in enumerate(self.case_of.items()):
             for u in estimator_units(self.suite, c, self.looks.get(key, 0)):
-                jobs.append((u.stream, u.replica, i, u.chunk_begin,
-                             EstimateJob(u, c, base, self.suite.seed, core_case_id(c, u.stream))))
+                job = EstimateJob(u, c, base, self.suite.seed, core_case_id(c, u.stream), self.suite.batches)
+                jobs.append((u.stream, u.replica, i, u.chunk_begin, job))
         return [job for *_, job in sorted(jobs, key=lambda j: j[:4])]
 
     def advance(self, store: Store) -> bool:
@@ -193,9 +193,9 @@ def _measure(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int = 0
         batches = [estimate(stream, b, k) for k in range(suite.batches)]
         faults = {k: v for e in batches for k, v in e.issues.items()}
         if "bias" in wanted:
-            tail = next(p for u, p in payloads.items() if u.kind == "tail" and u.stream == stream
-                        and u.budget == b)  # not a tail stored for an earlier sample count
-            tails = stats.TailSample.from_tops(tail["upper"], tail["lower"])
+            tails = stats.TailSample.merged(stats.TailSample.from_state(p) for u, p in sorted(
+                payloads.items(), key=lambda item: item[0].replica)
+                if u.kind == "tail" and u.stream == stream and u.budget == b)  # not an earlier count's
             if faults:
                 first = next(e for e in batches if e.issues)
                 bias = stats.UnbiasedResult.invalid(faults, first.examples, reference=est.reference,
@@ -206,10 +206,7 @@ def _measure(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int = 0
             if case.looks > 1 and bias.verdict != "invalid" and not bias.undecided:
                 # alpha spent over the looks a target may take (Bonferroni: any dependence, any
                 # stopping rule): the final look's p-value times the number of looks
-                p = min(1.0, bias.pvalue * case.looks)
-                verdict = ("consistent" if p >= suite.family_alpha else
-                           "inconclusive" if bias.heavy_tail else "biased")
-                bias = dataclasses.replace(bias, pvalue=p, verdict=verdict)
+                bias = bias.with_pvalue(min(1.0, bias.pvalue * case.looks))
         if "variance" in wanted and not faults and est.iid:
             reps = stats.Replicates.from_estimates(est, b, batches)
             rel = math.sqrt(max(reps.sample_kurtosis - 1, 0.0) / (reps.replicas * b))
@@ -239,11 +236,15 @@ def _measure(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int = 0
 def _judge_convergence(results: list[CaseResult], alpha: float) -> list[str]:
     """Convergence verdict per case, Holm over the suite's judged cases at family-wise
     alpha: 'as expected', 'slower than expected', or 'not judged' where no rate is promised
-    (infinite variance, heavy tails or skewed batches seen by the bias test: pre-asymptotic)
-    or the technique is biased on purpose (its error stops falling at the bias)."""
+    (infinite variance, heavy tails seen by the bias test, or an estimate that is skewed at the
+    smallest budget: pre-asymptotic) or the technique is biased on purpose (its error stops
+    falling at the bias)."""
+    def pre_asymptotic(r: CaseResult) -> bool:
+        b, smallest = r.bias, int(r.convergence.table.n.min())
+        return b is not None and (bool(b.flags) or b.tail_index < 3 or not b.normal_at(smallest))
+
     judged = [r.convergence is not None and not r.estimator.biased
-              and r.estimator.finite_variance is not False and not (r.bias is not None and r.bias.flags)
-              for r in results]
+              and r.estimator.finite_variance is not False and not pre_asymptotic(r) for r in results]
     # cases not judged enter the family with p = 1 (they count in Holm's m)
     rejected, _ = family_rejections([r.convergence.pvalue if ok else 1.0 for r, ok in zip(results, judged)],
                                     alpha)
@@ -271,7 +272,7 @@ def _judge_bias(results: list[CaseResult], alpha: float) -> list[str]:
             out.append("not measured")
         elif r.bias.verdict == "invalid":
             out.append("invalid")
-        elif r.bias.undecided or (rej and r.bias.heavy_tail):
+        elif r.bias.undecided or (rej and r.bias.no_level):
             out.append("inconclusive")
         elif rej:
             out.append("biased (expected)" if r.estimator.biased else "biased")
@@ -292,7 +293,8 @@ def _failure(r: CaseResult, verdicts: dict[str, str], alpha: float, family: int)
             lo, hi = b.confidence_interval(1 - alpha)
             head += f", {100 * (1 - alpha):g} % CI [{lo:.10g}, {hi:.10g}]"
         expected = "biased (deliberately)" if r.estimator.biased else "unbiased"
-        problems.append(f"{head}\n  verdict: {verdicts['bias']}; expected: {expected}"
+        cause = f" ({b.tail_end})" if b.tail_end and verdicts["bias"] == "biased" else ""
+        problems.append(f"{head}\n  verdict: {verdicts['bias']}{cause}; expected: {expected}"
                         + "".join(f"\n  {failure}" for failure in b.failures)
                         + (f"\n  flags: {'; '.join(b.flags)}" if b.flags else ""))
     c = r.convergence
@@ -316,7 +318,7 @@ def _rows(suite: Suite, results: list[CaseResult], table: pd.DataFrame) -> list[
                          "lo": lo - b.reference, "hi": hi - b.reference, "n": b.n, "pvalue": b.pvalue,
                          "verdict": row["verdict"],
                          "detail": {"estimate": b.estimate, "stderr": b.stderr, "t": b.statistic,
-                                    "flags": list(b.flags),
+                                    "flags": list(b.flags), "tail_end": b.tail_end,
                                     "counts": stats.failure_counts(b.failures)}})
         if r.case.target is not None and r.bias is not None:
             hw = r.target_half_width
@@ -337,7 +339,7 @@ def _rows(suite: Suite, results: list[CaseResult], table: pd.DataFrame) -> list[
                                     "z": c.statistic, "table": c.table.to_dict("list")}})
         if r.efficiency is not None:
             e = r.efficiency
-            z = 1.96 * e.log_se / math.log(10)
+            z = e.log10_half_width(0.95)
             said = {"verdict": e.verdict} if e.reason else {}   # "infinite variance", "unreliable"
             rows.append({**base, "measurement": "log10_efficiency", "value": e.log10_value,
                          "lo": e.log10_value - z, "hi": e.log10_value + z, "n": e.n, **said,
@@ -399,6 +401,8 @@ def results_table(results: list[CaseResult], alpha: float) -> pd.DataFrame:
 
 def _notes(r: CaseResult) -> str:
     notes = list(r.bias.flags) if r.bias else []
+    if r.bias and r.bias.tail_end:
+        notes.append(r.bias.tail_end)
     if r.bias and r.bias.failures:
         notes.append(f"faults: {stats.failure_counts(r.bias.failures)}")
     if r.estimator.finite_variance is False:

@@ -71,7 +71,7 @@ def _rows(r: Any, name: str, domain: str | None) -> tuple[str, str, list[dict[st
             "measurement": "bias", "value": r.estimate - r.reference, "lo": lo - r.reference,
             "hi": hi - r.reference, "n": r.n, "pvalue": r.pvalue, "alpha": r.alpha, "verdict": verdict,
             "detail": {"estimate": r.estimate, "stderr": r.stderr, "t": r.statistic, "flags": list(r.flags),
-                       "counts": failure_counts(r.failures)}}]
+                       "tail_end": r.tail_end, "counts": failure_counts(r.failures)}}]
     if isinstance(r, ConvergenceResult):
         lo, hi = r.confidence_interval()
         return r.integrand, name, [{
@@ -80,7 +80,7 @@ def _rows(r: Any, name: str, domain: str | None) -> tuple[str, str, list[dict[st
             "detail": {"expected": r.expected, "bound": r.expected + r.tolerance, "z": r.statistic,
                        "table": r.table.to_dict("list")}}]
     if isinstance(r, Efficiency):
-        z = 1.96 * r.log_se / math.log(10)
+        z = r.log10_half_width(0.95)
         return name, r.technique, [{
             "measurement": "log10_efficiency", "value": r.log10_value, "lo": r.log10_value - z,
             "hi": r.log10_value + z, "n": r.n, "detail": {"seconds": r.seconds}}]

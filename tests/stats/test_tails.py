@@ -1,0 +1,105 @@
+"""harness.stats.tails: the kept extremes (ties at the maximum counted exactly across blocks,
+merging replicas equal to one sample), the tail index, and the signatures of a clamped or a
+truncated tail, told apart from estimators that are discrete by design."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from harness.stats import TailSample
+from harness.stats.tails import Side
+
+RNG = np.random.default_rng(20261201)
+
+
+def pareto(n: int, index: float, rng=RNG) -> np.ndarray:
+    return rng.random(n) ** (-1 / index)
+
+
+def sample_of(y: np.ndarray, blocks: int = 1, keep: int | None = None) -> TailSample:
+    t = TailSample(keep or TailSample.for_count(y.size).keep)
+    for part in np.array_split(y, blocks):
+        t.add(part)
+    return t
+
+
+def test_ties_at_the_maximum_are_counted_across_blocks_beyond_what_is_kept():
+    y = np.minimum(pareto(200_000, 1.5), 50.0)          # P(Y > 50) = 0.28 %: about 560 ties, keep 447
+    whole, blocks = sample_of(y), sample_of(y, blocks=7)
+    ties = int(np.count_nonzero(y == 50.0))
+    center = whole.center
+    assert ties > whole.keep
+    assert whole.up.ties == blocks.up.ties == ties and whole.up.peak == pytest.approx(50.0 - center)
+    below = np.sort(y[y < 50.0])[::-1][: whole.keep] - center
+    np.testing.assert_array_equal(whole.up.below, below)
+    np.testing.assert_array_equal(whole.upper[:3], [50.0 - center] * 3)
+
+
+def test_merging_replicas_equals_one_sample_of_all_their_values():
+    y = pareto(60_000, 2.0)
+    parts = np.array_split(y, 6)
+    keep = TailSample.for_count(y.size).keep
+    merged = TailSample.merged(sample_of(p, keep=keep) for p in parts)   # each with its own centre
+    one = TailSample(keep)
+    one.center = merged.center
+    one.up.add(y - one.center)
+    one.down.add(one.center - y)
+    np.testing.assert_allclose(merged.upper, one.upper, rtol=1e-12)
+    np.testing.assert_allclose(merged.lower, one.lower, rtol=1e-12, atol=1e-12)
+    assert merged.tail_index() == pytest.approx(one.tail_index(), rel=1e-9)
+
+
+def test_state_round_trips_through_json_like_values():
+    t = sample_of(np.minimum(pareto(10_000, 1.5), 20.0), blocks=3)
+    back = TailSample.from_state(t.state())
+    assert back.center == t.center and back.up.ties == t.up.ties
+    np.testing.assert_array_equal(back.upper, t.upper)
+    assert back.tail_index() == t.tail_index()
+
+
+def test_a_clamp_is_an_atom_above_continuous_values():
+    end = sample_of(np.minimum(pareto(100_000, 1.5), 1e3)).up.end(1e-3)
+    assert end is not None and end.kind == "clamp" and end.count >= 2
+
+
+@pytest.mark.parametrize("y", [
+    (RNG.random(100_000) < 3e-4) / 3e-4,                       # a rare event: its atom is all it has
+    np.where(RNG.random(100_000) < 0.5, 0.0, 2.0),             # hit or miss
+    np.round(pareto(100_000, 1.5)),                            # discrete by design, no atom at the top
+], ids=["rare event", "hit or miss", "integer-valued"])
+def test_estimators_discrete_by_design_are_not_clamps(y):
+    t = sample_of(y)
+    for side in (t.up, t.down):
+        end = side.end(1e-3)
+        assert end is None or end.kind != "clamp"
+
+
+def test_a_truncated_pareto_tail_is_seen_to_end():
+    y = pareto(1_000_000, 1.5)
+    y = np.where(y <= 1e3, y, 0.0)                                   # 32 of 1e6 values lost, on average
+    end = sample_of(y, blocks=4).up.end(1e-3)
+    assert end is not None and end.kind == "truncation" and end.value < 1e3 and end.pvalue < 1e-3
+
+
+def test_a_continuing_pareto_tail_rarely_reads_as_truncated():
+    """Under an exact Pareto tail the spacings' F test is exact: at level 0.05 it fires in
+    about 5 % of samples (here at most 12 of 100, the binomial 0.999 quantile)."""
+    rng = np.random.default_rng(7)
+    fired = sum(sample_of(pareto(100_000, index, rng)).up.end(0.05) is not None
+                for index in (1.1, 1.5, 2.0, 2.5) for _ in range(25))
+    assert fired <= 12
+
+
+def test_tail_index_reads_heavy_light_and_bounded_tails():
+    assert 1.2 < sample_of(pareto(1_000_000, 1.5)).tail_index() < 1.9
+    assert sample_of(RNG.normal(size=100_000)).tail_index() > 3
+    assert sample_of(RNG.random(100_000)).tail_index() == math.inf
+
+
+def test_a_side_without_values_has_no_end_and_an_infinite_index():
+    s = Side(50)
+    s.add(np.array([-1.0, 0.0]))
+    assert s.peak is None and s.end(0.01) is None and s.tail_index() == math.inf
+    assert s.descending().size == 0
