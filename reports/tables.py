@@ -30,7 +30,8 @@ ORDER = ("bias", "variance", "convergence_slope", "convergence", "efficiency_rat
 # and the RMSE at the top budget is drawn, with its interval, in the convergence figure
 HIDDEN = {"variance", "log10_efficiency", "error_vs_time", "rmse"}
 LABELS = {
-    "bias": ("bias [95% CI]", "estimate − exact value, 95 % interval from the batch means; below it the "
+    "bias": ("bias [95% CI]", "estimate − exact value, 95 % Student-t interval (from all contributions, "
+                              "or from the replicas for stratified and Sobol' points); below it the "
                               "estimate ± its standard error and n = samples"),
     "convergence_slope": ("RMSE slope [95% CI]", "log-log slope of RMSE against samples per estimate, "
                                                  "bootstrap 95 % interval; n = replicas over all budgets"),

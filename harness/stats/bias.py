@@ -117,7 +117,7 @@ class UnbiasedResult:
         return self.estimate - self.reference
 
     def confidence_interval(self, confidence_level: float = 0.95) -> ConfidenceInterval:
-        """Student-t interval for E[Y] from the batch means, ``df`` degrees of freedom
+        """Student-t interval for E[Y] with ``df`` degrees of freedom
         (NaN ends for an "invalid" result; too narrow where ``no_level``)."""
         check_confidence_level(confidence_level)
         half = stats.t.ppf(0.5 + confidence_level / 2, self.df) * self.stderr
@@ -302,7 +302,8 @@ def _decide(parts: list[list[tuple[int, float, float, float]]], tails: TailSampl
         p = _skew_corrected_p(t, skew, df, weight_low)
     no_level = bool(heavy) or skewed
     verdict = verdict or ("consistent" if p >= alpha else ("inconclusive" if no_level else "biased"))
-    end = ends["upper"] if t < 0 else ends["lower"]   # the end that explains a deficit or an excess
+    # the end that explains a bias found: of the upper tail for a deficit, of the lower for an excess
+    end = (ends["upper"] if t < 0 else ends["lower"]) if verdict == "biased" else None
     with np.errstate(over="ignore"):  # a variance beyond 1.8e308 is inf, not an error
         variance = float(np.ldexp(variance, 2 * e))
     return UnbiasedResult(verdict, t, p, df, float(np.ldexp(estimate, e)),

@@ -156,9 +156,11 @@ class EstimatorKind:
         verdicts = [{"bias": v, "convergence": cv} for v, cv in zip(table.get("verdict", ()),
                                                                    table.get("convergence", ()))]
         failures = [_failure(r, v, suite.family_alpha, len(results)) for r, v in zip(results, verdicts)]
-        text = (format_table(table, suite.family_alpha) + f"\nt: Student t of {suite.batches} batch means "
-                "against the exact value; RMSE slope: log-log fit over budgets (expected -0.5 for Monte "
-                "Carlo); 1/(V·T): efficiency (background eq. 5) against uniform MC on the same integrand."
+        text = (format_table(table, suite.family_alpha) + "\nt: Student t of the estimate against the exact "
+                f"value (over all contributions; over {suite.batches} replicas for stratified and Sobol' "
+                "points), p corrected for the estimate's skewness; RMSE slope: log-log fit over budgets "
+                "(expected -0.5 for Monte Carlo); 1/(V·T): efficiency (background eq. 5) against uniform MC "
+                "on the same integrand."
                 if results else "")
         return Outcome(self.name, "cases", tuple(self.names()), tuple(results), tuple(verdicts),
                        tuple(failures),
