@@ -12,7 +12,7 @@ variance whatever its index below the end, so a deficit of the mean can be prove
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -75,16 +75,6 @@ class Side:
         old = np.full(min(low.ties, self.keep), low.peak if low.peak is not None else 0.0)
         self.below = self._top(np.concatenate([low.below, old, high.below]))
         self.peak, self.ties = high.peak, high.ties
-
-    def shifted(self, delta: float) -> Side:
-        """The same extremes as deviations from a centre ``delta`` lower (only positive ones kept)."""
-        if self.peak is None or delta == 0:
-            return self
-        peak = self.peak + delta
-        below = self.below + delta
-        if peak <= 0:
-            return Side(self.keep)
-        return Side(self.keep, peak, self.ties, below[below > 0])
 
     def _top(self, d: np.ndarray) -> np.ndarray:
         m = min(self.keep, d.size)
@@ -166,29 +156,6 @@ class TailSample:
             self.center = float(np.partition(y, y.size // 2)[y.size // 2])
         self.up.add(y - self.center)
         self.down.add(self.center - y)
-
-    def merge(self, other: TailSample) -> None:
-        """Takes another sample's extremes into this one (re-centred on this one's centre)."""
-        if other.center is None:
-            return
-        if self.center is None:
-            self.center = other.center
-        shift = other.center - self.center
-        self.up.merge(other.up.shifted(shift))
-        self.down.merge(other.down.shifted(-shift))
-
-    @classmethod
-    def merged(cls, samples: Iterable[TailSample]) -> TailSample:
-        """One sample of the extremes of several (the first one's centre), merged in order."""
-        out = None
-        for s in samples:
-            if out is None:
-                out = s
-            else:
-                out.merge(s)
-        if out is None:
-            raise ValueError("no tail samples to merge")
-        return out
 
     def state(self) -> dict[str, Any]:
         """JSON-serialisable: what :meth:`from_state` restores (see harness.suite.estimators)."""

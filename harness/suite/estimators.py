@@ -56,15 +56,15 @@ def estimator_of(case: Case, base: Path) -> stats.Estimator:
 @dataclass(frozen=True)
 class EstimateJob:
     """A unit of an estimator case: the accumulator state of its chunk range ("state"), or the
-    largest deviations above and below the median of the estimate's contributions ("tail",
-    for the tail-index test)."""
+    largest deviations above and below the median of the contributions of all the bias test's
+    batches ("tail", for the tail index and a tail's end; one batch in memory at a time)."""
 
     unit: Unit
     case: Case
     base: str          # the suite file's folder: where a user's estimator is loaded from
     seed: int
     core_case: int
-    batches: int       # of the bias test: a tail unit keeps the order statistics of all of them
+    batches: int       # of the bias test: a tail unit reads the contributions of all of them
 
     @property
     def serial(self) -> bool:
@@ -79,7 +79,8 @@ class EstimateJob:
                                 replica=u.replica)
         else:
             tails = stats.TailSample.for_count(u.budget * self.batches)
-            tails.add(est.values(u.budget, seed=self.seed, case_id=self.core_case, replica=u.replica))
+            for k in range(self.batches):
+                tails.add(est.values(u.budget, seed=self.seed, case_id=self.core_case, replica=k))
             payload = tails.state()
         return JobResult(u, payload, time.perf_counter() - start)
 
@@ -195,9 +196,9 @@ def _measure(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int = 0
         batches = [estimate(stream, b, k) for k in range(suite.batches)]
         faults = {k: v for e in batches for k, v in e.issues.items()}
         if "bias" in wanted:
-            tails = stats.TailSample.merged(stats.TailSample.from_state(p) for u, p in sorted(
-                payloads.items(), key=lambda item: item[0].replica)
-                if u.kind == "tail" and u.stream == stream and u.budget == b)  # not an earlier count's
+            tail = next(p for u, p in payloads.items() if u.kind == "tail" and u.stream == stream
+                        and u.budget == b)  # not a tail stored for an earlier sample count
+            tails = stats.TailSample.from_state(tail)
             if faults:
                 first = next(e for e in batches if e.issues)
                 bias = stats.UnbiasedResult.invalid(faults, first.examples, reference=est.reference,

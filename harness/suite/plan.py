@@ -205,8 +205,8 @@ def estimator_units(suite: Suite, case: Case, look: int = 0) -> list[Unit]:
         b, stream = bias_budget(suite, case, look), bias_stream(look)
         for k in range(suite.batches):
             units += _estimate_units(key, stream, b, k)
-        if "bias" in wanted:  # the tails of every batch's contributions, one batch per unit
-            units += [Unit(key, stream, b, k, 0, 0, "tail") for k in range(suite.batches)]
+        if "bias" in wanted:  # the tails of every batch's contributions, one batch in memory at a time
+            units.append(Unit(key, stream, b, 0, 0, 0, "tail"))
     for i, b in chosen_budgets(case.measurements, convergence_budgets(suite, case)):
         for r in range(suite.replicas):
             units += _estimate_units(key, 1 + i, b, r)

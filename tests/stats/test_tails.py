@@ -1,5 +1,5 @@
-"""harness.stats.tails: the kept extremes (ties at the maximum counted exactly across blocks,
-merging replicas equal to one sample), the tail index, and the signatures of a clamped or a
+"""harness.stats.tails: the kept extremes (ties at the maximum counted exactly across blocks),
+the tail index, and the signatures of a clamped or a
 truncated tail, told apart from estimators that are discrete by design."""
 from __future__ import annotations
 
@@ -35,20 +35,6 @@ def test_ties_at_the_maximum_are_counted_across_blocks_beyond_what_is_kept():
     below = np.sort(y[y < 50.0])[::-1][: whole.keep] - center
     np.testing.assert_array_equal(whole.up.below, below)
     np.testing.assert_array_equal(whole.upper[:3], [50.0 - center] * 3)
-
-
-def test_merging_replicas_equals_one_sample_of_all_their_values():
-    y = pareto(60_000, 2.0)
-    parts = np.array_split(y, 6)
-    keep = TailSample.for_count(y.size).keep
-    merged = TailSample.merged(sample_of(p, keep=keep) for p in parts)   # each with its own centre
-    one = TailSample(keep)
-    one.center = merged.center
-    one.up.add(y - one.center)
-    one.down.add(one.center - y)
-    np.testing.assert_allclose(merged.upper, one.upper, rtol=1e-12)
-    np.testing.assert_allclose(merged.lower, one.lower, rtol=1e-12, atol=1e-12)
-    assert merged.tail_index() == pytest.approx(one.tail_index(), rel=1e-9)
 
 
 def test_state_round_trips_through_json_like_values():
