@@ -25,17 +25,18 @@ def test_ci_suite_collects_every_case_and_passes(root, tmp_path):
 
 
 def test_a_failing_case_explains_itself(tmp_path):
-    """clamped:uniform(0.9) has a bias of -0.021; with 64 samples in 8 batches it cannot be
-    found, so its case fails as 'bias missed' and says what it measured and expected."""
+    """clamped:uniform(0.9) has a bias of -0.021; with 16 samples (standard error about 0.02)
+    it cannot be found, so its case fails as 'bias missed' and says what it measured and
+    expected."""
     suite = tmp_path / "weak.toml"
-    suite.write_text('[suite]\nname = "weak"\nsamples = 64\nbatches = 8\nreplicas = 4\n'
+    suite.write_text('[suite]\nname = "weak"\nsamples = 16\nbatches = 8\nreplicas = 4\n'
                      'measurements = ["bias"]\n\n'
                      '[[case]]\nintegrand = "gaussian"\ntechniques = ["uniform", "clamped:uniform(0.9)"]\n')
     r = pytest_run(str(suite), "--harness-db", str(tmp_path / "weak.sqlite"))
     assert r.returncode == 1, r.stdout
     assert "1 failed, 1 passed" in r.stdout
     out = r.stdout
-    for fragment in ("gaussian/clamped:uniform(0.9)", "bias: estimate", "(n = 64)", "exact 0.7468241328",
+    for fragment in ("gaussian/clamped:uniform(0.9)", "bias: estimate", "(n = 16)", "exact 0.7468241328",
                      "family-wise alpha = 0.01", "% CI [", "verdict: bias missed",
                      "expected: biased (deliberately)"):
         assert fragment in out, fragment

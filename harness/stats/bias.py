@@ -254,7 +254,7 @@ def _decide(parts: list[list[tuple[int, float, float, float]]], tails: TailSampl
     sizes_a = np.array([b[0] for b in batch_moments])
     means_a = np.array([b[1] for b in batch_moments])
     batches = means_a.size
-    total, mean_all, m2_all, m3_all = merge_moments(batch_moments)
+    total, _, m2_all, m3_all = merge_moments(batch_moments)
     estimate = float(np.sum(sizes_a * means_a) / total)
     variance = m2_all / (total - 1)
     # i.i.d. contributions: the standard error and the skewness of the estimate from all n of
@@ -272,9 +272,9 @@ def _decide(parts: list[list[tuple[int, float, float, float]]], tails: TailSampl
         skew = float(stats.skew(means_a)) / math.sqrt(batches)
     flags: list[str] = []
     sides = {"upper": tails.up, "lower": tails.down}
-    ends = {name: _biasing_end(s, alpha * _END_LEVEL, upper=name == "upper") for name, s in sides.items()}
-    heavy = [name for name, s in sides.items()
-             if s.tail_index() < _HEAVY_INDEX and s.end(alpha * _END_LEVEL) is None]
+    seen = {name: s.end(alpha * _END_LEVEL) for name, s in sides.items()}
+    ends = {name: _biasing(seen[name], s, upper=name == "upper") for name, s in sides.items()}
+    heavy = [name for name, s in sides.items() if s.tail_index() < _HEAVY_INDEX and seen[name] is None]
     tail = tails.tail_index()
     if heavy:
         flags.append(f"heavy tail: tail index {tail:.2f} < 2 (variance infinite) and no end seen")
@@ -297,7 +297,7 @@ def _decide(parts: list[list[tuple[int, float, float, float]]], tails: TailSampl
     else:
         t = (estimate - ref) / stderr
         if (ends["upper"] is None) != (ends["lower"] is None):
-            # a clamp or truncation of one heavy tail can only move the mean away from that side
+            # a clamp (or a heavy tail's truncation) on one side can only move the mean away from it
             weight_low = _TOWARD_END if ends["upper"] is not None else 1 - _TOWARD_END
         p = _skew_corrected_p(t, skew, df, weight_low)
     no_level = bool(heavy) or skewed
@@ -319,12 +319,11 @@ def _piece_moments(n: int, mean: float, stderr: float, skewness: float) -> tuple
     return n, mean, m2, (skewness * n * (m2 / n) ** 1.5 if math.isfinite(skewness) else 0.0)
 
 
-def _biasing_end(side: Side, level: float, *, upper: bool) -> TailEnd | None:
-    """The end of a side that would bias the mean: a clamp of the upper side (an atom at the
-    maximum above continuous values: a firefly clamp; at the bottom an atom is where zeros and
-    misses sit), or a truncation of a heavy tail (tail index < 3: light and bounded tails are
-    compressed at their top by nature)."""
-    end = side.end(level)
+def _biasing(end: TailEnd | None, side: Side, *, upper: bool) -> TailEnd | None:
+    """``end`` if it is a side's end that would bias the mean: a clamp of the upper side (an
+    atom at the maximum above continuous values: a firefly clamp; at the bottom an atom is where
+    zeros and misses sit), or a truncation of a heavy tail (tail index < 3: light and bounded
+    tails are compressed at their top by nature)."""
     if end is None or (end.kind == "clamp" and not upper):
         return None
     return end if end.kind == "clamp" or side.tail_index() < 3 else None
