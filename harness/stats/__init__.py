@@ -5,6 +5,7 @@
 ``multiple``  multiple testing (holm);
 ``estimator`` what estimates come from: a catalogue pair or a user's contributions callable;
 ``replicas``  replicas, convergence rates, efficiency, error against time;
+``timing``    an estimate's wall time and its error from blocks of replicas (median_time);
 ``results``   the result family every check returns (ConfidenceInterval, Failure);
 ``merge``     Chan's merge of (count, mean, variance) summaries, with the third moment;
 ``validate``  argument validators shared across the harness;
@@ -26,11 +27,11 @@ from harness.stats.replicas import (
     efficiency_ratio,
     error_vs_time,
     fit_convergence,
-    median_time,
     replicate,
 )
 from harness.stats.results import ConfidenceInterval, Failure, failure_counts, failures_from_counts
 from harness.stats.tails import TailSample
+from harness.stats.timing import median_time
 
 __all__ = [
     "Estimator", "CatalogueEstimator", "Contributions", "estimator",

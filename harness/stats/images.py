@@ -17,8 +17,8 @@ import numpy as np
 from scipy import stats as sps
 
 from harness import stats
-from harness.stats.replicas import median_time
 from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
+from harness.stats.timing import median_time
 from harness.stats.validate import level
 
 __all__ = ["RELMSE_EPSILON", "relative_squared_error", "Reference", "ImageBias", "pixel_bias_test", "relmse",

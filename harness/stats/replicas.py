@@ -20,9 +20,10 @@ import reference_estimators as rest
 from harness.stats.estimator import Contributions, Estimator, estimator
 from harness.stats.merge import chan_merge
 from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
+from harness.stats.timing import median_time, satterthwaite, time_blocks
 from harness.stats.validate import count
 
-__all__ = ["Replicates", "replicate", "median_time", "ConvergenceResult", "convergence_rate",
+__all__ = ["Replicates", "replicate", "ConvergenceResult", "convergence_rate",
            "fit_convergence", "Efficiency", "efficiency", "efficiency_ratio", "error_vs_time"]
 
 
@@ -30,37 +31,6 @@ __all__ = ["Replicates", "replicate", "median_time", "ConvergenceResult", "conve
 # not Monte Carlo error: 2.3e-13 relative, which a Monte Carlo error reaches only beyond ~1e24
 # samples per unit of relative standard deviation
 _ROUNDING_ULPS = 1024
-
-
-def median_time(seconds: np.ndarray) -> tuple[float, float]:
-    """Wall time of one estimate (s) from R replicas' times, in the order they ran: the median,
-    and its standard error from the spread between blocks of 4 consecutive replicas (at least
-    2 blocks): SD of the block medians / sqrt(blocks).  Between blocks, because the machine's
-    speed drifts during a run: replicas that ran back to back share a state of the machine, so
-    the spread within a block understates the time's uncertainty (measured: 11x on 8 blocks of
-    32 replicas).  The median, because a replica that shared its core with something else is an
-    outlier of the machine, not of the technique."""
-    t = np.asarray(seconds, dtype=np.float64)
-    med = float(np.median(t))
-    if t.size < 2:
-        return med, math.nan
-    blocks = _time_blocks(t.size)
-    medians = np.array([np.median(b) for b in np.array_split(t, blocks)])
-    return med, float(np.std(medians, ddof=1) / math.sqrt(blocks))
-
-
-def _time_blocks(replicas: int) -> int:
-    """How many blocks of consecutive replicas :func:`median_time` compares: the time's standard
-    error has ``_time_blocks - 1`` degrees of freedom."""
-    return max(2, replicas // 4)
-
-
-def _satterthwaite(parts: Sequence[tuple[float, float]]) -> float:
-    """Degrees of freedom of a sum of independent squared standard errors, each given as
-    (standard error, its degrees of freedom): the Welch-Satterthwaite approximation."""
-    num = sum(s * s for s, _ in parts) ** 2
-    den = sum(s ** 4 / df for s, df in parts if s > 0)
-    return num / den if den > 0 else math.inf
 
 
 # --- replicas ----------------------------------------------------------------------------------
@@ -387,6 +357,17 @@ class Efficiency:
     reason: str = ""          # why no interval: "infinite variance" or "unreliable (tail index ...)"
     df: float = math.inf      # degrees of freedom of log_se (Welch-Satterthwaite of variance and time)
 
+    @classmethod
+    def from_errors(cls, technique: str, log10_value: float, errors: Sequence[tuple[float, float]],
+                    budget: int, replicas: int, log10_variance: float, seconds: float, *,
+                    reason: str = "") -> Efficiency:
+        """A measured efficiency whose log's standard error combines independent relative
+        ``errors``, each (relative standard error, its degrees of freedom), with their
+        Welch-Satterthwaite ``df``; no interval (log_se NaN) where ``reason`` says why."""
+        log_se = math.nan if reason else math.hypot(*(e for e, _ in errors))
+        return cls(technique, log10_value, log_se, budget, replicas, log10_variance, seconds, reason=reason,
+                   df=satterthwaite(errors))
+
     @property
     def value(self) -> float:
         le = self.log10_value
@@ -460,9 +441,9 @@ def efficiency(r: Replicates, *, tail_index: float | None = None,
                           lv, t)
     unreliable = tail_index is not None and tail_index < 3
     reason = f"unreliable (tail index {tail_index:.2f} < 3)" if unreliable else ""
-    parts = [(v_rel, r.replicas - 1), (t_se / t, _time_blocks(r.replicas) - 1)]
-    return Efficiency(r.technique, -lv - math.log10(t), math.nan if reason else math.hypot(v_rel, t_se / t),
-                      r.n, r.replicas, lv, t, reason=reason, df=_satterthwaite(parts))
+    errors = [(v_rel, r.replicas - 1), (t_se / t, time_blocks(r.replicas) - 1)]
+    return Efficiency.from_errors(r.technique, -lv - math.log10(t), errors, r.n, r.replicas, lv, t,
+                                  reason=reason)
 
 
 def efficiency_ratio(a: Efficiency, b: Efficiency,
@@ -483,7 +464,7 @@ def efficiency_ratio(a: Efficiency, b: Efficiency,
     se = math.hypot(a.log_se, b.log_se)
     if not math.isfinite(se):
         return ratio, none
-    z = stats.t.ppf(0.5 + confidence_level / 2, _satterthwaite([(a.log_se, a.df), (b.log_se, b.df)]))
+    z = stats.t.ppf(0.5 + confidence_level / 2, satterthwaite([(a.log_se, a.df), (b.log_se, b.df)]))
     return ratio, ConfidenceInterval(float(ratio * math.exp(-z * se)), float(ratio * math.exp(z * se)))
 
 
