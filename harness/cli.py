@@ -60,15 +60,14 @@ def main(argv: list[str] | None = None) -> int:
                     help="move a damaged database aside and copy every readable row into a new one")
     sub.add_parser("list", help="list the catalogue's integrands, techniques and samplers")
     cmp = sub.add_parser("compare", help="two renderers' replica renders against each other, no "
-                                         "reference needed (per-pixel, tile and image-mean Welch tests; "
-                                         "relMSE and FLIP maps)")
+                                         "reference needed (Welch tests per pixel, per 2 to 16 pixel tile "
+                                         "and on the image mean; relMSE and FLIP maps)")
     cmp.add_argument("a", help="a folder of replica images (EXR, PFM, HDR), or with --db a render case (key "
                                "prefix or part of scene/configuration)")
     cmp.add_argument("b", help="the same for the other renderer")
     cmp.add_argument("--db", metavar="PATH", help="results database holding both render cases")
     cmp.add_argument("-o", "--output", metavar="PATH", default="compare.html", help="the report page")
     cmp.add_argument("--alpha", type=float, default=0.01)
-    cmp.add_argument("--tile", type=int, default=8, help="tile size (pixels) of the tile test")
     chk = sub.add_parser("check-sampler", help="test a sampler against its pdf (chi-square and friends)")
     chk.add_argument("target", help="module:attribute or path/to/file.py:attribute (found from the current "
                                     "directory): an object with sample(u) and pdf(x), or a function "
@@ -204,7 +203,7 @@ def _compare(args) -> int:
 
     try:
         a, b = (load_replicas(x, db=args.db) for x in (args.a, args.b))
-        result = compare_images(a.images, b.images, alpha=args.alpha, tile=args.tile)
+        result = compare_images(a.images, b.images, alpha=args.alpha)
     except ValueError as e:
         print(f"harness: {e}", file=sys.stderr)
         return 2

@@ -22,7 +22,7 @@ from harness.adapters.base import read_image
 from harness.stats.compare import ImageComparison
 from harness.suite.readers import connect_read_only
 from harness.suite.store import image_dir, read_stored, same_unit
-from reports import images
+from reports import images, plots
 
 __all__ = ["ReplicaSet", "load_replicas", "compare_page"]
 
@@ -135,17 +135,20 @@ def compare_page(a: ReplicaSet, b: ReplicaSet, result: ImageComparison) -> str:
         flip = _flip(y, x)
         if flip is not None:
             figs.append(_figure(images.png_bytes(flip[0]), f"FLIP (HDR) of {name}: mean {flip[1]:.4f}"))
+    worst = result.worst_scale
     t = np.nan_to_num(result.t_map, nan=0.0)
-    t_rgb = images.lut()[np.round(np.clip(t / max(float(t.max()), 4.0), 0, 1) * 255).astype(np.int64)]
-    figs.append(_figure(images.png_bytes(t_rgb), f"pixel test |t| (0 to {max(float(t.max()), 4.0):.3g}; "
-                                                 f"worst {result.worst_t:+.2f} at {result.worst_pixel})"))
-    tests = [("pixels (Welch per pixel-channel, Bonferroni)", result.pvalue_pixels,
-              f"{result.tested} tested, {result.untestable} too skewed"),
-             (f"{result.tile}x{result.tile} tiles (Welch, Bonferroni)", result.pvalue_tiles,
-              f"{result.tiles_tested} tested, {result.tiles_untestable} too skewed"),
-             ("image mean (Welch)", result.pvalue_mean,
-              f"A − B = {result.difference:+.3g} ± {result.difference_se:.2g}")]
-    rows = "".join(f"<tr><td>{e(n)}</td><td class=num>{p:.3g}</td><td>{e(d)}</td></tr>" for n, p, d in tests)
+    t_top = max(float(t.max()), 4.0)
+    t_rgb = images.lut()[np.round(np.clip(t / t_top, 0, 1) * 255).astype(np.int64)]
+    figs.append(_figure(images.png_bytes(t_rgb), f"|t| at the most significant scale, {worst.name} (0 to "
+                                                 f"{t_top:.3g}; worst {result.worst_t:+.2f} at "
+                                                 f"{result.worst_pixel})"))
+    figs.append(_figure(plots.pvalue_histogram(result.finest_pvalues, result.scales[0].name),
+                        f"p-values of the {result.scales[0].name} test: flat under H0, a peak at 0 where the "
+                        "sets differ"))
+    rows = "".join(f"<tr><td>{e(s.name)}</td><td class=num>{s.pvalue:.3g}</td>"
+                   f"<td class=num>{s.alpha:.3g}</td><td class=num>{s.count}</td>"
+                   f"<td class=num>{s.low_untested} / {s.high_untested}</td></tr>"
+                   for s in result.scales)
     when = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     cls = "good" if result.passed else "bad"
     return f"""<!DOCTYPE html>
@@ -159,8 +162,13 @@ figcaption{{font-size:12.5px;color:#656d76}}</style></head><body>
 <h1>Two renderers compared without a reference</h1>
 <p>A: {e(a.label)} <small>({e(a.source)})</small><br>B: {e(b.label)} <small>({e(b.source)})</small></p>
 <div class="v {cls}">{e(str(result))}</div>
-<p>H0: both sets estimate the same image. Three tests at α/3 each (Bonferroni), α = {result.alpha:g}:</p>
-<table><tr><th>test</th><th>p</th><th>what it covers</th></tr>{rows}</table>
+<p>H0: both sets estimate the same image. Welch t per tile-channel at {len(result.scales)} scales, each at
+α/{len(result.scales)} with Bonferroni over its tile-channels, α = {result.alpha:g}; a side (A darker / A
+brighter) is untested where either set is skewed there. Image-mean difference A − B =
+{result.difference:+.3g} ± {result.difference_se:.2g}.</p>
+<table><tr><th>scale</th><th>p</th><th>level</th><th>tile-channels</th>
+<th>untested darker / brighter</th></tr>
+{rows}</table>
 <div class="grid">{"".join(figs)}</div>
 <p><small>Written by <code>harness compare</code> on {when}.</small></p></body></html>
 """

@@ -43,8 +43,9 @@ def test_compare_folders_and_the_page(tmp_path):
             text = page.inner_text("body")
         finally:
             browser.close()
-    assert errors == [] and len(shown) == 7 and all(shown)      # 2 means, 2 relMSE, 2 FLIP, |t| map
-    assert "FLIP (HDR) of A against mean B" in text and "image mean (Welch)" in text
+    assert errors == [] and len(shown) == 8 and all(shown)   # means, relMSE, FLIP (2 each), |t| map, p-values
+    # 6 replicas a set: 8 x 8 tiles and the image only (the fine scales need 8)
+    assert "FLIP (HDR) of A against mean B" in text and "p-values of the 8x8 tiles test" in text
 
 
 def test_compare_errors_are_one_line(tmp_path):

@@ -18,15 +18,15 @@ from scipy import stats as sps
 
 from harness import stats
 from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
+from harness.stats.scales import ROUNDING, Scale, combined, multiscale
 from harness.stats.timing import median_time
 from harness.stats.validate import level
 
 __all__ = ["RELMSE_EPSILON", "relative_squared_error", "Reference", "ImageBias", "pixel_bias_test", "relmse",
-           "as_replicates", "image_efficiency", "pixel_variance", "normal_enough", "t_summary",
-           "excluded_pixels", "PixelVerdict", "ROUNDING"]
+           "as_replicates", "image_efficiency", "pixel_variance", "faulty_values",
+           "valid_pixels", "mean_difference", "PixelVerdict", "ROUNDING"]
 
 RELMSE_EPSILON = 1e-2   # relMSE = mean over pixels of (x - ref)^2 / (ref^2 + eps): keeps black pixels finite
-ROUNDING = 2.0**-20     # relative float32 rounding floor of an accumulated render (8 ulp of 2^-23)
 _MAX_EXAMPLES = 8       # first excluded pixels listed in a failure
 
 
@@ -43,30 +43,38 @@ def _relmse_scale(reference: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Reference:
-    """The value each pixel must have: ``mean`` (h, w, c) and the variance of that mean
-    (zero for an exact answer), ``parts`` independent renders it was averaged from (0 if exact)
-    and the variance of the image-average of the reference (zero if exact)."""
+    """The value each pixel must have: ``mean`` (h, w, c), and the ``parts`` (K, h, w, c) it
+    was averaged from: K >= 2 independent renders of equal budget, or None for an exact image.
+    The tests form each scale's tiles from the parts themselves, so the reference's own error
+    is counted at every scale, correlations between pixels included."""
 
     mean: np.ndarray
-    variance: np.ndarray
-    parts: int
-    image_mean_variance: float
+    parts: np.ndarray | None = None
 
     @classmethod
     def exact(cls, image: np.ndarray) -> Reference:
-        a = np.asarray(image, dtype=np.float64)
-        return cls(a, np.zeros_like(a), 0, 0.0)
+        return cls(np.asarray(image, dtype=np.float64))
 
     @classmethod
     def from_parts(cls, parts: np.ndarray) -> Reference:
         """From K >= 2 independent renders (K, h, w, c) of equal budget."""
         p = np.asarray(parts, dtype=np.float64)
-        k = p.shape[0]
-        if k < 2:
-            raise ValueError(f"a rendered reference needs >= 2 independent parts to know its own error, "
-                             f"got {k}")
-        means = p.reshape(k, -1).mean(axis=1)
-        return cls(p.mean(axis=0), p.var(axis=0, ddof=1) / k, k, float(np.var(means, ddof=1) / k))
+        if p.ndim != 4 or p.shape[0] < 2:
+            raise ValueError(f"a rendered reference needs >= 2 independent parts (K, h, w, c) to know its "
+                             f"own error, got shape {p.shape}")
+        return cls(p.mean(axis=0), p)
+
+    @property
+    def count(self) -> int:
+        """Independent parts (0 for an exact image)."""
+        return 0 if self.parts is None else int(self.parts.shape[0])
+
+    @property
+    def variance(self) -> np.ndarray:
+        """Per pixel-channel variance of ``mean`` (zero for an exact image)."""
+        if self.parts is None:
+            return np.zeros_like(self.mean)
+        return self.parts.var(axis=0, ddof=1) / self.count
 
     def noise_relmse(self, valid: np.ndarray | None = None) -> float:
         """The reference's own contribution to a relMSE measured against it."""
@@ -74,42 +82,57 @@ class Reference:
         return float(np.mean(share if valid is None else share[valid]))
 
 
-def t_summary(t: np.ndarray, testable: np.ndarray,
-              valid: np.ndarray) -> tuple[np.ndarray, tuple[int, int, int], float]:
-    """From per pixel-channel t (m, c) over the ``valid`` pixels (h, w): the (h, w) map of the
-    largest tested |t| (NaN elsewhere), the worst tested (row, col, channel) and its t."""
-    t_map = np.full(valid.shape, np.nan)
-    if t.size:
-        t_map[valid] = np.where(testable, np.abs(t), np.nan).max(axis=-1)
-    if not testable.any():
-        return t_map, (-1, -1, -1), math.nan
-    pix, ch = np.unravel_index(int(np.argmax(np.where(testable, np.abs(t), -1.0))), t.shape)
-    rows, cols = np.nonzero(valid)
-    return t_map, (int(rows[pix]), int(cols[pix]), int(ch)), float(t[pix, ch])
+def faulty_values(images: np.ndarray, what: str, index: str) -> list[Failure]:
+    """One failure per kind of bad value in ``images`` (R, h, w, c): "<what>_nan", "_inf" and
+    "_negative", each with its count of pixel-channels and first positions (``index``, row, col).
+    The tests leave those pixels out of every average and report them, never average them."""
+    out = []
+    for kind, bad in (("nan", np.isnan(images)), ("inf", np.isinf(images)), ("negative", images < 0)):
+        n = int(bad.sum())
+        if n:
+            where = np.argwhere(bad.any(axis=-1))[:_MAX_EXAMPLES]
+            out.append(Failure(f"{what}_{kind}", n, f"{kind} values in the {what} (pixel-channels)",
+                               tuple({index: int(k), "row": int(i), "col": int(j)} for k, i, j in where)))
+    return out
 
 
-def excluded_pixels(valid: np.ndarray, detail: str) -> list[Failure]:
-    """The "excluded_pixels" failure (count, first positions) where ``valid`` is False."""
-    excluded = int((~valid).sum())
-    return [Failure("excluded_pixels", excluded, detail,
-                    tuple({"row": int(i), "col": int(j)} for i, j in np.argwhere(~valid)[:_MAX_EXAMPLES]))
-            ] if excluded else []
+def valid_pixels(*sets: np.ndarray) -> np.ndarray:
+    """(h, w) mask of pixels finite and non-negative in every channel of every image of every
+    set (each (R, h, w, c))."""
+    return np.logical_and.reduce([(np.isfinite(x) & (x >= 0)).all(axis=(0, 3)) for x in sets])
 
 
 class PixelVerdict:
-    """The verdict of a per-pixel test result (``pvalue``, ``alpha``, ``failures``): "invalid"
-    where pixels were excluded, ``reject`` when pvalue <= alpha, else "consistent"."""
+    """The verdict of a multi-scale image test (``pvalue``, ``alpha``, ``failures``,
+    ``inconclusive``): "invalid" where pixels were excluded, ``reject`` when pvalue <= alpha,
+    "inconclusive" when a side of the whole image could not be tested (the reason says why),
+    else "consistent"."""
 
     reject = "biased"
     pvalue: float
     alpha: float
     failures: list[Failure]
+    scales: tuple[Scale, ...]
+    shape: tuple[int, int]
 
     @property
     def verdict(self) -> str:
         if self.failures:
             return "invalid"
-        return self.reject if self.pvalue <= self.alpha else "consistent"
+        if self.pvalue <= self.alpha:
+            return self.reject
+        return "inconclusive" if self.inconclusive else "consistent"
+
+    @property
+    def inconclusive(self) -> str:
+        """Why a "consistent" would be unfounded ("" if it is not): a side of the whole image
+        untested (its replicas too skewed or constant to trust the t law)."""
+        image = self.scales[-1]
+        sides = [s for s, n in (("darker", image.low_untested), ("brighter", image.high_untested)) if n]
+        if not sides:
+            return ""
+        return (f"whether the image is {' or '.join(sides)} than it should be is untested: its replicas are "
+                "too skewed (or constant) for the t law at this replica count; render more replicas")
 
     @property
     def passed(self) -> bool:
@@ -120,49 +143,84 @@ class PixelVerdict:
         """NaN: the p-value combines several tests."""
         return math.nan
 
+    def scale(self, size: int) -> Scale | None:
+        """The scale of tile edge ``size`` (1 pixels, 0 the whole image), None if not tested."""
+        return next((s for s in self.scales if s.size == size), None)
+
+    @property
+    def pvalue_pixels(self) -> float:
+        """The pixel scale's p-value (NaN where too few replicas to test pixels)."""
+        s = self.scale(1)
+        return math.nan if s is None else s.pvalue
+
+    @property
+    def pvalue_mean(self) -> float:
+        return self.scales[-1].pvalue
+
+    @property
+    def worst_scale(self) -> Scale:
+        """The scale with the smallest p-value: the one that rejected, if any did."""
+        return min(self.scales, key=lambda s: s.pvalue)
+
+    @property
+    def worst_pixel(self) -> tuple[int, int, int]:
+        """(row, col, channel) of the first pixel of the most significant tile."""
+        return self.worst_scale.worst
+
+    @property
+    def worst_t(self) -> float:
+        return self.worst_scale.worst_t
+
+    @property
+    def t_map(self) -> np.ndarray:
+        """(h, w): the largest |t| over channels at the most significant scale, per pixel."""
+        return self.worst_scale.expand(self.shape)
+
+    @property
+    def finest_pvalues(self) -> np.ndarray:
+        """The finest scale's tile-channel p-values: uniform under H0 where the t law holds, so
+        their histogram shows a miscalibrated test or a diffuse bias at a glance."""
+        return self.scales[0].pvalues
+
+    def scales_text(self) -> str:
+        return "; ".join(str(s) for s in self.scales)
+
 
 @dataclass(frozen=True)
 class ImageBias(PixelVerdict):
-    """Per-pixel bias test of one render configuration, a member of the result family
-    (:mod:`harness.stats.results`).
+    """Multi-scale bias test of one render configuration against a reference
+    (:func:`pixel_bias_test`), a member of the result family (:mod:`harness.stats.results`).
 
-    H0: every pixel's expected value equals the reference.  Two tests at alpha/2 each,
-    Bonferroni-combined, so the false-alarm rate is at most alpha under any dependence between
-    pixels and channels (pixel filters that share samples included):
+    H0: every pixel's expected value equals the reference.  The scales of
+    :mod:`harness.stats.scales` (pixels, 2 to 16 pixel tiles, the whole image; fine scales from 8
+    replicas on), each at alpha / n_scales, Bonferroni within: the false-alarm rate is at most
+    alpha under any dependence between pixels and channels.  A rendered reference enters each
+    scale through its parts (Welch t, Welch-Satterthwaite df); an exact one as a constant.
 
-    * pixels: Welch t per pixel and channel over R replicas (reference error included), the
-      smallest p times the number of pixel-channels tested.  Detects a bias confined to few
-      pixels of about t_{alpha/2m} pixel standard errors (roughly 5 to 6 for a 32 x 32 image).
-    * image mean: Student t of the replicas' image averages against the reference's.  Detects
-      a small bias spread over the image: about 3 standard errors of the image average at 80 %
-      power.
+    Detectable bias at 80 % power, measured at alpha = 0.01 on 32 x 32 RGB images with normal
+    replicas (``benchmarks/pixel_calibration.py``): see the table in that benchmark's output and
+    the README; roughly 9 pixel standard errors for one pixel at 16 replicas, and a region's bias
+    at 1 / (tile edge) of that on the tile scale that fits it.
 
-    The pixel test uses only pixel-channels whose replicas are close enough to normal for the
-    t law to hold at its Bonferroni level (an Edgeworth bound on the sample skewness); the
-    rest (a light tracer's sparse hits, fireflies) are counted in ``untestable`` and covered
-    by the image-mean test only.  ``gate_alpha`` is the family-wise level that bound is set for.
-
-    ``verdict``: "invalid" when pixels had to be excluded (NaN, infinite or negative in a
-    replica or the reference: ``failures`` has their count and first positions), else "biased"
-    when ``pvalue`` <= ``alpha``, else "consistent".  A suite judges many renders together
-    (Holm) and takes its own verdict from ``pvalue``.  ``statistic`` is NaN: the p-value
-    combines two tests (see ``worst_t`` and ``bias_mean`` / ``bias_mean_se``).  ``n`` =
-    ``replicas`` x ``spp``, the samples per pixel behind the figures.
+    ``verdict``: "invalid" when pixels had to be excluded (``failures``: counts and first
+    positions, replicas and reference parts apart), "biased" when ``pvalue`` <= ``alpha``,
+    "inconclusive" when a side of the whole image could not be tested (``inconclusive`` says
+    why), else "consistent".  A suite judges many renders together (Holm) from ``pvalue``.
+    ``bias_mean`` / ``bias_mean_se`` / ``bias_mean_df``: the image-average bias (all valid
+    pixel-channels), its standard error and Welch-Satterthwaite degrees of freedom, both sets'
+    errors and the rounding floor included.  ``n`` = ``replicas`` x ``spp``.
     """
 
     pvalue: float
-    pvalue_pixels: float
-    pvalue_mean: float
-    bias_mean: float            # image-average bias and its standard error
+    scales: tuple[Scale, ...]
+    bias_mean: float
     bias_mean_se: float
-    worst_pixel: tuple[int, int, int]
-    worst_t: float
-    tested: int                 # pixel-channels the pixel test trusted
-    untestable: int             # pixel-channels too skewed (or constant off the reference) to test
-    excluded: int               # pixels excluded for faults
+    bias_mean_df: float
     replicas: int
     spp: int
-    t_map: np.ndarray           # (h, w) largest |t| over channels, NaN where excluded
+    reference_parts: int
+    excluded: int               # pixels excluded for faults
+    shape: tuple[int, int]
     alpha: float = 0.01
     failures: list[Failure] = field(default_factory=list)
 
@@ -171,102 +229,65 @@ class ImageBias(PixelVerdict):
         return self.replicas * self.spp
 
     def confidence_interval(self, confidence_level: float = 0.95) -> ConfidenceInterval:
-        """Student-t interval (``replicas`` - 1 degrees of freedom, the image-mean test's) of the
-        image-average bias, replicas' and reference's errors included."""
+        """Student-t interval (``bias_mean_df`` degrees of freedom) of the image-average bias."""
         check_confidence_level(confidence_level)
-        half = float(sps.t.ppf(0.5 + confidence_level / 2, self.replicas - 1)) * self.bias_mean_se
+        half = float(sps.t.ppf(0.5 + confidence_level / 2, self.bias_mean_df)) * self.bias_mean_se
         return ConfidenceInterval(self.bias_mean - half, self.bias_mean + half)
 
     def __str__(self) -> str:
         lo, hi = self.confidence_interval(1 - self.alpha)
-        s = (f"{self.verdict}: p = {self.pvalue:.3g} (pixels {self.pvalue_pixels:.3g}, image mean "
-             f"{self.pvalue_mean:.3g}), alpha = {self.alpha}, {self.replicas} replicas x {self.spp} spp, "
-             f"{self.tested} pixel-channels tested ({self.untestable} too skewed to test); worst pixel "
-             f"(row, col, channel) {self.worst_pixel} t = {self.worst_t:+.2f}; image-mean bias "
-             f"{self.bias_mean:+.3g} ± {self.bias_mean_se:.2g}, "
-             f"{100 * (1 - self.alpha):g} % CI [{lo:+.3g}, {hi:+.3g}]")
+        parts = self.reference_parts
+        against = f"a reference of {parts} parts" if parts else "an exact reference"
+        s = (f"{self.verdict}: p = {self.pvalue:.3g}, alpha = {self.alpha}, {self.replicas} replicas x "
+             f"{self.spp} spp against {against}; "
+             f"{self.scales_text()}; most significant {self.worst_scale.name} at (row, col, channel) "
+             f"{self.worst_pixel} t = {self.worst_t:+.2f}; image-mean bias {self.bias_mean:+.3g} ± "
+             f"{self.bias_mean_se:.2g}, {100 * (1 - self.alpha):g} % CI [{lo:+.3g}, {hi:+.3g}]")
+        if self.inconclusive and self.verdict == "inconclusive":
+            s += f"; {self.inconclusive}"
         return s + "".join(f"; {f}" for f in self.failures)
 
 
-def _valid(images: np.ndarray, reference: Reference) -> np.ndarray:
-    """(h, w) mask of pixels that are finite and non-negative in every replica and the reference."""
-    def ok(a: np.ndarray) -> np.ndarray:
-        return (np.isfinite(a) & (a >= 0)).all(axis=-1)
-
-    return ok(images).all(axis=0) & ok(reference.mean) & ok(reference.variance)
-
-
-def normal_enough(x: np.ndarray, family: int, gate_alpha: float) -> tuple[np.ndarray, np.ndarray]:
-    """Where replicas x (R, ...) are close enough to normal for a two-sided t test at the
-    Bonferroni level gate_alpha / family, and where they are all equal (constant).
-
-    The one-term Edgeworth correction of the tail at the critical value z,
-    |skew| (2 z^2 + 1) / (6 sqrt(R)), must stay below half the nominal tail, up to one standard
-    deviation sqrt(6 / R) of the sample skewness of R normal values (else a normal pixel is
-    excluded by chance).  Sparse pixels (a light tracer's few hits, fireflies) fail it."""
-    r = x.shape[0]
-    m = x.mean(axis=0)
-    dev = x - m
-    m2 = (dev**2).mean(axis=0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        skew = (dev**3).mean(axis=0) / m2**1.5
-    z = sps.norm.isf(gate_alpha / (2 * max(family, 1)))
-    limit = 0.5 * 6 * math.sqrt(r) / (2 * z * z + 1) + math.sqrt(6 / r)
-    constant = ~(m2 > 0)
-    return ~constant & (np.abs(skew) <= limit), constant
+def mean_difference(a: np.ndarray, b: np.ndarray, b_exact: bool) -> tuple[float, float, float]:
+    """Image-average of mean(A) - mean(B) over the pixel-channels given ((R, m) each), its
+    standard error (both sets' errors and the float32 rounding floor) and Welch-Satterthwaite df."""
+    ma = a.reshape(a.shape[0], -1).mean(axis=1)
+    mb = b.reshape(b.shape[0], -1).mean(axis=1)
+    if ma.size == 0 or a.size == 0:
+        return 0.0, 0.0, math.inf
+    va = float(np.var(ma, ddof=1)) / ma.size
+    vb = 0.0 if b_exact else float(np.var(mb, ddof=1)) / mb.size
+    diff = float(ma.mean() - mb.mean())
+    floor = (ROUNDING * max(abs(float(ma.mean())), abs(float(mb.mean())))) ** 2
+    den = va**2 / (ma.size - 1) + (0.0 if b_exact else vb**2 / (mb.size - 1))
+    df = (va + vb) ** 2 / den if den > 0 else math.inf
+    return diff, math.sqrt(va + vb + floor), df
 
 
-def pixel_bias_test(images: np.ndarray, reference: Reference, spp: int, *, alpha: float = 0.01,
-                    gate_alpha: float = 0.01) -> ImageBias:
+def pixel_bias_test(images: np.ndarray, reference: Reference, spp: int, *, alpha: float = 0.01) -> ImageBias:
     """Tests replica renders (R, h, w, c) against a reference; see ImageBias.  ``alpha`` is the
-    level of the result's own verdict; it changes no figure (``gate_alpha`` sets the pixels'
-    normality gate)."""
+    family-wise level of the verdict, split equally across the scales."""
     level(alpha, "alpha")
-    level(gate_alpha, "gate_alpha")
     x = np.asarray(images, dtype=np.float64)
+    if x.ndim != 4:
+        raise ValueError(f"expected replica images (R, height, width, channels), got shape {x.shape}")
     r = x.shape[0]
-    if r < 2:
-        raise ValueError(f"the per-pixel bias test needs >= 2 replicas, got {r}")
-    valid = _valid(x, reference)
-    xv, ref, ref_var = x[:, valid], reference.mean[valid], reference.variance[valid]   # (R, m, c), (m, c)
-    m = xv.mean(axis=0)
-    s2 = xv.var(axis=0, ddof=1) / r
-    floor = (ROUNDING * np.maximum(np.abs(ref), np.abs(m))) ** 2
-    se2 = s2 + ref_var + floor
-    df = np.full_like(se2, r - 1.0)
-    if reference.parts:  # Welch-Satterthwaite: replicas' and reference's errors together
-        den = s2**2 / (r - 1) + ref_var**2 / (reference.parts - 1)
-        np.divide((s2 + ref_var) ** 2, den, out=df, where=den > 0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(se2 > 0, (m - ref) / np.sqrt(se2), 0.0)
-    # The t law is trusted in a pixel only where the replicas look normal enough at the
-    # Bonferroni critical value z: the one-term Edgeworth correction of the tail,
-    # |skew| (2 z^2 + 1) / (6 sqrt(R)), must stay below half the nominal tail, up to the noise
-    # of the skewness estimate itself (else a normal pixel is excluded by chance).  Sparse pixels
-    # (a light tracer's few hits, fireflies) are left to the image-mean test and counted.
-    normal, constant = normal_enough(xv, 2 * m.size, gate_alpha)
-    # Replicas that are all equal reveal nothing about the estimator's spread (a light tracer
-    # may never reach a pixel in R renders): testable only if they agree with the reference.
-    testable = np.where(constant, np.abs(m - ref) <= np.sqrt(floor), normal)
-    p = np.where(testable, 2 * sps.t.sf(np.abs(t), np.maximum(df, 1.0)), 1.0)
-    tested = int(testable.sum())
-    p_pix = min(1.0, float(p.min()) * tested) if tested else 1.0
+    if r < 4:
+        raise ValueError(f"the multi-scale bias test needs >= 4 replicas, got {r}")
+    exact = reference.parts is None
+    b = reference.mean[None] if exact else reference.parts
+    if b.shape[1:] != x.shape[1:]:
+        raise ValueError(f"replicas {x.shape[1:]} and reference {b.shape[1:]} differ in shape")
+    valid = valid_pixels(x, b)
+    scales = multiscale(x, b, valid, alpha, b_exact=exact)
+    bias, se, df = mean_difference(x[:, valid], b[:, valid], exact)
+    failures = faulty_values(x, "replicas", "replica") + faulty_values(b, "reference", "part")
+    return ImageBias(combined(scales), scales, bias, se, df, r, int(spp), reference.count,
+                     int((~valid).sum()), valid.shape, alpha, failures)
 
-    means = xv.reshape(r, -1).mean(axis=1)
-    bias = float(means.mean() - ref.mean()) if ref.size else 0.0
-    se = math.sqrt(float(np.var(means, ddof=1)) / r + reference.image_mean_variance)
-    if se > 0:
-        df_mean = r - 1.0
-        p_mean = float(2 * sps.t.sf(abs(bias) / se, df_mean))
-    else:
-        p_mean = 1.0 if bias == 0 else 0.0
 
-    t_map, worst, worst_t = t_summary(t, testable, valid)
-    excluded = int((~valid).sum())
-    failures = excluded_pixels(valid, "pixels NaN, infinite or negative in a replica or the reference, "
-                                      "left out of every average")
-    return ImageBias(min(1.0, 2 * min(p_pix, p_mean)), p_pix, p_mean, bias, se, worst, worst_t, tested,
-                     int(testable.size - tested), excluded, r, int(spp), t_map, alpha, failures)
+def _valid(x: np.ndarray, reference: Reference) -> np.ndarray:
+    return valid_pixels(x, reference.mean[None] if reference.parts is None else reference.parts)
 
 
 def relmse(images: np.ndarray, reference: Reference) -> np.ndarray:

@@ -26,6 +26,7 @@ __all__ = ["judge", "failures", "render_rows", "render_table", "equal_time_relms
 
 def judge(results: list[RenderResult], alpha: float) -> list[dict[str, str]]:
     """Per case: the bias verdict ("unbiased", "biased", "biased (expected)", "bias missed",
+    "inconclusive" where a side of the whole image was untestable and nothing rejected,
     "invalid" for NaN/Inf/negative pixels, "not measured") and the convergence verdict ("as
     expected", "slower than expected" where the relMSE's slope is measurably worse than
     spp^-1/2 (one-sided, Holm over the cases expected unbiased), "not judged" for cases biased on
@@ -40,6 +41,8 @@ def judge(results: list[RenderResult], alpha: float) -> list[dict[str, str]]:
             bias = "invalid"
         elif rej is None:
             bias = "not measured"
+        elif not rej and r.bias.inconclusive:
+            bias = "inconclusive"
         elif r.case.expect == "biased":
             bias = "biased (expected)" if rej else "bias missed"
         else:
@@ -66,11 +69,10 @@ def failures(results: list[RenderResult], verdicts: list[dict[str, str]], alpha:
             verdict = f"invalid ({r.faults.total} bad pixels)" if v["bias"] == "invalid" else v["bias"]
             text = f"bias: {verdict}; expected {what}"
             if b is not None:
-                text += (f"; p = {b.pvalue:.3g} (pixels {b.pvalue_pixels:.3g}, image mean "
-                         f"{b.pvalue_mean:.3g}) at family-wise alpha {alpha:.3g} (Holm over {len(results)} "
-                         f"configurations), {b.replicas} replicas x {b.spp} spp, {b.tested} pixel-channels "
-                         f"tested; worst pixel (row, col, channel) {b.worst_pixel} t = {b.worst_t:+.2f}; "
-                         f"image-mean bias {b.bias_mean:+.3g} ± {b.bias_mean_se:.2g}")
+                text += (f"; p = {b.pvalue:.3g} at family-wise alpha {alpha:.3g} (Holm over {len(results)} "
+                         f"configurations), {b.replicas} replicas x {b.spp} spp; {b.scales_text()}; most "
+                         f"significant {b.worst_scale.name} at (row, col, channel) {b.worst_pixel} t = "
+                         f"{b.worst_t:+.2f}; image-mean bias {b.bias_mean:+.3g} ± {b.bias_mean_se:.2g}")
             if r.faults.total:
                 text += f"; {r.faults}"
             problems.append(text)
@@ -151,9 +153,14 @@ def render_rows(suite: Suite, results: list[RenderResult],
                          "lo": b.bias_mean - 1.96 * b.bias_mean_se, "hi": b.bias_mean + 1.96 * b.bias_mean_se,
                          "n": b.replicas * b.spp, "pvalue": b.pvalue, "alpha": suite.family_alpha,
                          "verdict": v["bias"],
-                         "detail": {"pvalue_pixels": b.pvalue_pixels, "pvalue_mean": b.pvalue_mean,
-                                    "worst_pixel": list(b.worst_pixel), "worst_t": b.worst_t,
-                                    "tested": b.tested, "untestable": b.untestable, "excluded": b.excluded,
+                         "detail": {"scales": [{"scale": sc.name, "pvalue": sc.pvalue, "alpha": sc.alpha,
+                                                "count": sc.count, "low_untested": sc.low_untested,
+                                                "high_untested": sc.high_untested} for sc in b.scales],
+                                    "worst_scale": b.worst_scale.name, "worst_pixel": list(b.worst_pixel),
+                                    "worst_t": b.worst_t, "excluded": b.excluded,
+                                    "inconclusive": b.inconclusive,
+                                    "pvalue_histogram": np.histogram(b.finest_pvalues[b.finest_pvalues < 1],
+                                                                     bins=20, range=(0, 1))[0].tolist(),
                                     "replicas": b.replicas, "spp": b.spp, "reference": r.reference,
                                     "faults": r.faults.to_dict(), "notes": r.notes}})
         if r.variance is not None:

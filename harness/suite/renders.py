@@ -31,6 +31,7 @@ import pandas as pd
 from harness import stats
 from harness.adapters import ImageFaults, Renderer, image_faults, renderer
 from harness.stats import images as ist
+from harness.stats.scales import FINE_REPLICAS
 from harness.suite.execute import JobResult
 from harness.suite.kind import Outcome
 from harness.suite.parse import RenderCase, Suite
@@ -103,9 +104,9 @@ class RenderResult:
 
 
 class ReferenceCache:
-    """Rendered references keyed by hash: the mean and the variance of the mean as lossless
-    float64 arrays (.npy, what every run measures against, so a rerun is bitwise equal to the
-    first run), the same as EXR for viewing, and a JSON record written last."""
+    """Rendered references keyed by hash: the parts (K, h, w, c) as one lossless float64 array
+    (.npy, what every run measures against, so a rerun is bitwise equal to the first run), the
+    mean as EXR for viewing, and a JSON record written last."""
 
     def __init__(self, folder: Path):
         self.folder = folder
@@ -119,20 +120,21 @@ class ReferenceCache:
             return None
         try:
             meta = json.loads(meta_p.read_text())
-            mean, variance = np.load(self._path(key, "mean.npy")), np.load(self._path(key, "variance.npy"))
-            return ist.Reference(mean, variance, int(meta["parts"]), float(meta["image_mean_variance"]))
+            parts = np.load(self._path(key, "parts.npy"))
+            if parts.shape[0] != int(meta["parts"]):
+                raise ValueError(f"{parts.shape[0]} parts stored, {meta['parts']} recorded")
+            return ist.Reference.from_parts(parts)
         except (OSError, ValueError, KeyError) as e:  # damaged or partly deleted: built again from its parts
             warnings.warn(f"{meta_p}: cached reference unreadable ({e}); building it again", stacklevel=2)
             return None
 
     def save(self, key: str, ref: ist.Reference, meta: dict[str, Any]) -> None:
         self.folder.mkdir(parents=True, exist_ok=True)
-        for what, a in (("mean", ref.mean), ("variance", ref.variance)):
-            write_npy(self._path(key, f"{what}.npy"), np.asarray(a, dtype=np.float64))
-            write_exr(self._path(key, f"{what}.exr"), a)
+        write_npy(self._path(key, "parts.npy"), np.asarray(ref.parts, dtype=np.float64))
+        write_exr(self._path(key, "mean.exr"), ref.mean)
         meta_p = self._path(key, "meta.json")
         tmp = meta_p.with_suffix(".json.partial")
-        record = {**meta, "parts": ref.parts, "image_mean_variance": ref.image_mean_variance}
+        record = {**meta, "parts": ref.count}
         tmp.write_text(json.dumps(record, indent=1, sort_keys=True, default=str))
         os.replace(tmp, meta_p)
 
@@ -286,10 +288,16 @@ def _measure(rc: RenderCase, key: str, store: Store, reference: ist.Reference,
         images, _, spp = _stack(store, payloads, seconds_of, 0)
         if "bias" in wanted:
             bias = ist.pixel_bias_test(images, reference, spp)
-            if bias.untestable > bias.tested:
-                notes.append(f"pixel test covers {bias.tested} of {bias.tested + bias.untestable} "
-                             "pixel-channels (the rest too skewed at this spp; the image-mean test covers "
-                             "them)")
+            if bias.replicas < FINE_REPLICAS:
+                notes.append(f"pixels and tiles under 8 pixels are not tested at {bias.replicas} replicas "
+                             f"(the t law fails there for sparse pixels); render {FINE_REPLICAS} or more to "
+                             "test them")
+            skewed = [str(sc) for sc in bias.scales if sc.low_untested or sc.high_untested]
+            if skewed:
+                notes.append(f"sides of some tiles untested (replicas too skewed or constant there): "
+                             f"{'; '.join(skewed)}")
+            if bias.inconclusive:
+                notes.append(bias.inconclusive)
         if "variance" in wanted:
             variance = ist.pixel_variance(images, reference, spp)
         store.put_image(f"{key}/estimate", images.mean(axis=0))

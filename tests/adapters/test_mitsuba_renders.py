@@ -71,11 +71,15 @@ def test_pixel_bias_test_false_alarms_and_power():
     # a global 1 % energy gain: the image-mean test sees it
     b = pixel_bias_test(x * 1.01, ref, 32)
     assert b.pvalue_mean < 1e-6 and b.pvalue < 1e-5
-    # one pixel 30 % too bright in every replica: the pixel test finds it and says where
+    # one pixel 30 % too bright in every replica: found, and the tile that rejects covers it.  The
+    # furnace's pixels are left-skewed (and 56 % constant at 1), so the skew gate leaves their
+    # bright side untested at the pixel scale; a 2 x 2 tile averages the skew down and finds it.
     y = x.copy()
     y[:, 16, 20, :] *= 1.3
     b = pixel_bias_test(y, ref, 32)
-    assert b.pvalue_pixels < 1e-4 and b.worst_pixel[:2] == (16, 20) and b.worst_t > 0
+    s, (row, col, _) = b.worst_scale, b.worst_pixel
+    assert b.pvalue < 1e-3 and s.size in (1, 2, 4) and b.worst_t > 0
+    assert row <= 16 < row + s.size and col <= 20 < col + s.size, (s.name, b.worst_pixel)
     # a NaN pixel is excluded from the test, not averaged in
     z = x.copy()
     z[3, 5, 6, 1] = np.nan
@@ -90,7 +94,7 @@ def test_rendered_reference_error_enters_the_test():
     r = renderer("mitsuba", {"scene": "cornell", "integrator": "path", "variant": "llvm_ad_rgb",
                              "max_depth": 3})
     ref = Reference.from_parts(_stack(r.reference(), 64, range(1000, 1008)))
-    assert ref.parts == 8 and ref.image_mean_variance > 0 and np.all(ref.variance >= 0)
+    assert ref.count == 8 and ref.parts.shape == (8, *ref.mean.shape) and np.all(ref.variance >= 0)
     b = pixel_bias_test(_stack(r, 64, range(16)), ref, 64)
     assert b.pvalue > 1e-3
     assert relmse(_stack(r, 64, range(16, 20)), ref).shape == (4,)

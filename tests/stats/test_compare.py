@@ -64,7 +64,10 @@ def test_faulty_pixels_are_excluded_and_reported():
     b[0, 9, 9, 2] = -1.0
     r = compare_images(a, b)
     assert r.verdict == "invalid" and r.excluded == 2
-    assert r.failures[0].examples == ({"row": 4, "col": 4}, {"row": 9, "col": 9})
+    nan, negative = r.failures
+    assert (nan.check, nan.count, nan.examples) == ("set_a_nan", 1, ({"replica": 2, "row": 4, "col": 4},))
+    assert (negative.check, negative.count, negative.examples) == ("set_b_negative", 1,
+                                                                   ({"replica": 0, "row": 9, "col": 9},))
 
 
 def test_identical_constant_images_agree_and_rounding_is_not_a_difference():

@@ -1,15 +1,10 @@
-"""The per-pixel bias test (harness.stats.images.pixel_bias_test) on synthetic replica images
-(R, h, w, c): its false-alarm rate under normal noise, its power against a planted bias, and
-the exact cases (zero variance, a rendered reference).
+"""The multi-scale bias test (harness.stats.images.pixel_bias_test) on hand-built replica
+images: where it finds a bias and says where, the rendered reference's own error, the exact
+cases (zero variance, float32 rounding), bad values and refusals.  Its false-alarm rate and
+power over the calibration zoo are in test_image_zoo.py.
 
-alpha = 0.01 throughout.  Seeds are fixed before the test was written: numpy's
-default_rng(seed) for seed = 0, 1, ..., one generator per simulated configuration.  A rate
-"holds alpha" when the count of rejections is not significantly above n * alpha: a one-sided
-binomial test at 0.001 (equivalently, the lower 99.9 % Clopper-Pearson limit of the rate stays
-<= alpha); for n = 1000 that allows at most 21 rejections.
-
-Only normal noise is tested for the false-alarm rate.  Sparse compound-Poisson pixels (a light
-tracer's few hits) do not hold alpha at this stage and are not asserted here.
+alpha = 0.01.  Seeds are fixed before the test was written: numpy's default_rng(seed) for
+seed = 0, 1, ..., one generator per simulated configuration.
 """
 from __future__ import annotations
 
@@ -20,114 +15,143 @@ import pytest
 from scipy import stats as sps
 
 from harness.stats.images import Reference, pixel_bias_test
+from harness.stats.scales import FINE_REPLICAS
 
 ALPHA = 0.01
-R, H, W, C = 32, 8, 8, 3              # replicas and image shape: 192 pixel-channels
+R, H, W, C = 16, 32, 32, 3
 SIGMA = 0.05                          # per-replica noise; every pixel >= 0.5 = 10 SIGMA, so none is negative
 REF = 0.5 + 0.5 * np.add.outer(np.arange(H), np.arange(W))[:, :, None] / (H + W) * np.array([1.0, 0.5, 2.0])
 SE = SIGMA / math.sqrt(R)             # standard error of one pixel's replica mean
-SE_IMAGE = SE / math.sqrt(H * W * C)  # ... of the image average
 
 
 def replicas(seed: int, n: int = R, sigma: float = SIGMA) -> np.ndarray:
     return REF + sigma * np.random.default_rng(seed).standard_normal((n, H, W, C))
 
 
-def rejects(images: np.ndarray, reference: Reference) -> bool:
-    return pixel_bias_test(images, reference, spp=16).pvalue <= ALPHA
+def test_the_scales_and_their_levels_are_stated():
+    b = pixel_bias_test(replicas(0), Reference.exact(REF), 16)
+    names = ["pixels", "2x2 tiles", "4x4 tiles", "8x8 tiles", "16x16 tiles", "image"]
+    assert [s.name for s in b.scales] == names
+    assert all(s.alpha == pytest.approx(ALPHA / 6) for s in b.scales)
+    assert [s.count for s in b.scales] == [H * W * C, 256 * C, 64 * C, 16 * C, 4 * C, 1]
+    assert b.pvalue == pytest.approx(min(1.0, 6 * min(s.pvalue for s in b.scales)))
+    assert "pixels p = " in str(b) and "image p = " in str(b) and b.verdict == "consistent"
 
 
-def binomial_pvalue(count: int, n: int) -> float:
-    """P(K >= count) for K ~ Binomial(n, ALPHA): small when count is too many false alarms."""
-    return float(sps.binom.sf(count - 1, n, ALPHA))
+def test_fewer_than_eight_replicas_test_only_the_coarse_scales():
+    b = pixel_bias_test(replicas(0, FINE_REPLICAS - 1), Reference.exact(REF), 16)
+    assert [s.name for s in b.scales] == ["8x8 tiles", "16x16 tiles", "image"] and math.isnan(b.pvalue_pixels)
 
 
-def test_false_alarm_rate_holds_alpha_under_normal_noise():
-    """Measured: 16 rejections in 1000 (the test is about exact here: pixel t tests are exact
-    for normal replicas, and the skewness gate is independent of them)."""
-    n = 1000
-    count = sum(rejects(replicas(seed), Reference.exact(REF)) for seed in range(n))
-    assert binomial_pvalue(count, n) >= 1e-3, f"{count} rejections in {n} (alpha = {ALPHA})"
-
-
-def test_a_rendered_reference_holds_alpha_because_its_own_error_is_counted():
-    """Reference from 8 parts of 8 replicas' budget each (its variance half the replicas' mean's):
-    with its error counted the rate holds alpha (measured 14 rejections in 1000); taken as exact,
-    the same data reject far too often (88 in 1000), and every pixel's |t| is smaller with the
-    error counted."""
-    n, parts = 1000, 8
-    counted = ignored = 0
-    for seed in range(n):
-        x = replicas(seed)
-        p = replicas(n + seed, parts, SIGMA / math.sqrt(8))
-        with_error, as_exact = Reference.from_parts(p), Reference.exact(p.mean(axis=0))
-        a, b = pixel_bias_test(x, with_error, 16), pixel_bias_test(x, as_exact, 16)
-        assert abs(a.worst_t) < abs(b.worst_t) and a.bias_mean == b.bias_mean, seed
-        counted += a.pvalue <= ALPHA
-        ignored += b.pvalue <= ALPHA
-    assert binomial_pvalue(counted, n) >= 1e-3, f"{counted} rejections in {n} with the reference's error"
-    assert binomial_pvalue(ignored, n) < 1e-3, f"only {ignored} rejections in {n}, reference taken as exact"
-
-
-def test_a_bias_of_ten_standard_errors_in_one_pixel_is_found_where_it_is():
-    """A pixel-channel whose mean is 10 SE too high: found in at least 80 % of 200 seeds (measured
-    188; each miss is a seed where the skewness gate left that pixel to the image-mean test, as
-    it does for about 3 % of normal pixel-channels at R = 32), and every rejection names it."""
-    n, planted = 200, (2, 5, 1)
-    found = 0
-    for seed in range(n):
+def test_one_pixel_ten_standard_errors_off_is_found_at_the_pixel_scale_where_it_is():
+    """One pixel-channel 10 SE too bright: found in 37 of 50 seeds (at 16 replicas t_15 at the
+    pixel scale's Bonferroni level, 0.01 / 6 / 3072, needs about 9 SE); every rejection names
+    the pixel."""
+    planted, found = (20, 5, 1), 0
+    for seed in range(50):
         x = replicas(seed)
         x[(slice(None), *planted)] += 10 * SE
         b = pixel_bias_test(x, Reference.exact(REF), 16)
-        if b.pvalue <= ALPHA:
+        if b.verdict == "biased":
             found += 1
-            assert b.worst_pixel == planted and b.worst_t > 5, (seed, b.worst_pixel, b.worst_t)
-    assert found >= 0.8 * n, f"found in {found} of {n}"
+            assert b.worst_scale.name == "pixels" and b.worst_pixel == planted, (seed, b.worst_pixel)
+    assert found >= 30, found
 
 
-def test_a_small_bias_over_the_whole_image_is_found_and_measured():
-    """8 SE of the image average (0.03 SE per pixel, invisible to the pixel test): every one of
-    20 seeds rejects, and the measured bias is within 5 SE of the planted one."""
+def test_a_region_one_standard_error_off_is_found_by_the_tile_that_fits_it():
+    """An 8 x 8 region 1 pixel-SE too bright: invisible pixel by pixel, 8 SE on an 8 x 8 tile."""
     for seed in range(20):
-        b = pixel_bias_test(replicas(seed) + 8 * SE_IMAGE, Reference.exact(REF), 16)
-        assert b.pvalue <= ALPHA, (seed, b.pvalue)
-        assert abs(b.bias_mean - 8 * SE_IMAGE) < 5 * SE_IMAGE, (seed, b.bias_mean)
+        x = replicas(seed)
+        x[:, 8:16, 8:16] += SE
+        b = pixel_bias_test(x, Reference.exact(REF), 16)
+        assert b.verdict == "biased" and b.worst_scale.size in (8, 16), (seed, b.worst_scale.name)
+        assert b.worst_pixel[:2] in ((8, 8), (0, 0)) and b.t_map.shape == (H, W)
 
 
-def test_equal_replicas_equal_to_the_reference_are_not_biased():
-    dyadic = np.broadcast_to(np.array([1.0, 0.5, 0.25]), (H, W, C))   # the replicas' mean is exact
-    b = pixel_bias_test(np.repeat(dyadic[None], R, axis=0), Reference.exact(dyadic), 16)
-    assert (b.pvalue, b.tested, b.untestable, b.bias_mean) == (1.0, H * W * C, 0, 0.0)
-    b = pixel_bias_test(np.repeat(REF[None], R, axis=0), Reference.exact(REF), 16)
-    assert b.pvalue == 1.0 and b.tested + b.untestable == H * W * C
+def test_a_small_bias_everywhere_is_found_and_measured_by_the_image_mean():
+    """0.5 % brighter everywhere (about 0.16 pixel-SE): the image scale finds it in every seed and
+    its interval covers the planted bias."""
+    for seed in range(20):
+        x = replicas(seed) * 1.005
+        b = pixel_bias_test(x, Reference.exact(REF), 16)
+        assert b.verdict == "biased" and b.worst_scale.name == "image", seed
+        lo, hi = b.confidence_interval(0.999)
+        assert lo < 0.005 * REF.mean() < hi, (seed, lo, hi)
 
 
-def test_equal_replicas_off_the_reference_are_biased():
-    b = pixel_bias_test(np.repeat(REF[None] + 1e-3, R, axis=0), Reference.exact(REF), 16)
-    assert b.pvalue == 0.0 and (b.tested, b.untestable) == (0, H * W * C)   # nothing to test a pixel with
-    assert b.worst_pixel == (-1, -1, -1) and math.isnan(b.worst_t) and b.bias_mean == pytest.approx(1e-3)
+def test_a_rendered_reference_counts_its_own_error_at_every_scale():
+    """A reference of 8 parts, each with 2 replicas' budget (its variance a quarter of the
+    replicas' mean's): with its parts counted the rate holds alpha over 300 seeds; taken as
+    exact, the same data reject far more often, and the worst |t| is smaller counted."""
+    n, parts = 300, 8
+    counted = ignored = 0
+    for seed in range(n):
+        x = replicas(seed)
+        p = replicas(n + seed, parts, SIGMA / math.sqrt(2))
+        with_error, as_exact = Reference.from_parts(p), Reference.exact(p.mean(axis=0))
+        a, b = pixel_bias_test(x, with_error, 16), pixel_bias_test(x, as_exact, 16)
+        assert abs(a.scale(1).worst_t) <= abs(b.scale(1).worst_t) + 1e-9, seed
+        assert a.bias_mean == pytest.approx(b.bias_mean)
+        assert a.reference_parts == parts and b.reference_parts == 0
+        counted += a.verdict == "biased"
+        ignored += b.verdict == "biased"
+    assert sps.binom.sf(counted - 1, n, ALPHA) >= 1e-3, f"{counted} rejections in {n} with the parts counted"
+    assert ignored > 3 * counted + 10, (ignored, counted)
 
 
-def test_a_sparse_pixel_is_left_to_the_image_mean_test():
-    """One pixel lit in one replica of 32 (at 32 times its value, so its mean is right): too
-    skewed for the t law, so its 3 channels are untestable; the image mean is unbiased."""
+def test_zero_variance_renders_equal_to_the_reference_up_to_rounding_are_consistent():
     dyadic = np.broadcast_to(np.array([1.0, 0.5, 0.25]), (H, W, C))
-    x = np.repeat(dyadic[None], R, axis=0)
-    x[:, 3, 4] = 0.0
-    x[0, 3, 4] = R * dyadic[3, 4]
-    b = pixel_bias_test(x, Reference.exact(dyadic), 16)
-    assert (b.tested, b.untestable) == (H * W * C - C, C) and b.pvalue > ALPHA
+    b = pixel_bias_test(np.repeat(dyadic[None], R, axis=0), Reference.exact(dyadic), 16)
+    assert (b.pvalue, b.bias_mean, b.verdict) == (1.0, 0.0, "consistent")
+    low = np.nextafter(REF.astype(np.float32), np.float32(0)).astype(np.float64)   # every pixel 1 ulp low
+    b = pixel_bias_test(np.repeat(low[None], R, axis=0), Reference.exact(REF), 16)
+    assert b.verdict == "consistent" and b.bias_mean < 0
 
 
-def test_faulty_pixels_are_left_out_of_both_counts():
-    x = replicas(0)
-    x[5, 1, 2, 0], x[0, 3, 3, 2] = math.nan, -1.0    # a NaN and a negative value: two pixels out
+def test_zero_variance_renders_off_the_reference_are_biased_where_they_are():
+    x = np.repeat(REF[None], R, axis=0)
+    x[:, 7, 9, 2] += 1e-3
     b = pixel_bias_test(x, Reference.exact(REF), 16)
-    assert b.tested + b.untestable == (H * W - 2) * C
+    assert b.pvalue == 0.0 and b.verdict == "biased" and b.worst_pixel == (7, 9, 2)
 
 
-def test_too_few_replicas_or_parts_are_named():
-    with pytest.raises(ValueError, match=r"needs >= 2 replicas, got 1"):
-        pixel_bias_test(replicas(0, 1), Reference.exact(REF), 16)
-    with pytest.raises(ValueError, match=r"needs >= 2 independent parts to know its own error, got 1"):
+def test_a_pixel_no_replica_reached_is_left_to_the_coarser_scales():
+    """A light tracer that missed one pixel in all 16 replicas (zeros where the reference is
+    0.5): the constant pixel is not tested (its spread is unknown); its tiles are."""
+    x = replicas(0)
+    x[:, 3, 4] = 0.0
+    b = pixel_bias_test(x, Reference.exact(REF), 16)
+    pixels = b.scale(1)
+    assert pixels.low_untested >= C and pixels.pvalues.reshape(H, W, C)[3, 4].tolist() == [1.0] * C
+
+
+def test_nan_in_a_reference_part_is_invalid_with_its_position_never_biased():
+    p = replicas(1, 8)
+    p[5, 2, 3, 1] = np.nan
+    b = pixel_bias_test(replicas(0), Reference.from_parts(p), 16)
+    assert b.verdict == "invalid" and b.excluded == 1
+    (f,) = b.failures
+    assert (f.check, f.count, f.examples) == ("reference_nan", 1, ({"part": 5, "row": 2, "col": 3},))
+    assert math.isfinite(b.pvalue) and b.pvalue > ALPHA     # the other pixels are still measured
+
+
+def test_bad_replica_values_are_invalid_with_counts_and_positions():
+    x = replicas(0)
+    x[5, 1, 2, 0], x[0, 3, 3, 2], x[2, 3, 3, 1] = math.nan, -1.0, math.inf
+    b = pixel_bias_test(x, Reference.exact(REF), 16)
+    assert b.verdict == "invalid" and b.excluded == 2
+    assert {f.check: (f.count, f.examples) for f in b.failures} == {
+        "replicas_nan": (1, ({"replica": 5, "row": 1, "col": 2},)),
+        "replicas_inf": (1, ({"replica": 2, "row": 3, "col": 3},)),
+        "replicas_negative": (1, ({"replica": 0, "row": 3, "col": 3},))}
+
+
+def test_too_few_replicas_or_parts_and_bad_shapes_are_refused():
+    with pytest.raises(ValueError, match=r"needs >= 4 replicas, got 3"):
+        pixel_bias_test(replicas(0, 3), Reference.exact(REF), 16)
+    with pytest.raises(ValueError, match=r"needs >= 2 independent parts \(K, h, w, c\) to know its own"):
         Reference.from_parts(replicas(0, 1))
+    with pytest.raises(ValueError, match=r"replicas \(32, 32, 3\) and reference \(16, 32, 3\) differ"):
+        pixel_bias_test(replicas(0), Reference.exact(REF[:16]), 16)
+    with pytest.raises(ValueError, match=r"expected replica images"):
+        pixel_bias_test(REF, Reference.exact(REF), 16)

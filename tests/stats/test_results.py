@@ -103,8 +103,8 @@ def test_failures_carry_counts_and_examples(results):
     assert stats.failure_counts(results["invalid"].failures) == {"nan": nan.count}
     assert Failure.from_dict(nan.to_dict()) == nan
     (px,) = results["invalid image"].failures
-    assert px.check == "excluded_pixels" and px.count == 1 and px.examples == ({"row": 4, "col": 5},)
-    assert results["invalid image"].excluded == 1 and "excluded_pixels: 1" in str(results["invalid image"])
+    assert (px.check, px.count, px.examples) == ("replicas_nan", 1, ({"replica": 3, "row": 4, "col": 5},))
+    assert results["invalid image"].excluded == 1 and "replicas_nan: 1" in str(results["invalid image"])
     for name in ("unbiased", "biased", "convergence", "efficiency", "image"):
         assert results[name].failures == [], name
 

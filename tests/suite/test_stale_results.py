@@ -182,7 +182,7 @@ def test_a_deleted_or_damaged_image_is_reported_and_rendered_again(tmp_path):
     replicas[2].write_bytes(replaced[:-1] + bytes([replaced[-1] ^ 1]))   # same size, other bytes
     replicas[0].unlink()
     replicas[1].write_bytes(replicas[1].read_bytes()[:100])
-    next((tmp_path / "references").glob("*-mean.npy")).unlink()
+    next((tmp_path / "references").glob("*-parts.npy")).unlink()
     with pytest.warns(UserWarning) as caught:
         again = run_suite(load_suite(path), db)
     said = "\n".join(str(w.message) for w in caught)

@@ -227,13 +227,13 @@ def test_gc_removes_half_written_files_and_keeps_other_databases_references(tmp_
     images.mkdir()
     refs.mkdir()
     (images / "x.exr.partial.exr").write_bytes(b"half")
-    (refs / "0123456789abcdef01234567-mean.npy").write_bytes(b"another database's")
+    (refs / "0123456789abcdef01234567-parts.npy").write_bytes(b"another database's")
     dry = collect_garbage(db, dry_run=True)
     assert (dry.units, dry.files) == (0, 1) and (images / "x.exr.partial.exr").exists()
     done = collect_garbage(db)
     assert (done.units, done.files, done.references) == (0, 1, 0)
     assert not (images / "x.exr.partial.exr").exists()
-    assert (refs / "0123456789abcdef01234567-mean.npy").exists()
+    assert (refs / "0123456789abcdef01234567-parts.npy").exists()
     assert run_suite(load_suite(suite_file), db, threads=2).units_run == 0
 
 
