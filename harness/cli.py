@@ -68,6 +68,9 @@ def main(argv: list[str] | None = None) -> int:
     cmp.add_argument("--db", metavar="PATH", help="results database holding both render cases")
     cmp.add_argument("-o", "--output", metavar="PATH", default="compare.html", help="the report page")
     cmp.add_argument("--alpha", type=float, default=0.01)
+    cmp.add_argument("--spp", type=int, help="samples per pixel of a replica (the fewer of the two), if "
+                                             "known: scales whose tiles average fewer than 64 samples are "
+                                             "not tested")
     chk = sub.add_parser("check-sampler", help="test a sampler against its pdf (chi-square and friends)")
     chk.add_argument("target", help="module:attribute or path/to/file.py:attribute (found from the current "
                                     "directory): an object with sample(u) and pdf(x), or a function "
@@ -203,7 +206,7 @@ def _compare(args) -> int:
 
     try:
         a, b = (load_replicas(x, db=args.db) for x in (args.a, args.b))
-        result = compare_images(a.images, b.images, alpha=args.alpha)
+        result = compare_images(a.images, b.images, alpha=args.alpha, spp=args.spp)
     except ValueError as e:
         print(f"harness: {e}", file=sys.stderr)
         return 2

@@ -6,7 +6,8 @@ by their configuration or "scene/configuration", else by a case-key prefix or a 
 "scene/configuration" that only one case has; their bias-test renders are used).
 The verdict is harness.stats.compare's two-sample test; the page shows each set's mean, the
 relMSE and NVIDIA FLIP error maps of each mean against the other's (relMSE on one shared
-scale), the pixel test's |t| map and every figure with its sample count.
+scale), the |t| map at the most significant scale, the histogram of the finest scale's
+p-values and every figure with its sample count.
 """
 from __future__ import annotations
 
@@ -136,15 +137,13 @@ def compare_page(a: ReplicaSet, b: ReplicaSet, result: ImageComparison) -> str:
         if flip is not None:
             figs.append(_figure(images.png_bytes(flip[0]), f"FLIP (HDR) of {name}: mean {flip[1]:.4f}"))
     worst = result.worst_scale
-    t = np.nan_to_num(result.t_map, nan=0.0)
-    t_top = max(float(t.max()), 4.0)
-    t_rgb = images.lut()[np.round(np.clip(t / t_top, 0, 1) * 255).astype(np.int64)]
+    t_rgb, t_top = images.t_map_rgb(result.t_map)
     figs.append(_figure(images.png_bytes(t_rgb), f"|t| at the most significant scale, {worst.name} (0 to "
                                                  f"{t_top:.3g}; worst {result.worst_t:+.2f} at "
                                                  f"{result.worst_pixel})"))
-    figs.append(_figure(plots.pvalue_histogram(result.finest_pvalues, result.scales[0].name),
-                        f"p-values of the {result.scales[0].name} test: flat under H0, a peak at 0 where the "
-                        "sets differ"))
+    finest = result.scales[0].name
+    figs.append(_figure(plots.pvalue_histogram(result.pvalue_counts(), finest),
+                        f"p-values of the {finest} test: flat under H0, a peak at 0 where the sets differ"))
     rows = "".join(f"<tr><td>{e(s.name)}</td><td class=num>{s.pvalue:.3g}</td>"
                    f"<td class=num>{s.alpha:.3g}</td><td class=num>{s.count}</td>"
                    f"<td class=num>{s.low_untested} / {s.high_untested}</td></tr>"

@@ -29,7 +29,8 @@ class Results:
     ``measurements``: one row per case and measurement (columns of the store's table, plus
     ``detail`` as a dict, ``row``, the write order, and ``kind``: "estimator", "sampler" or
     "render").  ``image_pairs``: case key -> (name of the reference image, name of the
-    estimate image), for cases having both.
+    estimate image), for cases having both; ``t_maps``: case key -> name of its bias test's |t|
+    map at the most significant scale, for cases having one.
     """
 
     db: Path
@@ -38,6 +39,7 @@ class Results:
     superseded: int                       # case keys hidden because a later run replaced them
     labels: dict[str, tuple[str, str]] = field(default_factory=dict)  # case key -> (integrand, technique)
     runs: list[dict[str, Any]] = field(default_factory=list)  # the runs shown: run, suite, alpha, families
+    t_maps: dict[str, str] = field(default_factory=dict)      # case key -> its |t| map's image name
 
     @property
     def cases(self) -> pd.DataFrame:
@@ -104,4 +106,5 @@ def load_results(db: str | Path, suite: str | None = None, run: int | None = Non
             pairs[key] = (name, f"{key}/estimate")
     order = {k: i for i, k in enumerate(dict.fromkeys(m["case_key"]))}  # the suite's order of cases
     pairs = dict(sorted(pairs.items(), key=lambda kv: order.get(kv[0], len(order))))
-    return Results(path, m, pairs, len(all_keys - keep_keys), labels, runs)
+    t_maps = {key: f"{key}/tmap" for key in pairs if f"{key}/tmap" in images}
+    return Results(path, m, pairs, len(all_keys - keep_keys), labels, runs, t_maps)

@@ -213,6 +213,27 @@ def _chip(r: dict[str, Any]) -> str:
             f'{_badge(str(v(r, "verdict") or ""))}</span>')
 
 
+def _bias_figures(results: Results, key: str, rows: list[dict[str, Any]], integrand: str, pix: str) -> str:
+    """The bias test's |t| map at the scale that rejected (or came closest) and the histogram of
+    its finest scale's p-values, where the case has a stored bias test."""
+    bias = next((r for r in rows if r["measurement"] == "bias"), None)
+    if bias is None or key not in results.t_maps:
+        return ""
+    detail = bias["detail"]
+    rgb, top = images.t_map_rgb(results.image(results.t_maps[key])[:, :, 0])
+    scale = detail.get("worst_scale", "")
+    finest = (detail.get("scales") or [{}])[0].get("scale", "")
+    out = (f'<figure>{_img(images.png_bytes(rgb), f"bias |t| map of {integrand}", cls="render-img" + pix)}'
+           f'<figcaption>bias test |t| at {e(scale)} (the most significant scale; 0 to {top:.3g}, black: '
+           f'untested)</figcaption></figure>')
+    counts = detail.get("pvalue_counts")
+    if counts:
+        out += (f'<figure>{_img(plots.pvalue_histogram(counts, finest), f"p-values of {integrand}")}'
+                f'<figcaption>p-values of the {e(finest)} test: flat under H0, a peak at 0 where a bias is '
+                'spread over many tiles</figcaption></figure>')
+    return out
+
+
 def _render_section(results: Results) -> str:
     if not results.image_pairs:
         return ""
@@ -267,7 +288,7 @@ def _render_section(results: Results) -> str:
             f'aria-label="wipe between reference and estimate"> <button type="button" class="flip" '
             f'title="show all reference / all estimate">flip</button></div>'
             f'<figcaption>compare: drag to wipe between reference and estimate</figcaption>'
-            f'</figure></div></article>')
+            f'</figure>{_bias_figures(results, key, rows, integrand, pix)}</div></article>')
     parts.append("</section>")
     return "".join(parts)
 

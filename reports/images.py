@@ -21,8 +21,8 @@ from PIL import Image
 
 from harness.stats.images import relative_squared_error
 
-__all__ = ["ErrorMap", "tonemap", "relmse_map", "error_map", "colorbar_png", "png_bytes", "data_uri",
-           "DECADES"]
+__all__ = ["ErrorMap", "tonemap", "relmse_map", "error_map", "t_map_rgb", "colorbar_png", "png_bytes",
+           "data_uri", "DECADES"]
 
 DECADES = 4        # the colour scale spans this many powers of ten
 _MAGENTA = np.array([255, 0, 255], dtype=np.uint8)
@@ -76,6 +76,14 @@ def lut(name: str = "inferno") -> np.ndarray:
     import matplotlib
 
     return (matplotlib.colormaps[name](np.linspace(0, 1, 256))[:, :3] * 255).round().astype(np.uint8)
+
+
+def t_map_rgb(t_map: np.ndarray) -> tuple[np.ndarray, float]:
+    """A bias test's |t| map (h, w) in false colour (inferno, linear from 0 to the larger of its
+    maximum and 4, untested pixels black) and that top value."""
+    t = np.nan_to_num(np.abs(np.asarray(t_map, dtype=np.float64)), nan=0.0)
+    top = max(float(t.max()) if t.size else 0.0, 4.0)
+    return lut()[np.round(np.clip(t / top, 0, 1) * 255).astype(np.int64)], top
 
 
 def scale_top(maps: list[np.ndarray]) -> float:

@@ -439,18 +439,18 @@ def _marginal(lay: _Layout, left: float, bottom: float, width: float, height: fl
     low.set_xlim(0, 1)
 
 
-def pvalue_histogram(pvalues: np.ndarray, scale: str) -> bytes:
-    """Histogram (20 bins on [0, 1]) of a multi-scale test's tile-channel p-values at one
-    scale, untested ones (p = 1 by convention) left out, with the flat line H0 predicts: a test
-    that holds its level is flat; a peak at 0 is a bias (or a miscalibration) spread over many
-    tiles, a peak at 1 a conservative test."""
-    p = np.asarray(pvalues, dtype=np.float64)
-    p = p[p < 1]
+def pvalue_histogram(counts: Sequence[int], scale: str) -> bytes:
+    """Histogram of a multi-scale test's tested tile-channel p-values at one scale, as counts
+    in 20 equal bins of [0, 1], with the flat line H0 predicts: a test that holds its level is
+    flat; a peak at 0 is a bias (or a miscalibration) spread over many tiles, a peak at 1 a
+    conservative test."""
+    c = np.asarray(counts, dtype=np.float64)
+    edges = np.linspace(0, 1, c.size + 1)
     fig = Figure(figsize=(4.2, 2.6))
     ax = fig.add_subplot()
-    ax.hist(p, bins=20, range=(0, 1), color="#6e7781")
-    ax.axhline(p.size / 20, color="#cf222e", lw=1, label="uniform (H0)")
-    ax.set_xlabel(f"p-value ({scale}, {p.size} tested)")
+    ax.bar(edges[:-1], c, width=np.diff(edges), align="edge", color="#6e7781")
+    ax.axhline(c.sum() / max(c.size, 1), color="#cf222e", lw=1, label="uniform (H0)")
+    ax.set_xlabel(f"p-value ({scale}, {int(c.sum())} tested)")
     ax.set_ylabel("count")
     ax.legend(frameon=False, fontsize=8)
     fig.tight_layout()

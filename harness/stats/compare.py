@@ -27,7 +27,7 @@ from harness.stats.images import (
 )
 from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
 from harness.stats.scales import Scale, combined, multiscale
-from harness.stats.validate import level
+from harness.stats.validate import count, level
 
 __all__ = ["ImageComparison", "compare_images"]
 
@@ -81,12 +81,16 @@ class ImageComparison(PixelVerdict):
         return s + "".join(f"; {f}" for f in self.failures)
 
 
-def compare_images(a: np.ndarray, b: np.ndarray, *, alpha: float = 0.01) -> ImageComparison:
+def compare_images(a: np.ndarray, b: np.ndarray, *, alpha: float = 0.01,
+                   spp: int | None = None) -> ImageComparison:
     """Tests whether replica renders ``a`` (Ra, h, w, c) and ``b`` (Rb, h, w, c), each set
     independent renders of one configuration, estimate the same image; see the module
     docstring.  Needs at least 4 replicas a set (8 for the pixel and small-tile scales);
-    ``alpha`` is the verdict's family-wise level."""
+    ``alpha`` is the verdict's family-wise level; ``spp``, the fewer samples per pixel of the two
+    sets' replicas where known: scales whose tiles average fewer than 64 are then not tested."""
     level(alpha, "alpha")
+    if spp is not None:
+        spp = count(spp, "spp")
     x, y = (np.asarray(v, dtype=np.float64) for v in (a, b))
     x, y = (v[..., None] if v.ndim == 3 else v for v in (x, y))
     if x.ndim != 4 or y.ndim != 4 or x.shape[1:] != y.shape[1:]:
@@ -96,7 +100,7 @@ def compare_images(a: np.ndarray, b: np.ndarray, *, alpha: float = 0.01) -> Imag
     if min(ra, rb) < 4:
         raise ValueError(f"comparing two renderers needs at least 4 replicas of each, got {ra} and {rb}")
     valid = valid_pixels(x, y)
-    scales = multiscale(x, y, valid, alpha)
+    scales = multiscale(x, y, valid, alpha, spp=spp)
     xv, yv = x[:, valid], y[:, valid]
     diff, se, df = mean_difference(xv, yv, False)
     ma, mb = xv.mean(axis=0), yv.mean(axis=0)

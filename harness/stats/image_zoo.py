@@ -23,9 +23,10 @@ from scipy import stats as sps
 
 from harness.stats.images import Reference, pixel_bias_test
 
-__all__ = ["SHAPE", "ZooImage", "nulls", "faults", "measure", "expected_image"]
+__all__ = ["SHAPE", "SPP", "ZooImage", "nulls", "faults", "measure", "expected_image", "detectable"]
 
 SHAPE = (32, 32, 3)
+SPP = 64            # samples a zoo replica's pixel averages: every scale is tested (scales.MIN_SAMPLES)
 _NORMAL_SD = 0.1
 
 
@@ -170,7 +171,7 @@ def measure(cases: Iterable[ZooImage], seeds: Iterable[int], replicas: int, alph
         verdicts, peers, scales = [], 0, {}
         for s in seeds:
             images, reference = case.draw(np.random.default_rng(s), replicas)
-            b = pixel_bias_test(images, reference, 1, alpha=alpha)
+            b = pixel_bias_test(images, reference, SPP, alpha=alpha)
             verdicts.append(b.verdict)
             if b.verdict == "biased":
                 scales[b.worst_scale.name] = scales.get(b.worst_scale.name, 0) + 1
@@ -183,4 +184,32 @@ def measure(cases: Iterable[ZooImage], seeds: Iterable[int], replicas: int, alph
                      "rate": k / n, "rate_lo": ci.low, "rate_hi": ci.high,
                      "rejecting scales": ", ".join(f"{name} {c}" for name, c in sorted(scales.items())),
                      **({"peer": peers} if peer else {})})
+    return pd.DataFrame(rows)
+
+
+def detectable(replicas: int, sizes: Iterable[int] = (1, 2, 4, 8, 16, 32), seeds: Iterable[int] = range(100),
+               alpha: float = 0.01,
+               steps: Iterable[float] = (2, 3, 4, 5, 6, 7, 8, 9, 10, 12, 16, 20)) -> pd.DataFrame:
+    """The bias each scale detects with 80 % power: on normal replicas, one aligned square of
+    ``size`` pixels (at rows and cols 0 .. size, all channels; 32 is the whole image) made
+    k tile standard errors too bright (the tile's SE: a pixel's over size, independent pixels),
+    k over ``steps``; per size the power at each k over ``seeds`` and the smallest k whose
+    power reaches 80 % ("k80", NaN if none does), with the power at that k."""
+    seeds = list(seeds)
+    rows = []
+    for size in sizes:
+        powers = {}
+        for k in steps:
+            found = 0
+            for s in seeds:
+                images, reference = ZooImage("normal", _normal).draw(np.random.default_rng(s), replicas)
+                images[:, :size, :size] += k * _pixel_se(replicas)[:size, :size] / size
+                found += pixel_bias_test(images, reference, SPP, alpha=alpha).verdict == "biased"
+            powers[k] = found / len(seeds)
+            if powers[k] >= 0.8:
+                break
+        k80 = next((k for k, p in powers.items() if p >= 0.8), math.nan)
+        rows.append({"size": size, "replicas": replicas, "k80": k80,
+                     "power at k80": powers.get(k80, math.nan),
+                     "powers": ", ".join(f"{k:g}: {p:.2f}" for k, p in powers.items())})
     return pd.DataFrame(rows)

@@ -1,4 +1,4 @@
-"""Measurements of rendered images: per-pixel bias with a controlled false-alarm rate,
+"""Measurements of rendered images: bias at every scale with a controlled false-alarm rate,
 relMSE, variance, convergence and efficiency, each from independent replica renders.
 
 Pixels where any replica (or the reference) is NaN, infinite or negative are excluded from
@@ -176,11 +176,12 @@ class PixelVerdict:
         """(h, w): the largest |t| over channels at the most significant scale, per pixel."""
         return self.worst_scale.expand(self.shape)
 
-    @property
-    def finest_pvalues(self) -> np.ndarray:
-        """The finest scale's tile-channel p-values: uniform under H0 where the t law holds, so
-        their histogram shows a miscalibrated test or a diffuse bias at a glance."""
-        return self.scales[0].pvalues
+    def pvalue_counts(self, bins: int = 20) -> list[int]:
+        """Histogram (``bins`` equal bins of [0, 1]) of the finest scale's tested tile-channel
+        p-values: flat under H0 where the t law holds, so it shows a miscalibrated test or a
+        diffuse bias at a glance."""
+        p = self.scales[0].pvalues
+        return np.histogram(p[p < 1], bins=bins, range=(0, 1))[0].tolist()
 
     def scales_text(self) -> str:
         return "; ".join(str(s) for s in self.scales)
@@ -197,10 +198,22 @@ class ImageBias(PixelVerdict):
     alpha under any dependence between pixels and channels.  A rendered reference enters each
     scale through its parts (Welch t, Welch-Satterthwaite df); an exact one as a constant.
 
-    Detectable bias at 80 % power, measured at alpha = 0.01 on 32 x 32 RGB images with normal
-    replicas (``benchmarks/pixel_calibration.py``): see the table in that benchmark's output and
-    the README; roughly 9 pixel standard errors for one pixel at 16 replicas, and a region's bias
-    at 1 / (tile edge) of that on the tile scale that fits it.
+    Detectable bias at 80 % power, measured (``benchmarks/pixel_calibration.py``,
+    ``image_zoo.detectable``: alpha = 0.01, 32 x 32 RGB, normal replicas, 100 seeds, one aligned
+    square of s pixels too bright in all channels), in standard errors of that square's mean
+    (a pixel's SE / s):
+
+    ========  ======  ====  ====  ====  ======  =====
+    replicas  pixels  2x2   4x4   8x8   16x16   image
+    ========  ======  ====  ====  ====  ======  =====
+    16        8       7     7     6     5       3
+    8         > 12    12    12    9     7       4
+    ========  ======  ====  ====  ====  ======  =====
+
+    So a region's bias is found at a fraction of a pixel's SE (an 8 x 8 region at 6 / 8 of it
+    with 16 replicas), where a per-pixel test needs 8.  Under 16 replicas only the 8 x 8, 16 x 16
+    and image scales are tested, with the t law at 3 degrees of freedom (the 8-replica row was
+    measured before that rule; with it the test is far more conservative there).
 
     ``verdict``: "invalid" when pixels had to be excluded (``failures``: counts and first
     positions, replicas and reference parts apart), "biased" when ``pvalue`` <= ``alpha``,
@@ -279,7 +292,7 @@ def pixel_bias_test(images: np.ndarray, reference: Reference, spp: int, *, alpha
     if b.shape[1:] != x.shape[1:]:
         raise ValueError(f"replicas {x.shape[1:]} and reference {b.shape[1:]} differ in shape")
     valid = valid_pixels(x, b)
-    scales = multiscale(x, b, valid, alpha, b_exact=exact)
+    scales = multiscale(x, b, valid, alpha, b_exact=exact, spp=int(spp), replicas=r)
     bias, se, df = mean_difference(x[:, valid], b[:, valid], exact)
     failures = faulty_values(x, "replicas", "replica") + faulty_values(b, "reference", "part")
     return ImageBias(combined(scales), scales, bias, se, df, r, int(spp), reference.count,

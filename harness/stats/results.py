@@ -1,7 +1,7 @@
 """The result family: what every check of the harness returns.
 
-Every check (a bias test, a sampler check, a render's pixel test, a convergence fit) returns a
-frozen dataclass with the same reading surface, so a caller, the runner, the CLI, the pytest
+Every check (a bias test, a sampler check, a render's multi-scale bias test, a convergence fit)
+returns a frozen dataclass with the same reading surface, so a caller, the runner, the CLI, the pytest
 plugin and the report treat them alike:
 
 ``verdict``    one word (or short phrase) from the vocabulary of the check, e.g. "unbiased",

@@ -25,11 +25,25 @@ the block right- (left-) skewed when that count exceeds the normal rate (10 % a 
 level 0.01 (binomial).  In a right-skewed block of A (left-skewed of B) the low side of t is not
 tested at that scale, and vice versa; the tile's pixels are still covered by coarser scales, where
 averaging has shrunk the skewness.  A block holding fewer than 48 tile-channels pools the whole
-scale.  The gate never reads t.
+scale.  A scale holding fewer than 48 in all (16 x 16 tiles and the whole image of a small
+render) is judged from the last scale that could be: its mean skewness, shrunk by the square root
+of the number of its tiles (and channels) a coarse tile averages, against 0.2 (the t law's 1e-5
+tail is about 1.3 times too heavy at skewness 0.2 and 16 replicas); where the whole image's low
+side is left untested that way, a verdict that is not "biased" is "inconclusive".  The gate
+never reads t.
 
-Replicas.  With fewer than 8 replicas a set the t law fails at fine scales for sparse, discrete
-pixels (Poisson hits at 1 to 3 a pixel: nearly equal tile means at 4 replicas give an enormous t),
-so pixels and tiles under 8 are tested only from 8 replicas on (:func:`sizes`).
+Replicas and samples.  Below 16 replicas a set the t law fails at fine scales: for sparse,
+discrete pixels (Poisson hits at 1 to 3 a pixel: nearly equal tile means at 4 replicas give an
+enormous t) and for real light-traced renders at 8 replicas (Mitsuba's particle tracer on the
+Cornell box and a glossy sphere, 16 spp: 5 and 11 false alarms in 100 from 2 x 2 and 4 x 4
+tiles).  So pixels and tiles under 8 are tested only from 16 replicas on, and below 16 the
+coarser scales judge t by the t law with at most 3 degrees of freedom (heavier tailed than
+R - 1 would give: at 8 replicas t_7 let skewed 8 x 8 and 16 x 16 tiles of the same renders
+through 4 and 5 times in 100, t_3 holds; at 4 replicas it is the law anyway).  A scale is also
+left out where a replica's tile mean averages fewer than 64 samples (``spp`` x edge^2, when
+the caller knows spp): at 4 spp the pixels of an area light's edge are a few Bernoulli draws, and
+16 replicas that missed the rare dark sample give a huge t (Mitsuba's path tracer on the Cornell
+box at depth 4: 91 false alarms in 100 with pixels tested at 4 spp, none without).
 
 Constant sets.  A tile-channel whose replicas are all equal reveals nothing about its spread (a
 light tracer may miss a pixel in every replica): it is not tested at that scale unless the
@@ -46,14 +60,17 @@ import numpy as np
 from scipy import special
 from scipy import stats as sps
 
-__all__ = ["SIZES", "FINE_REPLICAS", "ROUNDING", "Scale", "sizes", "multiscale", "combined"]
+__all__ = ["SIZES", "FINE_REPLICAS", "MIN_SAMPLES", "ROUNDING", "Scale", "sizes", "multiscale", "combined"]
 
 SIZES = (1, 2, 4, 8, 16)       # tile edges tested below the whole image (0 stands for the whole image)
-FINE_REPLICAS = 8              # pixels and tiles under 8 pixels need this many replicas a set
+FINE_REPLICAS = 16             # pixels and tiles under 8 pixels need this many replicas a set ...
+FEW_DF = 3.0                   # ... and with fewer, t is judged by the t law with at most 3 df
+MIN_SAMPLES = 64               # a scale is tested where a replica's tile mean averages this many samples
 ROUNDING = 2.0**-20            # relative float32 rounding floor of an accumulated render (8 ulp of 2^-23)
 GATE_BLOCK = 8                 # a tile's skew gate pools the GATE_BLOCK x GATE_BLOCK tiles of its block
 GATE_MINIMUM = 48              # ... or the whole scale where a block holds fewer tile-channels
 GATE_LEVEL = 0.01              # one-sided binomial level at which a block is called skewed
+SKEW_LIMIT = 0.2               # a scale too coarse to judge is skewed where its projected skewness passes it
 _FLAG = 0.2                    # |skewness| beyond its normal (1 - _FLAG) quantile flags a tile-channel
 
 
@@ -102,10 +119,13 @@ class Scale:
         return f"{self.name} p = {self.pvalue:.3g} ({self.count} tested at {self.alpha:.3g}{untested})"
 
 
-def sizes(replicas: int, shape: tuple[int, int]) -> tuple[int, ...]:
-    """The scales tested for ``replicas`` (the smaller set's count) and an (h, w) image: tile
-    edges under the image's shorter side (under 8 only from FINE_REPLICAS replicas), then 0."""
-    fine = [s for s in SIZES if s < min(shape) and (s >= 8 or replicas >= FINE_REPLICAS)]
+def sizes(replicas: int, shape: tuple[int, int], spp: int | None = None) -> tuple[int, ...]:
+    """The scales tested for ``replicas`` (the smaller set's count), an (h, w) image and ``spp``
+    samples per pixel a replica (None: unknown): tile edges under the image's shorter side,
+    under 8 only from FINE_REPLICAS replicas, and only where a replica's tile mean averages at
+    least MIN_SAMPLES samples (spp x edge^2), then 0 (the whole image)."""
+    fine = [s for s in SIZES if s < min(shape) and (s >= 8 or replicas >= FINE_REPLICAS)
+            and (spp is None or spp * s * s >= MIN_SAMPLES)]
     return (*fine, 0)
 
 
@@ -146,14 +166,20 @@ def _flag_cut(r: int) -> float:
     return float(np.quantile(np.concatenate(g), 1 - _FLAG))
 
 
+Judged = tuple[float, float]   # a set's mean skewness over the last judged scale's tile-channels, its edge
+
+
 def _skewed_blocks(skew: np.ndarray, constant: np.ndarray, ti: np.ndarray, tj: np.ndarray,
-                   r: int) -> tuple[np.ndarray, np.ndarray]:
-    """(tiles, c) masks: tile-channels in a right-skewed block, in a left-skewed block."""
+                   r: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """(tiles, c) masks: tile-channels in a right-skewed block, in a left-skewed block; None
+    where the whole scale holds fewer than GATE_MINIMUM live tile-channels (too few to judge)."""
     cut = _flag_cut(r)
     _, block = np.unique((ti // GATE_BLOCK) * (int(tj.max()) // GATE_BLOCK + 1) + tj // GATE_BLOCK,
                          return_inverse=True)
     live = ~constant
     sizes_ = np.bincount(block, weights=live.sum(axis=1))
+    if sizes_.sum() < GATE_MINIMUM:
+        return None
     if sizes_.min() < GATE_MINIMUM:
         block = np.zeros_like(block)
         sizes_ = sizes_.sum(keepdims=True)
@@ -163,6 +189,18 @@ def _skewed_blocks(skew: np.ndarray, constant: np.ndarray, ti: np.ndarray, tj: n
         p = sps.binom.sf(k - 1, sizes_.astype(np.int64), _FLAG / 2)
         out[:] = (p < GATE_LEVEL)[block][:, None]
     return right, left
+
+
+def _projected(finer: Judged, size: int, shape: tuple[int, int], channels: int) -> tuple[bool, bool]:
+    """A coarse scale's skew flags (right, left) where it has too few tiles to judge: the finer scale's mean
+    skewness, shrunk as a mean of independent parts shrinks it (by the square root of how many
+    finer tiles, and channels for the whole image's all-channel mean, each coarse tile holds),
+    compared with SKEW_LIMIT.  Pixels that share samples shrink it less; the zoo and the real
+    renders (benchmarks/pixel_calibration.py, render_calibration.py) measure what that costs."""
+    skew, edge = finer
+    parts = (shape[0] * shape[1] * channels if size == 0 else size * size) / (edge * edge)
+    g = skew / math.sqrt(parts)
+    return g > SKEW_LIMIT, g < -SKEW_LIMIT
 
 
 def _welch_df(var_a: np.ndarray, var_b: np.ndarray, ra: int, rb: int) -> float:
@@ -183,17 +221,24 @@ def _welch_df(var_a: np.ndarray, var_b: np.ndarray, ra: int, rb: int) -> float:
 
 
 def multiscale(a: np.ndarray, b: np.ndarray, valid: np.ndarray, alpha: float, *,
-               b_exact: bool = False) -> tuple[Scale, ...]:
+               b_exact: bool = False, spp: int | None = None,
+               replicas: int | None = None) -> tuple[Scale, ...]:
     """The scales of A (Ra, h, w, c) against B (Rb, h, w, c), or against the exact image
     b (1, h, w, c) when ``b_exact``, over the ``valid`` (h, w) pixels; see the module docstring.
-    Each scale holds ``alpha`` / n_scales; the combined p-value is :func:`combined`."""
+    ``replicas``: the count the replica rules go by (default the smaller set's; a rendered
+    reference's parts, each of many samples, are near normal and pass A's count).  Each scale
+    holds ``alpha`` / n_scales; the combined p-value is :func:`combined`."""
     ra = a.shape[0]
     rb = b.shape[0]
-    scales = sizes(ra if b_exact else min(ra, rb), valid.shape)
+    if replicas is None:
+        replicas = ra if b_exact else min(ra, rb)
+    scales = sizes(replicas, valid.shape, spp)
+    few = replicas < FINE_REPLICAS
     share = alpha / len(scales)
     fixed_a = bool(np.all(a == a[:1]))
     fixed_b = b_exact or bool(np.all(b == b[:1]))
     out = []
+    finer: list[Judged | None] = [None, None]   # each set's mean skewness at the last scale judged
     for size in scales:
         ma, ti, tj = _tile_means(a, valid, size)
         mb = _tile_means(b, valid, size)[0]
@@ -211,15 +256,25 @@ def multiscale(a: np.ndarray, b: np.ndarray, valid: np.ndarray, alpha: float, *,
         with np.errstate(divide="ignore", invalid="ignore"):
             t = np.where(se2 > 0, diff / np.sqrt(se2), 0.0)
         df = ra - 1.0 if fixed_b else _welch_df(var_a, var_b, ra, rb)
+        if few:
+            df = min(df, FEW_DF)
         low_ok = np.ones(t.shape, bool)
         high_ok = np.ones(t.shape, bool)
         # a constant set (but not a deterministic one) hides its spread: nothing to test with
         blind = (const_a & ~np.bool_(fixed_a)) | (const_b & ~np.bool_(fixed_b))
-        for mean, skew, const, r, fixed, sign in ((mean_a, skew_a, const_a, ra, fixed_a, 1),
-                                                   (mean_b, skew_b, const_b, rb, fixed_b, -1)):
-            if fixed or (~const).sum() == 0:
+        for side, (skew, const, r, fixed, sign) in enumerate(((skew_a, const_a, ra, fixed_a, 1),
+                                                             (skew_b, const_b, rb, fixed_b, -1))):
+            if fixed:
                 continue
-            right, left = _skewed_blocks(skew, const, ti, tj, r)
+            gate = _skewed_blocks(skew, const, ti, tj, r) if (~const).any() else None
+            if gate is not None:
+                finer[side] = (float(skew[~const].mean()), size)
+            elif finer[side] is not None:
+                right, left = _projected(finer[side], size, valid.shape, a.shape[-1])
+                gate = (np.full(t.shape, right), np.full(t.shape, left))
+            if gate is None:
+                continue
+            right, left = gate
             # right skew of A makes t's low side heavy; of B (entering as -B) its high side
             low_ok &= ~(right if sign > 0 else left)
             high_ok &= ~(left if sign > 0 else right)

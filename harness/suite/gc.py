@@ -91,13 +91,13 @@ def _collect(store: Store, dry_run: bool) -> tuple[int, int, int, int, int]:
 
     units = db.execute(f"SELECT COUNT(*) {_UNPLANNED}").fetchone()[0]
     db.execute(f"DELETE {_UNPLANNED}")
-    # images: those the remaining render units point at, and the kept cases' reference/estimate
+    # images: those the remaining render units point at, and the kept cases' reference/estimate/|t| map
     wanted = {json.loads(p).get("image")
               for (p,) in db.execute("SELECT payload FROM units WHERE kind = 'render'")}
     images = []
     for name, file in db.execute("SELECT name, file FROM images").fetchall():
         key, _, what = name.rpartition("/")
-        if name not in wanted and not (what in ("reference", "estimate") and key in kept_keys):
+        if name not in wanted and not (what in ("reference", "estimate", "tmap") and key in kept_keys):
             images.append((name, file))
     db.executemany("DELETE FROM images WHERE name = ?", [(n,) for n, _ in images])
     cases = db.execute("SELECT case_key FROM cases WHERE case_key NOT IN (SELECT case_key FROM measurements)"

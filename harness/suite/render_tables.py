@@ -159,8 +159,7 @@ def render_rows(suite: Suite, results: list[RenderResult],
                                     "worst_scale": b.worst_scale.name, "worst_pixel": list(b.worst_pixel),
                                     "worst_t": b.worst_t, "excluded": b.excluded,
                                     "inconclusive": b.inconclusive,
-                                    "pvalue_histogram": np.histogram(b.finest_pvalues[b.finest_pvalues < 1],
-                                                                     bins=20, range=(0, 1))[0].tolist(),
+                                    "pvalue_counts": b.pvalue_counts(),
                                     "replicas": b.replicas, "spp": b.spp, "reference": r.reference,
                                     "faults": r.faults.to_dict(), "notes": r.notes}})
         if r.variance is not None:

@@ -226,7 +226,7 @@ class RenderKind:
         if results:
             notes = [f"\n  {r.case.scene} {r.case.label}: {n}" for r in results for n in r.notes]
             table = frame.to_string(index=False, float_format=lambda v: f"{v:.3g}")
-            text = (f"renders (per-pixel bias test, Holm over {len(results)} configurations at alpha "
+            text = (f"renders (multi-scale bias test, Holm over {len(results)} configurations at alpha "
                     f"{alpha:.3g}; relMSE = mean (x - ref)^2 / (ref^2 + 0.01); efficiency 1/(relMSE·T) "
                     "against the first configuration of the same scene and reference; relMSE at the longest "
                     "time all of those reached):\n" + table + "".join(notes))
@@ -289,15 +289,17 @@ def _measure(rc: RenderCase, key: str, store: Store, reference: ist.Reference,
         if "bias" in wanted:
             bias = ist.pixel_bias_test(images, reference, spp)
             if bias.replicas < FINE_REPLICAS:
-                notes.append(f"pixels and tiles under 8 pixels are not tested at {bias.replicas} replicas "
-                             f"(the t law fails there for sparse pixels); render {FINE_REPLICAS} or more to "
-                             "test them")
+                notes.append(f"pixels and tiles under 8 pixels are not tested at {bias.replicas} replicas, "
+                             "and coarser tiles with the t law at 3 degrees of freedom (the t law fails "
+                             f"there for sparse pixels); render {FINE_REPLICAS} or more to test them")
             skewed = [str(sc) for sc in bias.scales if sc.low_untested or sc.high_untested]
             if skewed:
                 notes.append(f"sides of some tiles untested (replicas too skewed or constant there): "
                              f"{'; '.join(skewed)}")
             if bias.inconclusive:
                 notes.append(bias.inconclusive)
+            # the |t| map at the most significant scale (0 where untested), for the report
+            store.put_image(f"{key}/tmap", np.nan_to_num(bias.t_map, nan=0.0).astype(np.float32))
         if "variance" in wanted:
             variance = ist.pixel_variance(images, reference, spp)
         store.put_image(f"{key}/estimate", images.mean(axis=0))

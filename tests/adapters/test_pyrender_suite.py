@@ -87,7 +87,8 @@ def test_one_cached_reference_per_estimand(raster):
 
 def test_a_planted_offset_bias_is_found(tmp_path, monkeypatch):
     """Sub-pixel offsets shifted by 0.15 pixel (a filter not centred on the pixel) estimate a
-    different image: the per-pixel test must say so."""
+    different image: the per-pixel test must say so (16 replicas: the count from which pixels and
+    small tiles, where an edge's shift shows, are tested)."""
     from harness.adapters.pyrender import render as adapter
 
     real = adapter.PyrenderRenderer._placements
@@ -106,7 +107,7 @@ def test_a_planted_offset_bias_is_found(tmp_path, monkeypatch):
         scene = "edges"
         technique = "antialias"
         spp = 64
-        replicas = 8
+        replicas = 16
         measurements = ["bias"]
         expect = "biased"
         reference_spp = 2048

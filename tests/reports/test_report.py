@@ -48,7 +48,10 @@ def _render_rows(key: str, technique: str, scale: float, baseline: str) -> list[
               "alpha": 0.01}
     return [
         {**common, "measurement": "bias", "value": 1e-4, "lo": -2e-4, "hi": 4e-4, "n": 128, "pvalue": 0.6,
-         "verdict": "unbiased", "detail": {"spp": 16, "replicas": 8}},
+         "verdict": "unbiased", "detail": {"spp": 16, "replicas": 8, "worst_scale": "2x2 tiles",
+                                           "scales": [{"scale": "pixels", "pvalue": 0.7},
+                                                      {"scale": "2x2 tiles", "pvalue": 0.1}],
+                                           "pvalue_counts": [60 + 3 * k for k in range(20)]}},
         {**common, "measurement": "convergence", "value": -0.5, "lo": -0.6, "hi": -0.4, "n": 24,
          "pvalue": 0.9, "verdict": "as expected",
          "detail": {"expected": -0.5, "budgets": budgets, "rmse": rmse, "rmse_lo": [0.8 * r for r in rmse],
@@ -115,6 +118,8 @@ def report(tmp_path_factory) -> dict:
         store.put_image(f"{key}/estimate", est)
         store.put_measurements(_render_rows(key, technique, scale, "integrator=path, variant=test"),
                                run=run.run)
+        if scale == 1:   # the first case has a stored bias test's |t| map (the second shows none)
+            store.put_image(f"{key}/tmap", np.abs(est - ref)[:, :, :1] / 0.05)
         renders[key] = (ref, est)
     store.close()
 
@@ -184,9 +189,12 @@ def test_report_in_chromium(report):
                 assert s["shownW"] > 0, f"image not displayed: {s}"
                 if s["cls"] != "colorbar":
                     assert s["std"] > 4, f"blank image: {s}"
-            # 1 integrand figure, 1 scene figure, 2 sampler figures; per render 3 images + 2 in the wipe
-            assert len(by_cls["plot"]) == 4, [s["alt"] for s in by_cls["plot"]]
-            assert len(by_cls["render-img"]) == 6
+            # 1 integrand figure, 1 scene figure, 2 sampler figures, 1 p-value histogram; per render 3
+            # images (4 with the bias test's |t| map) + 2 in the wipe
+            assert len(by_cls["plot"]) == 5, [s["alt"] for s in by_cls["plot"]]
+            assert len(by_cls["render-img"]) == 7
+            body = page.inner_text("body")
+            assert "bias test |t| at 2x2 tiles" in body and "p-values of the pixels test" in body
             assert len(by_cls["under"]) == len(by_cls["top"]) == 2
             assert len(by_cls["colorbar"]) == 2                         # one scale per error map
 
