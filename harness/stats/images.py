@@ -19,7 +19,7 @@ from scipy import stats as sps
 from harness import stats
 from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
 from harness.stats.scales import ROUNDING, Scale, combined, multiscale
-from harness.stats.timing import median_time
+from harness.stats.timing import median_time, time_blocks
 from harness.stats.validate import level
 
 __all__ = ["RELMSE_EPSILON", "relative_squared_error", "Reference", "ImageBias", "pixel_bias_test", "relmse",
@@ -336,7 +336,9 @@ def as_replicates(scene: str, label: str, spp: int, errors: np.ndarray,
 
 def image_efficiency(label: str, spp: int, errors: np.ndarray, seconds: np.ndarray) -> stats.Efficiency:
     """1 / (relMSE T) (background eq. 5 with relMSE for V) of one render at ``spp``, with the
-    standard error of its log from the replicas' relMSE spread and the median time's."""
+    standard error of its log from the replicas' relMSE spread (R - 1 df) and the median time's
+    (blocks - 1 df), and their Welch-Satterthwaite degrees of freedom: its interval is Student t,
+    as the estimators' are."""
     e = np.asarray(errors, dtype=np.float64)
     t = np.asarray(seconds, dtype=np.float64)
     r = e.size
@@ -345,5 +347,6 @@ def image_efficiency(label: str, spp: int, errors: np.ndarray, seconds: np.ndarr
     if not (mse > 0 and med > 0):
         return stats.Efficiency(label, math.nan, math.nan, spp, r, math.nan, med)
     rel = float(e.std(ddof=1)) / math.sqrt(r) / mse
-    return stats.Efficiency(label, -math.log10(mse) - math.log10(med), math.hypot(rel, t_se / med), spp, r,
-                            math.log10(mse), med)
+    return stats.Efficiency.from_errors(label, -math.log10(mse) - math.log10(med),
+                                        [(rel, r - 1), (t_se / med, time_blocks(r) - 1)], spp, r,
+                                        math.log10(mse), med)
