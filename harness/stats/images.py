@@ -207,13 +207,13 @@ class ImageBias(PixelVerdict):
     replicas  pixels  2x2   4x4   8x8   16x16   image
     ========  ======  ====  ====  ====  ======  =====
     16        8       7     7     6     5       3
-    8         > 12    12    12    9     7       4
+    8         --      --    --    > 20  16      7
     ========  ======  ====  ====  ====  ======  =====
 
     So a region's bias is found at a fraction of a pixel's SE (an 8 x 8 region at 6 / 8 of it
     with 16 replicas), where a per-pixel test needs 8.  Under 16 replicas only the 8 x 8, 16 x 16
-    and image scales are tested, with the t law at 3 degrees of freedom (the 8-replica row was
-    measured before that rule; with it the test is far more conservative there).
+    and image scales are tested, with the t law at 3 degrees of freedom: that holds alpha on the
+    real renders where R - 1 did not, at a steep price in power; render 16 replicas.
 
     ``verdict``: "invalid" when pixels had to be excluded (``failures``: counts and first
     positions, replicas and reference parts apart), "biased" when ``pvalue`` <= ``alpha``,
