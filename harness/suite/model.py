@@ -52,7 +52,9 @@ class RenderCase:
     ``spec`` holds the adapter's keys (scene, integrator, points, ...); ``spp`` is the budget
     (samples or frames per pixel) of each of the bias test's ``replicas`` renders; ``budgets``
     those of the convergence renders; a scene without an exact answer is compared with
-    ``reference_parts`` independent renders of ``reference_spp`` in total.
+    ``reference_parts`` independent renders of ``reference_spp`` in total, or, where
+    ``reference_config`` names another configuration of the same table (its ``spec``), with that
+    configuration's bias-test replicas (two renderers compared without a converged reference).
     """
 
     adapter: str
@@ -69,6 +71,7 @@ class RenderCase:
     base: str = ""                     # the suite file's folder: adapters resolve paths there
     scene_name: str = ""               # the renderer's own description (Renderer.describe()) ...
     config: str = ""                   # ... of its scene and configuration, where it has one
+    reference_config: tuple[tuple[str, Any], ...] | None = None   # the sibling measured against
 
     @property
     def scene(self) -> str:

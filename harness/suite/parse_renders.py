@@ -12,7 +12,7 @@ from harness.suite.rules import check_keys, measurements, named_key, positive, x
 __all__ = ["RENDER_KEYS", "renders"]
 
 RENDER_KEYS = {"adapter": str, "spp": int, "replicas": int, "budgets": list, "reference_spp": int,
-               "reference_parts": int, "measurements": list, "expect": str, "xfail": str}
+               "reference_parts": int, "reference": dict, "measurements": list, "expect": str, "xfail": str}
 
 
 def renders(raw: list[dict[str, Any]], suite_measurements: tuple[str, ...], base: Path,
@@ -71,6 +71,8 @@ def renders(raw: list[dict[str, Any]], suite_measurements: tuple[str, ...], base
         for k in axes:
             if not spec[k]:
                 raise SuiteError(where.at(table, k, "expected a value or a non-empty list of values, got []"))
+        sibling = _sibling_keys(c, spec, ms, where, table)
+        first = len(out)
         for values in itertools.product(*(spec[k] for k in axes)):
             one = {**spec, **dict(zip(axes, values))}
             try:
@@ -82,10 +84,35 @@ def renders(raw: list[dict[str, Any]], suite_measurements: tuple[str, ...], base
                     msg = msg[len(key) + 2:].lstrip(": ")
                 raise SuiteError(where.at(table, key, msg)) from None
             scene, config = r.describe() if hasattr(r, "describe") else ("", "")
+            target = tuple(sorted({**one, **sibling}.items()))
             out.append(RenderCase(adapter, tuple(sorted(one.items())), len(out), spp, replicas, budgets,
                                   ref_spp, parts, ms, expect, xfail_reason(c, where, table), str(base),
-                                  scene, config))
+                                  scene, config, target if sibling and target != tuple(sorted(one.items()))
+                                  else None))
+        table_specs = {rc.spec for rc in out[first:]}
+        for rc in out[first:]:
+            if rc.reference_config is not None and rc.reference_config not in table_specs:
+                shown = ", ".join(f"{k} = {v!r}" for k, v in sibling.items())
+                raise SuiteError(where.at(table, "reference", f"{{{shown}}} names no configuration of this "
+                                          f"[[render]] table (from {rc.label})"))
     return tuple(out)
+
+
+def _sibling_keys(c: dict[str, Any], spec: dict[str, Any], ms: tuple[str, ...], where: Locator,
+                  table: Any) -> dict[str, Any]:
+    """The ``reference`` table: adapter keys whose values, put into a configuration, name the
+    sibling it is compared with (e.g. {integrator = "path"}); {} where absent."""
+    sibling = c.get("reference", {})
+    unknown = [k for k in sibling if k not in spec]
+    if unknown:
+        raise SuiteError(where.at(table, "reference", f"expected adapter keys of this table "
+                                  f"({', '.join(spec)}), got {', '.join(map(repr, unknown))}"))
+    if any(isinstance(v, (list, dict)) for v in sibling.values()):
+        raise SuiteError(where.at(table, "reference", f"expected one value per key, got {sibling!r}"))
+    if sibling and "bias" not in ms:
+        raise SuiteError(where.at(table, "reference", "a configuration compared with a sibling needs the "
+                                  "'bias' measurement (its replicas are the reference)"))
+    return dict(sibling)
 
 
 MAX_SPP = 2**31 - 1   # renderers take 32-bit signed sample counts (Mitsuba's spp, most command lines)

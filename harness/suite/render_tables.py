@@ -210,7 +210,8 @@ def render_table(results: list[RenderResult], verdicts: list[dict[str, str]]) ->
     out = []
     for r, v in zip(results, verdicts):
         row: dict[str, Any] = {"scene": r.case.scene, "configuration": r.case.label, "reference": (
-            "exact" if r.reference == "exact" else f"{r.case.reference_spp} spp")}
+            "exact" if r.reference == "exact" else r.reference if r.case.reference_config is not None
+            else f"{r.case.reference_spp} spp")}
         if r.bias is not None:
             row.update({"spp x R": f"{r.bias.spp} x {r.bias.replicas}", "p": r.bias.pvalue, "bias": v["bias"],
                         "worst |t|": abs(r.bias.worst_t)})

@@ -17,6 +17,7 @@ versions), budget and seed; every case and run that needs the same reference reu
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -148,6 +149,7 @@ class _Case:
     ref: Renderer | None
     stream: str                  # what the renders' seeds derive from (plan.render_stream)
     ref_stream: str | None       # ... the reference's (plan.reference_stream)
+    sibling: _Case | None = None  # the configuration whose bias replicas are the reference
 
 
 class RenderKind:
@@ -168,8 +170,8 @@ class RenderKind:
         for rc in self.suite.renders:
             r = cached_renderer(rc.adapter, rc.spec, base=rc.base)
             key = render_key(self.suite, r.fingerprint())
-            ref = (cached_renderer(rc.adapter, rc.spec, reference=True, base=rc.base) if r.exact() is None
-                   else None)
+            rendered = r.exact() is None and rc.reference_config is None
+            ref = cached_renderer(rc.adapter, rc.spec, reference=True, base=rc.base) if rendered else None
             ref_key = reference_key(self.suite, rc, ref.fingerprint()) if ref else None
             ref_stream = reference_stream(self.suite, rc, ref.fingerprint()) if ref else None
             self.cases.append(_Case(rc, key, r, ref_key, ref, render_stream(self.suite, r.fingerprint()),
@@ -178,6 +180,9 @@ class RenderKind:
                            {"adapter": rc.adapter, "spec": dict(rc.spec), "fingerprint": r.fingerprint()})
             if ref_key:
                 store.use_key(ref_key)
+        by_spec = {(c.rc.adapter, c.rc.spec): c for c in self.cases}
+        self.cases = [dataclasses.replace(c, sibling=by_spec[(c.rc.adapter, c.rc.reference_config)])
+                      if c.rc.reference_config is not None else c for c in self.cases]
 
     def plan(self, store: Store) -> list[RenderJob]:
         """Every render the measurements need (and the reference's parts, unless it is cached);
@@ -210,7 +215,12 @@ class RenderKind:
         cache = ReferenceCache(_reference_folder(store))
         results = []
         for c in self.cases:
-            if c.ref_key is None:
+            if c.sibling is not None:   # two renderers, no converged reference: the sibling's replicas
+                planned = set(render_units(c.sibling.rc, c.sibling.key))
+                payloads = {u: p for u, p in store.payloads(c.sibling.key).items() if u in planned}
+                images, _, _ = _stack(store, payloads, store.seconds(c.sibling.key), 0)
+                reference, label = ist.Reference.from_parts(images), c.sibling.rc.label
+            elif c.ref_key is None:
                 reference, label = ist.Reference.exact(c.renderer.exact()), "exact"
             else:
                 reference, label = cache.load(c.ref_key), c.ref_key

@@ -180,6 +180,24 @@ def test_suite_compares_integrators_and_caches_references(tmp_path, variant):
     assert run_suite(suite, db).units_run == 0
 
 
+def test_a_configuration_is_compared_with_a_sibling_without_a_converged_reference(tmp_path):
+    """The light tracer against the path tracer's own 16 replicas (Jung et al.'s setting: two
+    noisy renderers, no converged reference): the path tracer is tested against its rendered
+    reference, the light tracer against the path tracer's replicas, both unbiased; the table
+    names the reference configuration, and no reference is rendered for the light tracer."""
+    table = ('{ adapter = "mitsuba", scene = "cornell", integrator = ["path", "ptracer"], max_depth = 2, '
+             'variant = "llvm_ad_rgb", spp = 64, replicas = 16, measurements = ["bias"], '
+             'reference = { integrator = "path" } }')
+    path = _suite(tmp_path, f"render = [{table}]\n")
+    summary = run_suite(load_suite(path), tmp_path / "s.sqlite")
+    traced, light = summary["render"].results
+    assert [v["bias"] for v in summary["render"].verdicts] == ["unbiased", "unbiased"]
+    assert traced.bias.reference_parts == 8 and light.bias.reference_parts == 16
+    assert light.reference == "integrator=path, max_depth=2, variant=llvm_ad_rgb"
+    assert list(summary["render"].frame["reference"]) == ["4096 spp", light.reference]
+    assert summary.units_planned == 16 + 16 + 8     # two sets of replicas and the path tracer's parts
+
+
 def test_nan_pixels_are_reported_with_positions(tmp_path, monkeypatch):
     """A renderer that returns NaN pixels makes its case 'invalid', with counts and positions."""
     from harness.adapters.mitsuba import render as adapter

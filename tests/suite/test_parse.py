@@ -109,6 +109,14 @@ def test_a_mitsuba_render_table_makes_one_case_per_list_element_with_defaults(tm
     assert path.measurements == MEASUREMENTS
 
 
+def test_a_render_table_can_name_a_sibling_configuration_as_the_reference(tmp_path):
+    text = ('[[render]]\nadapter = "mitsuba"\nscene = "cornell"\nintegrator = ["path", "ptracer"]\n'
+            'reference = { integrator = "path" }\n')
+    path, ptracer = load_suite(write(tmp_path, text)).renders
+    assert path.reference_config is None                  # the sibling itself: its usual reference
+    assert ptracer.reference_config == path.spec
+
+
 def test_a_mitsuba_sampler_table_is_labelled_and_keeps_its_spec(tmp_path):
     text = '[[sampler]]\nadapter = "mitsuba"\nplugin = { type = "diffuse" }\nvariant = "scalar_rgb"\n'
     (sc,) = load_suite(write(tmp_path, text)).samplers
@@ -326,6 +334,18 @@ MISTAKES = {
     "no techniques": (
         HEAD + '[[case]]\nintegrand = "gaussian"\ntechniques = []\n', 8, "techniques",
         "expected \"all\", a technique or a non-empty list of techniques, got []"),
+    "sibling reference of an unknown key": (
+        '[[render]]\nadapter = "mitsuba"\nscene = "cornell"\nintegrator = ["path", "ptracer"]\n'
+        'reference = { sampler = "x" }\n', 5, "reference", "expected adapter keys of this table (scene, "
+        "integrator), got 'sampler'"),
+    "sibling reference naming no configuration": (
+        '[[render]]\nadapter = "mitsuba"\nscene = "cornell"\nintegrator = ["path", "ptracer"]\n'
+        'reference = { integrator = "direct" }\n', 5, "reference",
+        "{integrator = 'direct'} names no configuration of this [[render]] table"),
+    "sibling reference without the bias test": (
+        '[[render]]\nadapter = "mitsuba"\nscene = "cornell"\nintegrator = ["path", "ptracer"]\n'
+        'reference = { integrator = "path" }\nmeasurements = ["convergence"]\nbudgets = [1, 4, 16]\n', 5,
+        "reference", "needs the 'bias' measurement"),
     "no scenes": (
         '[[render]]\nadapter = "mitsuba"\nscene = []\n', 3, "scene",
         "expected a value or a non-empty list of values, got []"),
