@@ -22,8 +22,8 @@ import calibration_args
 
 from harness.stats import image_zoo
 
-COLUMNS = ["case", "fault", "runs", "biased", "inconclusive", "consistent", "rate", "rate_lo", "rate_hi",
-           "peer", "rejecting scales"]
+COLUMNS = ["case", "fault", "runs", "biased", "inconclusive", "consistent", "invalid", "rate", "rate_lo",
+           "rate_hi", "peer", "rejecting scales"]
 
 
 def main() -> None:

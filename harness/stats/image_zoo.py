@@ -74,6 +74,7 @@ class ZooImage:
     planted: Callable[[np.ndarray, int], np.ndarray] | None = None   # (images, replicas) -> biased images
     rendered_reference: bool = False    # the reference is 8 parts of 16 replicas' budget each
     float32: bool = False               # zero-variance render rounded to float32, half its pixels 1 ulp low
+    nan: bool = False                   # one replica's pixel NaN: the verdict must be "invalid"
 
     @property
     def correct(self) -> bool:
@@ -86,6 +87,8 @@ class ZooImage:
             low = np.where(rng.random(SHAPE) < 0.5, np.nextafter(f, np.float32(0)), f)
             return np.repeat(low[None], replicas, axis=0).astype(np.float64), Reference.exact(truth)
         images = truth * self.factors(rng, replicas)
+        if self.nan:
+            images[0, 5, 7, 1] = np.nan
         if self.planted is not None:
             images = self.planted(images, replicas)
         if self.rendered_reference:   # each part the mean of 16 replicas' worth of samples
@@ -103,7 +106,8 @@ def nulls() -> list[ZooImage]:
             for k, s in ((3, 1.0), (10, 1.5), (100, 1.5))]
     out += [ZooImage("compound 3 hits, lognormal 1, rendered reference", _compound(3, 1.0),
                      rendered_reference=True),
-            ZooImage("constant", _constant), ZooImage("float32, half 1 ulp low", _constant, float32=True)]
+            ZooImage("constant", _constant), ZooImage("float32, half 1 ulp low", _constant, float32=True),
+            ZooImage("normal, one NaN", _normal, nan=True)]
     return out
 
 
@@ -180,7 +184,7 @@ def measure(cases: Iterable[ZooImage], seeds: Iterable[int], replicas: int, alph
         ci = sps.binomtest(k, n).proportion_ci(0.95, method="exact")
         rows.append({"case": case.name, "fault": case.fault or "-", "replicas": replicas, "runs": n,
                      "biased": k, "inconclusive": verdicts.count("inconclusive"),
-                     "consistent": verdicts.count("consistent"),
+                     "consistent": verdicts.count("consistent"), "invalid": verdicts.count("invalid"),
                      "rate": k / n, "rate_lo": ci.low, "rate_hi": ci.high,
                      "rejecting scales": ", ".join(f"{name} {c}" for name, c in sorted(scales.items())),
                      **({"peer": peers} if peer else {})})

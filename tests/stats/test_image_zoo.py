@@ -35,6 +35,11 @@ def test_constant_and_float32_rounded_renders_are_never_biased(null_table):
     assert (exact["biased"] == 0).all() and (exact["consistent"] == 200).all()
 
 
+def test_a_nan_pixel_makes_every_verdict_invalid_never_biased(null_table):
+    row = null_table.set_index("case").loc["normal, one NaN"]
+    assert (row["invalid"], row["biased"]) == (200, 0), row.to_dict()
+
+
 @pytest.fixture(scope="module")
 def fault_table():
     return zoo.measure(zoo.faults(), range(50), 16, ALPHA, peer=True).set_index("fault")
