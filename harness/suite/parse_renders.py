@@ -89,7 +89,7 @@ def renders(raw: list[dict[str, Any]], suite_measurements: tuple[str, ...], base
                                   ref_spp, parts, ms, expect, xfail_reason(c, where, table), str(base),
                                   scene, config, target if sibling and target != tuple(sorted(one.items()))
                                   else None))
-        table_specs = {rc.spec for rc in out[first:]}
+        table_specs = [rc.spec for rc in out[first:]]   # a list: specs may hold tables (unhashable)
         for rc in out[first:]:
             if rc.reference_config is not None and rc.reference_config not in table_specs:
                 shown = ", ".join(f"{k} = {v!r}" for k, v in sibling.items())
@@ -107,7 +107,7 @@ def _sibling_keys(c: dict[str, Any], spec: dict[str, Any], ms: tuple[str, ...], 
     if unknown:
         raise SuiteError(where.at(table, "reference", f"expected adapter keys of this table "
                                   f"({', '.join(spec)}), got {', '.join(map(repr, unknown))}"))
-    if any(isinstance(v, (list, dict)) for v in sibling.values()):
+    if any(isinstance(v, list) for v in sibling.values()):
         raise SuiteError(where.at(table, "reference", f"expected one value per key, got {sibling!r}"))
     if sibling and "bias" not in ms:
         raise SuiteError(where.at(table, "reference", "a configuration compared with a sibling needs the "

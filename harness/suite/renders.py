@@ -180,9 +180,9 @@ class RenderKind:
                            {"adapter": rc.adapter, "spec": dict(rc.spec), "fingerprint": r.fingerprint()})
             if ref_key:
                 store.use_key(ref_key)
-        by_spec = {(c.rc.adapter, c.rc.spec): c for c in self.cases}
-        self.cases = [dataclasses.replace(c, sibling=by_spec[(c.rc.adapter, c.rc.reference_config)])
-                      if c.rc.reference_config is not None else c for c in self.cases]
+        cases = self.cases
+        self.cases = [c if c.rc.reference_config is None
+                      else dataclasses.replace(c, sibling=_sibling(c, cases)) for c in cases]
 
     def plan(self, store: Store) -> list[RenderJob]:
         """Every render the measurements need (and the reference's parts, unless it is cached);
@@ -246,6 +246,11 @@ class RenderKind:
                        tuple(mark_xfail(render_rows(self.suite, results, verdicts),
                                         {c.key: c.rc.xfail for c in self.cases})), frame, text,
                        tuple(rc.xfail for rc in self.suite.renders))
+
+
+def _sibling(c: _Case, cases: list[_Case]) -> _Case:
+    """The case whose spec ``c`` names as its reference (specs may hold tables, so no dict)."""
+    return next(s for s in cases if s.rc.adapter == c.rc.adapter and s.rc.spec == c.rc.reference_config)
 
 
 def _reference_folder(store: Store) -> Path:

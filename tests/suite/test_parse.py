@@ -115,6 +115,12 @@ def test_a_render_table_can_name_a_sibling_configuration_as_the_reference(tmp_pa
     path, ptracer = load_suite(write(tmp_path, text)).renders
     assert path.reference_config is None                  # the sibling itself: its usual reference
     assert ptracer.reference_config == path.spec
+    # adapter keys may hold tables (a python adapter's params): still found
+    text = ('[[render]]\nadapter = "python"\nfunction = "flat:render"\nscene = "flat"\n'
+            'params = [{ gain = 1.0 }, { gain = 1.05 }]\nreference = { params = { gain = 1.0 } }\n')
+    (tmp_path / "flat.py").write_text("def render(spp, seed, gain=1.0):\n    return None\n")
+    one, other = load_suite(write(tmp_path, text)).renders
+    assert one.reference_config is None and other.reference_config == one.spec
 
 
 def test_a_mitsuba_sampler_table_is_labelled_and_keeps_its_spec(tmp_path):
