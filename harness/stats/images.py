@@ -19,7 +19,7 @@ from scipy import stats as sps
 from harness import stats
 from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
 from harness.stats.scales import ROUNDING, Scale, combined, multiscale
-from harness.stats.timing import median_time, time_blocks
+from harness.stats.timing import median_time, satterthwaite, time_blocks
 from harness.stats.validate import level
 
 __all__ = ["RELMSE_EPSILON", "relative_squared_error", "Reference", "ImageBias", "pixel_bias_test", "relmse",
@@ -68,6 +68,11 @@ class Reference:
     def count(self) -> int:
         """Independent parts (0 for an exact image)."""
         return 0 if self.parts is None else int(self.parts.shape[0])
+
+    @property
+    def stack(self) -> np.ndarray:
+        """(K, h, w, c): the parts, or the exact image as the one "part" it is."""
+        return self.mean[None] if self.parts is None else self.parts
 
     @property
     def variance(self) -> np.ndarray:
@@ -193,7 +198,7 @@ class ImageBias(PixelVerdict):
     (:func:`pixel_bias_test`), a member of the result family (:mod:`harness.stats.results`).
 
     H0: every pixel's expected value equals the reference.  The scales of
-    :mod:`harness.stats.scales` (pixels, 2 to 16 pixel tiles, the whole image; fine scales from 8
+    :mod:`harness.stats.scales` (pixels, 2 to 16 pixel tiles, the whole image; fine scales from 16
     replicas on), each at alpha / n_scales, Bonferroni within: the false-alarm rate is at most
     alpha under any dependence between pixels and channels.  A rendered reference enters each
     scale through its parts (Welch t, Welch-Satterthwaite df); an exact one as a constant.
@@ -256,7 +261,7 @@ class ImageBias(PixelVerdict):
              f"{self.scales_text()}; most significant {self.worst_scale.name} at (row, col, channel) "
              f"{self.worst_pixel} t = {self.worst_t:+.2f}; image-mean bias {self.bias_mean:+.3g} ± "
              f"{self.bias_mean_se:.2g}, {100 * (1 - self.alpha):g} % CI [{lo:+.3g}, {hi:+.3g}]")
-        if self.inconclusive and self.verdict == "inconclusive":
+        if self.verdict == "inconclusive":
             s += f"; {self.inconclusive}"
         return s + "".join(f"; {f}" for f in self.failures)
 
@@ -264,16 +269,15 @@ class ImageBias(PixelVerdict):
 def mean_difference(a: np.ndarray, b: np.ndarray, b_exact: bool) -> tuple[float, float, float]:
     """Image-average of mean(A) - mean(B) over the pixel-channels given ((R, m) each), its
     standard error (both sets' errors and the float32 rounding floor) and Welch-Satterthwaite df."""
+    if a.size == 0:   # no valid pixel-channel
+        return 0.0, 0.0, math.inf
     ma = a.reshape(a.shape[0], -1).mean(axis=1)
     mb = b.reshape(b.shape[0], -1).mean(axis=1)
-    if ma.size == 0 or a.size == 0:
-        return 0.0, 0.0, math.inf
     va = float(np.var(ma, ddof=1)) / ma.size
     vb = 0.0 if b_exact else float(np.var(mb, ddof=1)) / mb.size
     diff = float(ma.mean() - mb.mean())
     floor = (ROUNDING * max(abs(float(ma.mean())), abs(float(mb.mean())))) ** 2
-    den = va**2 / (ma.size - 1) + (0.0 if b_exact else vb**2 / (mb.size - 1))
-    df = (va + vb) ** 2 / den if den > 0 else math.inf
+    df = satterthwaite([(math.sqrt(va), ma.size - 1), (math.sqrt(vb), max(mb.size - 1, 1))])
     return diff, math.sqrt(va + vb + floor), df
 
 
@@ -288,7 +292,7 @@ def pixel_bias_test(images: np.ndarray, reference: Reference, spp: int, *, alpha
     if r < 4:
         raise ValueError(f"the multi-scale bias test needs >= 4 replicas, got {r}")
     exact = reference.parts is None
-    b = reference.mean[None] if exact else reference.parts
+    b = reference.stack
     if b.shape[1:] != x.shape[1:]:
         raise ValueError(f"replicas {x.shape[1:]} and reference {b.shape[1:]} differ in shape")
     valid = valid_pixels(x, b)
@@ -300,7 +304,7 @@ def pixel_bias_test(images: np.ndarray, reference: Reference, spp: int, *, alpha
 
 
 def _valid(x: np.ndarray, reference: Reference) -> np.ndarray:
-    return valid_pixels(x, reference.mean[None] if reference.parts is None else reference.parts)
+    return valid_pixels(x, reference.stack)
 
 
 def relmse(images: np.ndarray, reference: Reference) -> np.ndarray:

@@ -17,10 +17,10 @@ image) holds only for near-normal replicas.  For right-skewed ones (a light trac
 hits, fireflies) the low side of t is far heavier than the t law: a replica set that missed its
 rare large values has a low mean *and* a small spread.  Measured (4e6 gamma tests, 16
 replicas): skewness 0.4 makes the 1e-6 tail 2.5 times too heavy, skewness 1.6 175 times.  The
-same low side is lighter than the t law, so the other side stays valid.  A tile's own sample
+high side is lighter than the t law there, so it stays valid.  A tile's own sample
 skewness cannot gate it (it is small exactly when the rare value is missing, i.e. it selects the
 worst tiles), so the gate pools a *block* of 8 x 8 tiles: it counts the tile-channels whose
-skewness lies beyond the 90 % quantile of |skewness| of normal replicas, on each side, and calls
+skewness lies beyond the 80 % quantile of |skewness| of normal replicas, on each side, and calls
 the block right- (left-) skewed when that count exceeds the normal rate (10 % a side) at one-sided
 level 0.01 (binomial).  In a right-skewed block of A (left-skewed of B) the low side of t is not
 tested at that scale, and vice versa; the tile's pixels are still covered by coarser scales, where
@@ -108,7 +108,7 @@ class Scale:
     def expand(self, shape: tuple[int, int]) -> np.ndarray:
         """``t_map`` on the (h, w) pixel grid: each tile's value over its pixels."""
         h, w = shape
-        s = max(h, w) if self.size == 0 else self.size
+        s = _edge(self.size, shape)
         return np.repeat(np.repeat(self.t_map, s, axis=0), s, axis=1)[:h, :w]
 
     def __str__(self) -> str:
@@ -129,11 +129,16 @@ def sizes(replicas: int, shape: tuple[int, int], spp: int | None = None) -> tupl
     return (*fine, 0)
 
 
+def _edge(size: int, shape: tuple[int, int]) -> int:
+    """A scale's tile edge in pixels on an (h, w) image (``size`` 0, the whole image: one tile)."""
+    return max(shape) if size == 0 else size
+
+
 def _tile_means(x: np.ndarray, valid: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Each replica's mean over each tile's valid pixels: (R, tiles, c), and the tiles' grid
     rows and cols (tiles with no valid pixel are left out)."""
     h, w = valid.shape
-    s = max(h, w) if size == 0 else size
+    s = _edge(size, valid.shape)
     rows, cols = np.arange(0, h, s), np.arange(0, w, s)
     kept = np.where(valid[None, :, :, None], x, 0.0)
     sums = np.add.reduceat(np.add.reduceat(kept, rows, axis=1), cols, axis=2)
@@ -297,7 +302,7 @@ def multiscale(a: np.ndarray, b: np.ndarray, valid: np.ndarray, alpha: float, *,
         worst, worst_t = (-1, -1, -1), math.nan
         if count and tested.any():
             k, ch = np.unravel_index(int(np.argmin(np.where(tested, p, 2.0))), p.shape)
-            s = max(valid.shape) if size == 0 else size
+            s = _edge(size, valid.shape)
             worst, worst_t = (int(ti[k]) * s, int(tj[k]) * s, -1 if size == 0 else int(ch)), float(t[k, ch])
         out.append(Scale(size, share, pvalue, count, int((~low_ok).sum()), int((~high_ok).sum()), worst,
                          worst_t, t_map, p.ravel()))

@@ -216,9 +216,8 @@ class RenderKind:
         results = []
         for c in self.cases:
             if c.sibling is not None:   # two renderers, no converged reference: the sibling's replicas
-                planned = set(render_units(c.sibling.rc, c.sibling.key))
-                payloads = {u: p for u, p in store.payloads(c.sibling.key).items() if u in planned}
-                images, _, _ = _stack(store, payloads, store.seconds(c.sibling.key), 0)
+                images, _, _ = _stack(store, _planned_payloads(store, c.sibling.rc, c.sibling.key),
+                                      store.seconds(c.sibling.key), 0)
                 reference, label = ist.Reference.from_parts(images), c.sibling.rc.label
             elif c.ref_key is None:
                 reference, label = ist.Reference.exact(c.renderer.exact()), "exact"
@@ -251,6 +250,14 @@ class RenderKind:
 def _sibling(c: _Case, cases: list[_Case]) -> _Case:
     """The case whose spec ``c`` names as its reference (specs may hold tables, so no dict)."""
     return next(s for s in cases if s.rc.adapter == c.rc.adapter and s.rc.spec == c.rc.reference_config)
+
+
+def _planned_payloads(store: Store, rc: RenderCase, key: str) -> dict[Unit, dict]:
+    """The stored renders of the units this configuration plans: renders stored for an earlier
+    version of the suite (other spp, budgets or replica counts) share the case key but are not
+    part of this measurement."""
+    planned = set(render_units(rc, key))
+    return {u: p for u, p in store.payloads(key).items() if u in planned}
 
 
 def _reference_folder(store: Store) -> Path:
@@ -290,11 +297,8 @@ def _faults(payloads: dict[Unit, dict]) -> ImageFaults:
 
 def _measure(rc: RenderCase, key: str, store: Store, reference: ist.Reference,
              ref_label: str) -> RenderResult:
-    # only the units this configuration plans: renders stored for an earlier version of the suite
-    # (other spp, budgets or replica counts) share the case key but are not part of this measurement
-    planned = set(render_units(rc, key))
-    payloads = {u: p for u, p in store.payloads(key).items() if u in planned}
-    seconds_of = {u: s for u, s in store.seconds(key).items() if u in planned}
+    payloads = _planned_payloads(store, rc, key)
+    seconds_of = {u: s for u, s in store.seconds(key).items() if u in payloads}
     wanted = set(rc.measurements)
     faults = _faults(payloads)
     notes: list[str] = []
