@@ -43,6 +43,7 @@ class Estimate:
     examples: tuple[dict[str, Any], ...]
     threads: int = 1
     chunks: int = 0
+    busy: tuple[float, ...] = ()  # seconds each thread spent in chunks, the calling thread first
     candidates: int = 0        # samplers' candidate draws (rejection: > drawn)
     integrand: str | None = None
     technique: str | None = None

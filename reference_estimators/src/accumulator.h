@@ -16,6 +16,8 @@
 #include <limits>
 #include <vector>
 
+#include "simd.h"
+
 namespace re {
 
 // Neumaier (1974) compensated sum.
@@ -88,22 +90,14 @@ inline int scale_exponent_for(double maxabs) {
 }
 
 // Block reductions run over 8 logical lanes in a fixed order, held in native-width vectors
-// (GCC/Clang vector extensions): 1 x 8 with AVX-512, 2 x 4 with AVX, 4 x 2 otherwise.  The
-// arithmetic per logical lane is the same in all three, so results are bitwise identical
-// across ISAs; wider-than-native vector types are lowered badly by GCC 12 (10x slower).
-#if defined(__AVX512F__)
-constexpr size_t kVecWidth = 8;
-#elif defined(__AVX__)
-constexpr size_t kVecWidth = 4;
-#else
-constexpr size_t kVecWidth = 2;
-#endif
+// (simd.h): 1 x 8 with AVX-512, 2 x 4 with AVX, 4 x 2 otherwise.  The arithmetic per logical
+// lane is the same in all three, so results are bitwise identical across ISAs.
+using simd::f64v;
+using simd::i64v;
+constexpr size_t kVecWidth = simd::kWidth;
 constexpr size_t kLanes = 8, kParts = kLanes / kVecWidth;
-typedef double f64v __attribute__((vector_size(8 * kVecWidth)));
-typedef int64_t i64v __attribute__((vector_size(8 * kVecWidth)));
-#define RE_INLINE inline __attribute__((always_inline))
 
-RE_INLINE f64v loadv(const double *p) { f64v v; std::memcpy(&v, p, sizeof v); return v; }
+RE_INLINE f64v loadv(const double *p) { return simd::load(p); }
 
 // Sum of the 8 logical lanes of parts[0..kParts), always in the same tree order.
 template <class V>
@@ -114,62 +108,62 @@ RE_INLINE double lane_sum(const V (&parts)[kParts]) {
     return ((l[0] + l[1]) + (l[2] + l[3])) + ((l[4] + l[5]) + (l[6] + l[7]));
 }
 
-// One vector pass over a block: non-finite and negative counts, the largest magnitude,
-// and the lane sums of the (unscaled) values.
+// One vector pass over a block: the lane sums, the smallest and the largest of the
+// (unscaled) values.  Three operations per vector; what screening needs follows from them: a
+// NaN or an infinity makes the sum non-finite (the converse fails only where a finite sum
+// overflows, and then the slow path counts exactly), and a negative value makes min < 0.
 struct BlockScan {
-    size_t nonfinite = 0, negative = 0;
-    double maxabs = 0, sum = 0;
+    double sum = 0;
+    double min = std::numeric_limits<double>::infinity(), max = -std::numeric_limits<double>::infinity();
+    bool maybe_nonfinite() const { return !(std::fabs(sum) <= std::numeric_limits<double>::max()); }
+    double maxabs() const { return std::max(-min, max); }  // -inf for an empty block
 };
 
 RE_INLINE BlockScan scan_block(const double *y, size_t count) {
     const size_t full = count / kLanes * kLanes;
-    const f64v zero = {}, big = zero + std::numeric_limits<double>::max();
-    f64v amax[kParts], s[kParts];
-    i64v bad[kParts], neg[kParts];
-    for (size_t k = 0; k < kParts; ++k) { amax[k] = s[k] = zero; bad[k] = neg[k] = i64v{}; }
+    const f64v zero = {}, inf = zero + std::numeric_limits<double>::infinity();
+    f64v s[kParts], lo[kParts], hi[kParts];
+    for (size_t k = 0; k < kParts; ++k) { s[k] = zero; lo[k] = inf; hi[k] = -inf; }
     for (size_t i = 0; i < full; i += kLanes)
         for (size_t k = 0; k < kParts; ++k) {
-            f64v v = loadv(y + i + k * kVecWidth), a = v < 0 ? -v : v;
-            bad[k] -= !(a <= big);  // comparisons give -1 for true
-            neg[k] -= v < 0;
-            amax[k] = a > amax[k] ? a : amax[k];
+            f64v v = loadv(y + i + k * kVecWidth);
             s[k] += v;
+            lo[k] = v < lo[k] ? v : lo[k];
+            hi[k] = v > hi[k] ? v : hi[k];
         }
     BlockScan r;
     for (size_t k = 0; k < kParts; ++k)
-        for (size_t w = 0; w < kVecWidth; ++w) {
-            r.nonfinite += size_t(bad[k][w]);
-            r.negative += size_t(neg[k][w]);
-            r.maxabs = std::max(r.maxabs, amax[k][w]);
-        }
+        for (size_t w = 0; w < kVecWidth; ++w) { r.min = std::min(r.min, lo[k][w]); r.max = std::max(r.max, hi[k][w]); }
     r.sum = lane_sum(s);
     for (size_t i = full; i < count; ++i) {
-        double v = y[i], a = std::fabs(v);
-        r.nonfinite += !(a <= std::numeric_limits<double>::max());
-        r.negative += v < 0;
-        r.maxabs = std::max(r.maxabs, a);
-        r.sum += v;
+        r.sum += y[i];
+        r.min = std::min(r.min, y[i]);
+        r.max = std::max(r.max, y[i]);
     }
     return r;
 }
 
 // Adds y[0..count) (finite, unscaled; `scan` is scan_block of them) as one block: two-pass
-// within the block, then merge.  Compilers' own vectorisation of these reductions was 2-3x
-// slower than these explicit lanes.
+// within the block (the block's mean from the scan's sum, then central moments about it),
+// then merge.  Compilers' own vectorisation of these reductions was 2-3x slower than these
+// explicit lanes.  The scaled value v 2^-e is exact (a power of two, and v is at most 2 after
+// scaling), so d = fma(v, 2^-e, -mean) rounds once, as (v 2^-e) - mean would; the min and max
+// of the scaled values are the scan's, scaled (scaling is monotone).
 RE_INLINE void accumulate_block(Moments &acc, const double *y, size_t count, bool higher, const BlockScan &scan) {
     if (count == 0) return;
     const size_t full = count / kLanes * kLanes;
-    const f64v zero = {}, inf = zero + std::numeric_limits<double>::infinity();
+    const f64v zero = {};
     // The scale follows the largest magnitude seen so far, so scaled values stay <= 2.
-    if (scan.maxabs > 0) {
-        int e = scale_exponent_for(scan.maxabs);
+    const double maxabs = scan.maxabs();
+    if (maxabs > 0) {
+        int e = scale_exponent_for(maxabs);
         if (!acc.scale_set || e > acc.scale_exp) acc.rescale_to(e);
     }
     const double scale = acc.scale_set ? std::ldexp(1.0, -acc.scale_exp) : 1.0;
     // Scaling by a power of two commutes with rounding unless something over- or underflows:
     // then the sum is redone on scaled values (same lane order, so a deterministic choice).
     double sum = scan.sum * scale;
-    if (!(std::fabs(scan.sum) <= std::numeric_limits<double>::max()) || scan.maxabs < 0x1p-1000) {
+    if (scan.maybe_nonfinite() || maxabs < 0x1p-1000) {
         f64v s[kParts];
         for (size_t k = 0; k < kParts; ++k) s[k] = zero;
         for (size_t i = 0; i < full; i += kLanes)
@@ -178,22 +172,23 @@ RE_INLINE void accumulate_block(Moments &acc, const double *y, size_t count, boo
         for (size_t i = full; i < count; ++i) sum += y[i] * scale;
     }
     const double nb = double(count), mb = sum / nb;
+    const f64v vscale = zero + scale, vmean = zero - mb;
 
-    f64v c2[kParts], c3[kParts], c4[kParts], lo[kParts], hi[kParts];
-    for (size_t k = 0; k < kParts; ++k) { c2[k] = c3[k] = c4[k] = zero; lo[k] = inf; hi[k] = -inf; }
+    f64v c2[kParts], c3[kParts], c4[kParts];
+    for (size_t k = 0; k < kParts; ++k) c2[k] = c3[k] = c4[k] = zero;
     if (higher) {
         for (size_t i = 0; i < full; i += kLanes)
             for (size_t k = 0; k < kParts; ++k) {
-                f64v v = loadv(y + i + k * kVecWidth) * scale, d = v - mb, d2 = d * d;
-                c2[k] += d2; c3[k] += d2 * d; c4[k] += d2 * d2;
-                lo[k] = v < lo[k] ? v : lo[k]; hi[k] = v > hi[k] ? v : hi[k];
+                f64v d = simd::fma(loadv(y + i + k * kVecWidth), vscale, vmean), d2 = d * d;
+                c2[k] += d2;
+                c3[k] = simd::fma(d2, d, c3[k]);
+                c4[k] = simd::fma(d2, d2, c4[k]);
             }
     } else {
         for (size_t i = 0; i < full; i += kLanes)
             for (size_t k = 0; k < kParts; ++k) {
-                f64v v = loadv(y + i + k * kVecWidth) * scale, d = v - mb;
-                c2[k] += d * d;
-                lo[k] = v < lo[k] ? v : lo[k]; hi[k] = v > hi[k] ? v : hi[k];
+                f64v d = simd::fma(loadv(y + i + k * kVecWidth), vscale, vmean);
+                c2[k] += d * d;  // as above: M2 does not depend on `higher`
             }
     }
     Moments b;
@@ -204,13 +199,15 @@ RE_INLINE void accumulate_block(Moments &acc, const double *y, size_t count, boo
     b.m2 = lane_sum(c2);
     b.m3 = lane_sum(c3);
     b.m4 = lane_sum(c4);
-    for (size_t k = 0; k < kParts; ++k)
-        for (size_t w = 0; w < kVecWidth; ++w) { b.min = std::min(b.min, lo[k][w]); b.max = std::max(b.max, hi[k][w]); }
+    b.min = scan.min * scale;
+    b.max = scan.max * scale;
     for (size_t i = full; i < count; ++i) {
-        double v = y[i] * scale, d = v - mb, d2 = d * d;
+        double d = std::fma(y[i], scale, -mb), d2 = d * d;
         b.m2 += d2;
-        if (higher) { b.m3 += d2 * d; b.m4 += d2 * d2; }
-        b.min = std::min(b.min, v); b.max = std::max(b.max, v);
+        if (higher) {
+            b.m3 = std::fma(d2, d, b.m3);
+            b.m4 = std::fma(d2, d2, b.m4);
+        }
     }
     b.total.sum = sum;
     acc.merge_same_scale(b);
@@ -280,7 +277,7 @@ struct Diagnostics {
 
 // Screens a block of contributions and accumulates what is usable: NaN and +-Inf are
 // counted, noted and left out; negatives are counted, noted and kept.  One vector pass when
-// nothing is wrong; the slow path runs only for blocks with something to report.  y is
+// nothing is wrong (a second one where a value is negative); the slow path runs only for blocks with something to report.  y is
 // compacted in place.  x (may be null) holds the points, for the examples; entry i is sample
 // index[i] when `index` is given (a block compacted before), else first_index + i.
 inline void screen_and_accumulate(Moments &acc, Diagnostics &diag, double *y, const double *x, int dim,
@@ -289,12 +286,14 @@ inline void screen_and_accumulate(Moments &acc, Diagnostics &diag, double *y, co
     auto point = [&](size_t i) { return x ? x + i * dim : nullptr; };
     auto sample = [&](size_t i) { return index ? index[i] : first_index + i; };
     const int d = x ? dim : 0;
-    if (scan.nonfinite == 0) {
-        if (scan.negative) {
-            diag.counts[int(Issue::Negative)] += scan.negative;
+    if (!scan.maybe_nonfinite()) {
+        if (scan.min < 0) {
             size_t want = kMaxExamples - std::min(kMaxExamples, diag.examples_of(Issue::Negative));
-            for (size_t i = 0; i < count && want > 0; ++i)
-                if (y[i] < 0.0) { diag.note(Issue::Negative, sample(i), point(i), d, y[i]); --want; }
+            for (size_t i = 0; i < count; ++i)
+                if (y[i] < 0.0) {
+                    diag.counts[int(Issue::Negative)]++;
+                    if (want > 0) { diag.note(Issue::Negative, sample(i), point(i), d, y[i]); --want; }
+                }
         }
         accumulate_block(acc, y, count, higher, scan);
         return;

@@ -94,6 +94,7 @@ nb::dict estimate_dict(const Estimate &e) {
     r["seconds"] = e.seconds;
     r["chunks"] = e.chunks;
     r["threads"] = e.threads;
+    r["busy"] = nb::tuple(nb::cast(e.busy));
     return r;
 }
 
@@ -344,7 +345,7 @@ NB_MODULE(_core, m) {
         OutArray r = new_array(size_t(rows), size_t(dim), &u);
         {
             nb::gil_scoped_release g;
-            ThreadPool::instance().run(c1 - c0, threads > 0 ? threads : ThreadPool::default_threads(), [&](size_t i) {
+            ThreadPool::instance().run(c1 - c0, threads > 0 ? threads : ThreadPool::default_threads(), [&](size_t i, int) {
                 uint64_t c = c0 + i;
                 UniformStream stream({seed, case_id, replica, c});
                 uint64_t first = c * kChunkSize, count = std::min<uint64_t>(kChunkSize, uint64_t(n) - first);
@@ -475,7 +476,7 @@ NB_MODULE(_core, m) {
     m.def("fm_exp", [](InArray x) {
         double *y;
         OutArray r = new_array(x.size(), 0, &y);
-        for (size_t i = 0; i < x.size(); ++i) y[i] = fm::exp(x.data()[i]);
+        simd::map(x.data(), y, x.size(), [](auto v) { return fm::exp(v); });
         return r;
     });
     m.def("fm_log", [](InArray x) {

@@ -3,6 +3,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <vector>
 
 #include "thread_pool.h"
@@ -276,6 +277,22 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
     return dropped;
 }
 
+// Per-thread scratch, built on a worker's first chunk and reused by its later ones.
+template <class T>
+class PerWorker {
+  public:
+    explicit PerWorker(int threads) : items_(size_t(threads)) {}
+    template <class Make>
+    T &get(int worker, Make make) {
+        auto &p = items_[size_t(worker)];
+        if (!p) p = std::make_unique<T>(make());
+        return *p;
+    }
+  private:
+    std::vector<std::unique_ptr<T>> items_;
+};
+
+// chunk_fn(c, first, count, moments, diagnostics, worker) for each chunk c of the range.
 template <class ChunkFn>
 Estimate run_chunks(uint64_t n, const RunOptions &opt, ChunkFn chunk_fn) {
     auto t0 = std::chrono::steady_clock::now();
@@ -285,11 +302,11 @@ Estimate run_chunks(uint64_t n, const RunOptions &opt, ChunkFn chunk_fn) {
     std::vector<Moments> moments(nc);
     std::vector<Diagnostics> diags(nc);
     const int threads = resolve_threads(opt.threads);
-    ThreadPool::instance().run(nc, threads, [&](size_t i) {
-        uint64_t c = c0 + i, first = c * kChunkSize, count = std::min(kChunkSize, n - first);
-        chunk_fn(c, first, count, moments[i], diags[i]);
-    });
     Estimate e;
+    e.busy = ThreadPool::instance().run(nc, threads, [&](size_t i, int worker) {
+        uint64_t c = c0 + i, first = c * kChunkSize, count = std::min(kChunkSize, n - first);
+        chunk_fn(c, first, count, moments[i], diags[i], worker);
+    });
     for (uint64_t i = 0; i < nc; ++i) {
         e.moments.merge(moments[i]);
         e.diagnostics.merge(diags[i]);
@@ -327,9 +344,10 @@ void finish_block(double *y, double *x, int xd, size_t m, size_t dropped, const 
 Estimate integrate(const Integrand &f, const Technique &t, uint64_t n, const RunOptions &opt) {
     check_technique(f, t);
     const Kernel k(f, t, n, opt.key);
-    return run_chunks(n, opt, [&](uint64_t c, uint64_t first, uint64_t count, Moments &acc, Diagnostics &diag) {
+    PerWorker<Scratch> scratch(resolve_threads(opt.threads));
+    return run_chunks(n, opt, [&](uint64_t c, uint64_t first, uint64_t count, Moments &acc, Diagnostics &diag, int w) {
         UniformStream stream(chunk_key(opt.key, c));
-        Scratch s = k.scratch();
+        Scratch &s = scratch.get(w, [&] { return k.scratch(); });
         for_each_block(count, [&](uint64_t b, size_t m) {
             size_t dropped = block_contributions(k, stream, m, first + b, s, diag);
             diag.drawn += m;
@@ -342,9 +360,11 @@ void contributions(const Integrand &f, const Technique &t, uint64_t n, const Run
     check_technique(f, t);
     const Kernel k(f, t, n, opt.key);
     const uint64_t nc = chunk_count(n);
-    ThreadPool::instance().run(nc, resolve_threads(opt.threads), [&](size_t c) {
+    const int threads = resolve_threads(opt.threads);
+    PerWorker<Scratch> scratch(threads);
+    ThreadPool::instance().run(nc, threads, [&](size_t c, int w) {
         UniformStream stream(chunk_key(opt.key, c));
-        Scratch s = k.scratch();
+        Scratch &s = scratch.get(w, [&] { return k.scratch(); });
         Diagnostics diag;
         uint64_t first = c * kChunkSize, count = std::min(kChunkSize, n - first);
         for_each_block(count, [&](uint64_t b, size_t m) {
@@ -355,8 +375,9 @@ void contributions(const Integrand &f, const Technique &t, uint64_t n, const Run
 }
 
 Estimate accumulate_values(const double *y, uint64_t n, const RunOptions &opt) {
-    return run_chunks(n, opt, [&](uint64_t, uint64_t first, uint64_t count, Moments &acc, Diagnostics &diag) {
-        std::vector<double> buf(kBlock);
+    PerWorker<std::vector<double>> buffers(resolve_threads(opt.threads));
+    return run_chunks(n, opt, [&](uint64_t, uint64_t first, uint64_t count, Moments &acc, Diagnostics &diag, int w) {
+        std::vector<double> &buf = buffers.get(w, [] { return std::vector<double>(kBlock); });
         for_each_block(count, [&](uint64_t b, size_t m) {
             std::copy(y + first + b, y + first + b + m, buf.begin());
             diag.drawn += m;
@@ -382,8 +403,9 @@ Estimate estimate_from_samples(const Integrand &f, const double *x, const double
                                const Domain &sampler_domain, const RunOptions &opt) {
     const int xd = f.domain.dim;
     if (sampler_domain.dim != xd) throw std::invalid_argument("sampler domain and integrand differ in dimension");
-    return run_chunks(n, opt, [&](uint64_t, uint64_t first, uint64_t count, Moments &acc, Diagnostics &diag) {
-        Scratch s(1, xd, 1);
+    PerWorker<Scratch> scratch(resolve_threads(opt.threads));
+    return run_chunks(n, opt, [&](uint64_t, uint64_t first, uint64_t count, Moments &acc, Diagnostics &diag, int w) {
+        Scratch &s = scratch.get(w, [&] { return Scratch(1, xd, 1); });
         for_each_block(count, [&](uint64_t b, size_t m) {
             const double *xb = x + (first + b) * xd, *pb = pdf + first + b;
             std::copy(xb, xb + m * xd, s.x.begin());
@@ -401,7 +423,7 @@ Diagnostics draw_samples(const Sampler &smp, uint64_t n, const RunOptions &opt, 
     const uint64_t nc = chunk_count(n);
     const int xd = smp.domain.dim;
     std::vector<Diagnostics> diags(nc);
-    ThreadPool::instance().run(nc, resolve_threads(opt.threads), [&](size_t c) {
+    ThreadPool::instance().run(nc, resolve_threads(opt.threads), [&](size_t c, int) {
         UniformStream stream(chunk_key(opt.key, c));
         uint64_t first = c * kChunkSize, count = std::min(kChunkSize, n - first);
         smp.draw(stream, x + first * xd, pdf + first, count, first, diags[c]);
@@ -420,6 +442,8 @@ Estimate merge_estimates(const std::vector<Estimate> &parts) {
         e.seconds += p.seconds;
         e.chunks += p.chunks;
         e.threads = std::max(e.threads, p.threads);
+        if (e.busy.size() < p.busy.size()) e.busy.resize(p.busy.size(), 0.0);
+        for (size_t w = 0; w < p.busy.size(); ++w) e.busy[w] += p.busy[w];
     }
     return e;
 }

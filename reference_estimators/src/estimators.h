@@ -17,6 +17,7 @@ struct Estimate {
     Moments moments;          // of the finite contributions
     Diagnostics diagnostics;  // counts and examples of everything excluded or suspicious
     double seconds = 0;       // wall time of the whole call
+    std::vector<double> busy; // seconds each thread spent in chunks (the caller's first)
     uint64_t chunks = 0;
     int threads = 1;
 };

@@ -12,59 +12,52 @@
 #include <cstring>
 #include <limits>
 
+#include "simd.h"
+
 namespace re::fm {
 
 inline double bits_as_double(uint64_t b) { double d; std::memcpy(&d, &b, 8); return d; }
 inline uint64_t double_as_bits(double d) { uint64_t b; std::memcpy(&b, &d, 8); return b; }
 
-// 2^(j/64), j = 0..63, each the correctly rounded double (computed with Python's decimal
+// 2^(j/16), j = 0..15, each the correctly rounded double (computed with Python's decimal
 // module at 60 digits).
-alignas(64) inline constexpr double kExp2Table[64] = {
-    0x1.0000000000000p+0, 0x1.02c9a3e778061p+0, 0x1.059b0d3158574p+0, 0x1.0874518759bc8p+0,
-    0x1.0b5586cf9890fp+0, 0x1.0e3ec32d3d1a2p+0, 0x1.11301d0125b51p+0, 0x1.1429aaea92de0p+0,
-    0x1.172b83c7d517bp+0, 0x1.1a35beb6fcb75p+0, 0x1.1d4873168b9aap+0, 0x1.2063b88628cd6p+0,
-    0x1.2387a6e756238p+0, 0x1.26b4565e27cddp+0, 0x1.29e9df51fdee1p+0, 0x1.2d285a6e4030bp+0,
-    0x1.306fe0a31b715p+0, 0x1.33c08b26416ffp+0, 0x1.371a7373aa9cbp+0, 0x1.3a7db34e59ff7p+0,
-    0x1.3dea64c123422p+0, 0x1.4160a21f72e2ap+0, 0x1.44e086061892dp+0, 0x1.486a2b5c13cd0p+0,
-    0x1.4bfdad5362a27p+0, 0x1.4f9b2769d2ca7p+0, 0x1.5342b569d4f82p+0, 0x1.56f4736b527dap+0,
-    0x1.5ab07dd485429p+0, 0x1.5e76f15ad2148p+0, 0x1.6247eb03a5585p+0, 0x1.6623882552225p+0,
-    0x1.6a09e667f3bcdp+0, 0x1.6dfb23c651a2fp+0, 0x1.71f75e8ec5f74p+0, 0x1.75feb564267c9p+0,
-    0x1.7a11473eb0187p+0, 0x1.7e2f336cf4e62p+0, 0x1.82589994cce13p+0, 0x1.868d99b4492edp+0,
-    0x1.8ace5422aa0dbp+0, 0x1.8f1ae99157736p+0, 0x1.93737b0cdc5e5p+0, 0x1.97d829fde4e50p+0,
-    0x1.9c49182a3f090p+0, 0x1.a0c667b5de565p+0, 0x1.a5503b23e255dp+0, 0x1.a9e6b5579fdbfp+0,
-    0x1.ae89f995ad3adp+0, 0x1.b33a2b84f15fbp+0, 0x1.b7f76f2fb5e47p+0, 0x1.bcc1e904bc1d2p+0,
-    0x1.c199bdd85529cp+0, 0x1.c67f12e57d14bp+0, 0x1.cb720dcef9069p+0, 0x1.d072d4a07897cp+0,
-    0x1.d5818dcfba487p+0, 0x1.da9e603db3285p+0, 0x1.dfc97337b9b5fp+0, 0x1.e502ee78b3ff6p+0,
-    0x1.ea4afa2a490dap+0, 0x1.efa1bee615a27p+0, 0x1.f50765b6e4540p+0, 0x1.fa7c1819e90d8p+0,
+alignas(64) inline constexpr double kExp2Table[16] = {
+    0x1.0000000000000p+0, 0x1.0b5586cf9890fp+0, 0x1.172b83c7d517bp+0, 0x1.2387a6e756238p+0,
+    0x1.306fe0a31b715p+0, 0x1.3dea64c123422p+0, 0x1.4bfdad5362a27p+0, 0x1.5ab07dd485429p+0,
+    0x1.6a09e667f3bcdp+0, 0x1.7a11473eb0187p+0, 0x1.8ace5422aa0dbp+0, 0x1.9c49182a3f090p+0,
+    0x1.ae89f995ad3adp+0, 0x1.c199bdd85529cp+0, 0x1.d5818dcfba487p+0, 0x1.ea4afa2a490dap+0,
 };
 
-// exp(x): x = (64 k + j) ln2/64 + r with |r| <= ln2/128, exp(x) = 2^k 2^(j/64) exp(r), and
-// exp(r) - 1 by a degree-5 Taylor polynomial (truncation < 4e-17).  The table lookup
-// vectorises to a gather; 2^k is applied in two steps so subnormal results come out right.
-inline double exp(double x) {
-    const double kShift = 0x1.8p52;
-    const double kLn2Hi = 0.693147180559890330187045037746429443359375;  // hi + lo = ln 2
-    const double kLn2Lo = 5.497923018708371174712471492138406e-14;
-    double xc = x < -746.0 ? -746.0 : (x > 710.0 ? 710.0 : x);
-    double t = std::fma(xc, 64 * 1.4426950408889634, kShift);
-    double n = t - kShift;  // round(64 x / ln 2)
-    double r = std::fma(n, -kLn2Hi / 64, xc);
-    r = std::fma(n, -kLn2Lo / 64, r);
-    double p = 1.0 / 120;
-    p = std::fma(p, r, 1.0 / 24);
-    p = std::fma(p, r, 1.0 / 6);
-    p = std::fma(p, r, 0.5);
-    p = std::fma(p, r, 1.0);
+// exp(x) for double or simd::f64v (the same bits lane by lane): x = (16 k + j) ln2/16 + r
+// with |r| <= ln2/32, exp(x) = 2^k 2^(j/16) exp(r), exp(r) - 1 by a degree-7 Taylor
+// polynomial (truncation < 2e-18).  t = x 16/ln2 + 1.5 2^52 rounds to the integer 16 k + j in
+// its low mantissa bits, so j is read from t's bits (AVX-512: an in-register permute, no
+// gather) and 2^k is applied by one correctly rounded scaling (AVX-512: vscalefpd), so
+// subnormal results come out right.  The clamp to [-746, 710] passes NaN through; the overflow
+// threshold is explicit so that exp overflows exactly where libm's does.
+template <class D>
+RE_INLINE D exp(D x) {
+    using simd::fma;
+    const D lo = D{} - 746.0, hi = D{} + 710.0, shift = D{} + 0x1.8p52;
+    const D ln2_hi = D{} - 0.693147180559890330187045037746429443359375 / 16;  // hi + lo = ln 2
+    const D ln2_lo = D{} - 5.497923018708371174712471492138406e-14 / 16;
+    D xc = simd::min_or_second(hi, simd::max_or_second(lo, x));  // NaN passes
+    D t = fma(xc, D{} + 16 * 1.4426950408889634, shift);
+    D n = t - shift;  // round(16 x / ln 2) = 16 k + j
+    D r = fma(n, ln2_hi, xc);
+    r = fma(n, ln2_lo, r);
+    D p = D{} + 1.0 / 5040;
+    p = fma(p, r, D{} + 1.0 / 720);
+    p = fma(p, r, D{} + 1.0 / 120);
+    p = fma(p, r, D{} + 1.0 / 24);
+    p = fma(p, r, D{} + 1.0 / 6);
+    p = fma(p, r, D{} + 0.5);
+    p = fma(p, r, D{} + 1.0);
     p = p * r;
-    int64_t ni = int64_t(n);
-    int64_t k = ni >> 6, k1 = k >> 1, k2 = k - k1;
-    double tj = kExp2Table[ni & 63];
-    double s1 = bits_as_double(uint64_t(k1 + 1023) << 52);
-    double s2 = bits_as_double(uint64_t(k2 + 1023) << 52);
-    double y = std::fma(tj, p, tj) * s1 * s2;
-    y = x > 709.782712893384 ? std::numeric_limits<double>::infinity() : y;
-    y = x < -745.2 ? 0.0 : y;
-    return x != x ? x : y;
+    D tj = simd::lookup16(kExp2Table, t);
+    D y = simd::scale2k(fma(tj, p, tj), n * 0.0625);
+    const D inf = D{} + std::numeric_limits<double>::infinity();
+    return x > D{} + 709.782712893384 ? inf : y;
 }
 
 // log(x): x = (1 + f) 2^e with 1 + f in [sqrt(1/2), sqrt(2)) and f exact; with s = f/(2+f),

@@ -13,6 +13,9 @@ namespace {
 constexpr double kSqrtPi = 1.7724538509055160273;
 
 inline bool in_unit(double x) { return x >= 0.0 && x <= 1.0; }
+// value where x is in [0, 1], else 0: for double and simd::f64v (simd::map's lambdas)
+template <class D>
+RE_INLINE D on_unit(D x, D value) { return (x >= 0.0) & (x <= 1.0) ? value : D{}; }
 
 // Standard normal probability of (lo, hi) in units of sigma, without cancellation in the tails.
 double normal_mass(double lo, double hi) {
@@ -32,10 +35,7 @@ class ScaledGaussian final : public Integrand {
         reference = s * 0.5 * kSqrtPi * std::erf(1.0);
     }
     void eval(const double *x, double *f, size_t n) const override {
-        for (size_t i = 0; i < n; ++i) {
-            double v = s_ * fm::exp(-x[i] * x[i]);
-            f[i] = in_unit(x[i]) ? v : 0.0;
-        }
+        simd::map(x, f, n, [s = s_](auto v) { return on_unit(v, s * fm::exp(-v * v)); });
     }
   private:
     double s_;
@@ -74,11 +74,11 @@ class GaussianPeak final : public Integrand {
         description = s.str();
     }
     void eval(const double *x, double *f, size_t n) const override {
-        const double k = 1.0 / (sigma_ * std::sqrt(2 * M_PI)), h = -0.5 / (sigma_ * sigma_);
-        for (size_t i = 0; i < n; ++i) {
-            double d = x[i] - mu_, v = k * fm::exp(h * d * d);
-            f[i] = in_unit(x[i]) ? v : 0.0;
-        }
+        const double k = 1.0 / (sigma_ * std::sqrt(2 * M_PI)), h = -0.5 / (sigma_ * sigma_), mu = mu_;
+        simd::map(x, f, n, [=](auto v) {
+            auto d = v - mu;
+            return on_unit(v, k * fm::exp(h * d * d));
+        });
     }
   private:
     double mu_, sigma_;
@@ -169,8 +169,9 @@ class GaussianProduct final : public Integrand {
                 s += (v - 0.5) * (v - 0.5);
                 in = in && in_unit(v);
             }
-            f[i] = in ? fm::exp(-s) : 0.0;
+            f[i] = in ? -s : -std::numeric_limits<double>::infinity();  // exp(-inf) = 0
         }
+        simd::map(f, f, n, [](auto s) { return fm::exp(s); });
     }
 };
 
@@ -236,11 +237,12 @@ class Gaussian2D final : public Integrand {
     }
     void eval(const double *x, double *f, size_t n) const override {
         const double h = -0.5 / (s_ * s_);
-        for (size_t i = 0; i < n; ++i) {
+        for (size_t i = 0; i < n; ++i) {  // the exponent (-inf outside the box), then exp in place
             double dx = x[2 * i] - mx_, dy = x[2 * i + 1] - my_;
-            double v = fm::exp(h * (dx * dx + dy * dy));
-            f[i] = (in_unit(x[2 * i]) && in_unit(x[2 * i + 1])) ? v : 0.0;
+            bool in = in_unit(x[2 * i]) && in_unit(x[2 * i + 1]);
+            f[i] = in ? h * (dx * dx + dy * dy) : -std::numeric_limits<double>::infinity();
         }
+        simd::map(f, f, n, [](auto a) { return fm::exp(a); });
     }
     double value(double x, double y) const { double f, p[2] = {x, y}; eval(p, &f, 1); return f; }
   private:

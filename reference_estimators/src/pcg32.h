@@ -124,7 +124,8 @@ class LaneGenerator {
         auto output = [](u64v old) __attribute__((always_inline)) {  // PCG32 XSH-RR, low word of each lane
             u32v x = (u32v)(((old >> 18u) ^ old) >> 27u), rot = (u32v)(old >> 59u);
 #if defined(__AVX512F__)
-            return (u32v)_mm512_rorv_epi32((__m512i)x, (__m512i)rot);
+            // all-lanes mask form: the unmasked intrinsic trips GCC 12's -Wmaybe-uninitialized
+            return (u32v)_mm512_mask_rorv_epi32((__m512i)x, 0xffff, (__m512i)x, (__m512i)rot);
 #else
             return (x >> rot) | (x << ((-rot) & 31u));
 #endif

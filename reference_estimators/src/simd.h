@@ -1,0 +1,156 @@
+// Native-width double vectors, and the few operations vector kernels need that GCC's and
+// Clang's vector extensions lack: fused multiply-add, floor, a 16-entry table lookup and
+// scaling by 2^k.  Every operation has a scalar twin of the same name taking double, and the
+// two give bitwise the same result lane by lane.  A kernel written once as a template over
+// double and f64v (see map) therefore computes the same numbers in its vector body, in its
+// scalar tail and on every ISA: AVX-512 (one instruction each), AVX2 + FMA, and plain x86-64.
+#pragma once
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+
+#if defined(__AVX__) || defined(__AVX512F__)
+#include <immintrin.h>
+#endif
+
+#define RE_INLINE inline __attribute__((always_inline))
+
+namespace re::simd {
+
+// Wider-than-native vector types are lowered badly by GCC 12 (10x slower), so the width is
+// the machine's: 8 doubles with AVX-512, 4 with AVX, 2 otherwise.
+#if defined(__AVX512F__)
+constexpr size_t kWidth = 8;
+constexpr const char *kIsa = "AVX-512";
+#elif defined(__AVX2__) && defined(__FMA__)
+constexpr size_t kWidth = 4;
+constexpr const char *kIsa = "AVX2+FMA";
+#elif defined(__AVX__)
+constexpr size_t kWidth = 4;
+constexpr const char *kIsa = "AVX";
+#else
+constexpr size_t kWidth = 2;
+constexpr const char *kIsa = "SSE2";
+#endif
+
+typedef double f64v __attribute__((vector_size(8 * kWidth)));
+typedef int64_t i64v __attribute__((vector_size(8 * kWidth)));
+typedef uint64_t u64v __attribute__((vector_size(8 * kWidth)));
+
+RE_INLINE f64v load(const double *p) { f64v v; std::memcpy(&v, p, sizeof v); return v; }
+RE_INLINE void store(double *p, f64v v) { std::memcpy(p, &v, sizeof v); }
+
+RE_INLINE uint64_t bits(double d) { uint64_t b; std::memcpy(&b, &d, 8); return b; }
+RE_INLINE u64v bits(f64v v) { return (u64v)v; }
+RE_INLINE double from_bits(uint64_t b) { double d; std::memcpy(&d, &b, 8); return d; }
+RE_INLINE f64v from_bits(u64v b) { return (f64v)b; }
+
+// Applies a scalar function to each lane (the fallback where no instruction exists).
+template <class Fn>
+RE_INLINE f64v per_lane(f64v x, Fn fn) {
+    for (size_t w = 0; w < kWidth; ++w) x[w] = fn(x[w]);
+    return x;
+}
+
+// a * b + c with one rounding (std::fma is correctly rounded by definition).
+RE_INLINE double fma(double a, double b, double c) { return std::fma(a, b, c); }
+RE_INLINE f64v fma(f64v a, f64v b, f64v c) {
+#if defined(__AVX512F__)
+    return (f64v)_mm512_fmadd_pd((__m512d)a, (__m512d)b, (__m512d)c);
+#elif defined(__AVX__) && defined(__FMA__)
+    return (f64v)_mm256_fmadd_pd((__m256d)a, (__m256d)b, (__m256d)c);
+#else
+    for (size_t w = 0; w < kWidth; ++w) a[w] = std::fma(a[w], b[w], c[w]);
+    return a;
+#endif
+}
+
+// a > b ? a : b and a < b ? a : b, exactly (a NaN in either, or a tie, gives b): the
+// definition of x86's maxpd / minpd, one instruction where compilers emit compare and blend.
+RE_INLINE double max_or_second(double a, double b) { return a > b ? a : b; }
+RE_INLINE double min_or_second(double a, double b) { return a < b ? a : b; }
+RE_INLINE f64v max_or_second(f64v a, f64v b) {
+#if defined(__AVX512F__)
+    return (f64v)_mm512_mask_max_pd((__m512d)a, 0xff, (__m512d)a, (__m512d)b);  // mask form: see scale2k
+#elif defined(__AVX__)
+    return (f64v)_mm256_max_pd((__m256d)a, (__m256d)b);
+#else
+    return a > b ? a : b;
+#endif
+}
+RE_INLINE f64v min_or_second(f64v a, f64v b) {
+#if defined(__AVX512F__)
+    return (f64v)_mm512_mask_min_pd((__m512d)a, 0xff, (__m512d)a, (__m512d)b);
+#elif defined(__AVX__)
+    return (f64v)_mm256_min_pd((__m256d)a, (__m256d)b);
+#else
+    return a < b ? a : b;
+#endif
+}
+
+RE_INLINE double floor(double x) { return std::floor(x); }
+RE_INLINE f64v floor(f64v x) {
+#if defined(__AVX512F__)
+    return (f64v)_mm512_mask_roundscale_pd((__m512d)x, 0xff, (__m512d)x, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC);
+#elif defined(__AVX__)
+    return (f64v)_mm256_floor_pd((__m256d)x);
+#else
+    return per_lane(x, [](double v) { return std::floor(v); });
+#endif
+}
+
+// table[bits(t) & 15]: the low four bits of t's representation pick the entry (table: 16
+// doubles, 64-byte aligned).
+RE_INLINE double lookup16(const double *table, double t) { return table[bits(t) & 15u]; }
+RE_INLINE f64v lookup16(const double *table, f64v t) {
+#if defined(__AVX512F__)
+    // The table lives in two registers; vpermt2pd reads the low four bits of each index lane.
+    return (f64v)_mm512_permutex2var_pd(_mm512_load_pd(table), (__m512i)t, _mm512_load_pd(table + 8));
+#elif defined(__AVX2__)
+    return (f64v)_mm256_i64gather_pd(table, (__m256i)(bits(t) & 15u), 8);
+#else
+    u64v j = bits(t) & 15u;
+    f64v r;
+    for (size_t w = 0; w < kWidth; ++w) r[w] = table[j[w]];
+    return r;
+#endif
+}
+
+// 2^k for integral k in [-1022, 1023], from the bits of k + 2^52 + 1023 (whose low bits are
+// the biased exponent).
+template <class D>
+RE_INLINE D pow2_integral(D k) {
+    return from_bits(bits(k + (0x1p52 + 1023.0)) << 52u);
+}
+
+// y * 2^floor(k), correctly rounded (one rounding: overflow gives inf, subnormal results are
+// rounded once), for |y| in [0.5, 4) and floor(k) in [-1077, 1024]; NaN stays NaN.  Without
+// AVX-512's vscalefpd, in two exact-or-once-rounded steps 2^k1 2^k2 with k1 = floor(k/2): y 2^k1
+// is a normal number, so only the second product rounds.
+template <class D>
+RE_INLINE D scale2k_steps(D y, D k) {
+    D kf = floor(k), k1 = floor(kf * 0.5), k2 = kf - k1;
+    return y * pow2_integral(k1) * pow2_integral(k2);
+}
+RE_INLINE double scale2k(double y, double k) { return scale2k_steps(y, k); }
+RE_INLINE f64v scale2k(f64v y, f64v k) {
+#if defined(__AVX512F__)
+    // the all-lanes mask form: the unmasked intrinsic reads an "undefined" register, which GCC
+    // 12 warns about under -Wall
+    return (f64v)_mm512_mask_scalef_pd((__m512d)y, 0xff, (__m512d)y, (__m512d)k);
+#else
+    return scale2k_steps(y, k);
+#endif
+}
+
+// y[i] = fn(x[i]) for i < n: fn is a generic lambda, called on whole vectors (f64v) and on
+// the scalar tail (double); written with the operations above it gives the same bits in both.
+template <class Fn>
+RE_INLINE void map(const double *x, double *y, size_t n, Fn fn) {
+    size_t i = 0;
+    for (; i + kWidth <= n; i += kWidth) store(y + i, fn(load(x + i)));
+    for (; i < n; ++i) y[i] = fn(x[i]);
+}
+
+}  // namespace re::simd
