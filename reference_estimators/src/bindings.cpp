@@ -185,6 +185,20 @@ NB_MODULE(_core, m) {
     m.attr("ISSUES") = nb::make_tuple("nan", "posinf", "neginf", "negative", "outside_domain", "zero_pdf", "bad_pdf",
                                       "bound_violation");
     m.def("hardware_threads", &ThreadPool::default_threads);
+    m.def("build_info", [] {
+        nb::dict d;
+        d["isa"] = simd::kIsa;  // what the kernels were compiled for: no runtime dispatch
+        d["vector_doubles"] = simd::kWidth;
+        d["rng_lanes"] = LaneGenerator::kLanes;
+        d["march"] = RE_MARCH;
+        d["compiler"] = __VERSION__;
+        d["chunk_size"] = kChunkSize;
+        __builtin_cpu_init();
+        d["cpu_isa"] = __builtin_cpu_supports("avx512f") ? "AVX-512"
+                       : (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma")) ? "AVX2+FMA"
+                       : __builtin_cpu_supports("avx") ? "AVX" : "SSE2";
+        return d;
+    }, "How the core was built (ISA, vector width, -march, compiler) and the best ISA this CPU supports.");
 
     nb::class_<Integrand>(m, "Integrand")
         .def_ro("name", &Integrand::name)
@@ -395,6 +409,22 @@ NB_MODULE(_core, m) {
         return estimate_dict(e);
     }, "integrand"_a, "technique"_a, "n"_a, "seed"_a = 0, "case_id"_a = 0, "replica"_a = 0, "threads"_a = 0,
        "higher_moments"_a = true);
+    m.def("profile_stages", [check_pair](const Integrand &f, const Technique &t, int64_t n, uint64_t seed, int threads) {
+        check_n(n);
+        check_pair(f, t);
+        RunOptions o = options(seed, 0, 0, threads);
+        StageTimes st;
+        {
+            nb::gil_scoped_release g;
+            st = profile_stages(f, t, uint64_t(n), o);
+        }
+        nb::dict d;
+        d["points"] = st.points;
+        d["contributions"] = st.contributions;
+        d["estimate"] = estimate_dict(st.estimate);
+        return d;
+    }, "integrand"_a, "technique"_a, "n"_a, "seed"_a = 0, "threads"_a = 0,
+       "Seconds of the pipeline's prefixes (points; contributions; the whole estimate) on the same chunks.");
     m.def("integrate_chunks", [check_pair](const Integrand &f, const Technique &t, int64_t n, uint64_t seed,
                                            uint64_t case_id, uint64_t replica, uint64_t chunk_begin, uint64_t chunk_end,
                                            int threads) {

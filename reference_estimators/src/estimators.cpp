@@ -356,6 +356,42 @@ Estimate integrate(const Integrand &f, const Technique &t, uint64_t n, const Run
     });
 }
 
+StageTimes profile_stages(const Integrand &f, const Technique &t, uint64_t n, const RunOptions &opt) {
+    check_technique(f, t);
+    const Kernel k(f, t, n, opt.key);
+    const uint64_t nc = chunk_count(n);
+    const int threads = resolve_threads(opt.threads);
+    const bool rejection = t.sampler->method == SamplingMethod::Rejection;
+    PerWorker<Scratch> scratch(threads);
+    // One pass stopping after the points or after the contributions; each chunk keeps one of
+    // its values (sink), so nothing computed can be optimised away.
+    auto pass = [&](bool with_contributions) {
+        std::vector<double> sink(nc, 0.0);
+        auto t0 = std::chrono::steady_clock::now();
+        ThreadPool::instance().run(nc, threads, [&](size_t c, int w) {
+            UniformStream stream(chunk_key(opt.key, c));
+            Scratch &s = scratch.get(w, [&] { return k.scratch(); });
+            Diagnostics diag;
+            uint64_t first = c * kChunkSize, count = std::min(kChunkSize, n - first);
+            for_each_block(count, [&](uint64_t b, size_t m) {
+                if (with_contributions) {
+                    block_contributions(k, stream, m, first + b, s, diag);
+                    sink[c] += s.y[m - 1];
+                } else if (!rejection) {
+                    fill_points(k.points, stream, first + b, m, k.ud, s.u.data());
+                    sink[c] += s.u[m * size_t(k.ud) - 1];
+                }
+            });
+        });
+        return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    };
+    StageTimes r;
+    r.points = rejection ? 0.0 : pass(false);
+    r.contributions = pass(true);
+    r.estimate = integrate(f, t, n, opt);
+    return r;
+}
+
 void contributions(const Integrand &f, const Technique &t, uint64_t n, const RunOptions &opt, double *out) {
     check_technique(f, t);
     const Kernel k(f, t, n, opt.key);

@@ -32,6 +32,16 @@ struct RunOptions {
     uint64_t chunk_begin = 0, chunk_end = UINT64_MAX;
 };
 
+// Wall seconds of each prefix of integrate()'s pipeline, each run over the same chunks on the
+// same threads: the point set alone (0 for rejection samplers, which draw inside the
+// sampler), the contributions (points, sampling, integrand, estimator arithmetic), and the
+// whole estimate (screening and accumulation too).  Differences give each stage's cost.
+struct StageTimes {
+    double points = 0, contributions = 0;
+    Estimate estimate;  // the whole pipeline: its seconds and per-thread busy time
+};
+StageTimes profile_stages(const Integrand &f, const Technique &t, uint64_t n, const RunOptions &opt);
+
 // Merges states in the order given (Chan/Pebay; the same order gives the same bits).
 Estimate merge_estimates(const std::vector<Estimate> &parts);
 
