@@ -39,7 +39,7 @@ import numpy as np
 # drjit LLVM targets for --drjit-target: (cpu, features, vector width)
 DRJIT_TARGETS = {
     "haswell": ("haswell", "+avx,+avx2,+fma,+f16c,+bmi,+bmi2,+popcnt,+sse4.2,+lzcnt,+movbe,"
-                           "-avx512f,-avx512vl,-avx512bw,-avx512dq,-avx512cd", 4),
+                           "-avx512f,-avx512vl,-avx512bw,-avx512dq,-avx512cd", 8),
 }
 
 

@@ -1,0 +1,117 @@
+"""The C++ core built for other ISAs, side by side with this machine's build: the same bits,
+and how fast each one runs.
+
+Builds reference_estimators/_core with CMake into build/isa-<march>/ for each --march
+(default: haswell, the AVX2 + FMA baseline, and x86-64, plain SSE2), then
+  --identity    compares, bit for bit, every catalogue estimate (all techniques, random,
+                stratified and Sobol' points, 1 and 2 threads) and the elementary functions'
+                values between the installed build and each variant; exit status 1 on any
+                difference (tests/core/test_isa_builds.py runs this)
+  --throughput  runs benchmarks/uniform_mc.py on each variant, drjit targeting the same ISA
+                where it can (haswell), so an AVX2 build is compared with AVX2 drjit code
+
+    .venv/bin/python benchmarks/isa_builds.py --identity [--march haswell x86-64]
+    .venv/bin/python benchmarks/isa_builds.py --throughput --march haswell
+
+Needs cmake, ninja and nanobind (setup.sh installs them).
+"""
+from __future__ import annotations
+
+import argparse
+import glob
+import json
+import os
+import subprocess
+import sys
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+# Runs in a subprocess with one build of the core loaded: digests of everything it computes.
+DIGEST = r"""
+import importlib.util, json, sys
+import numpy as np
+path = sys.argv[1]
+if path:
+    spec = importlib.util.spec_from_file_location("reference_estimators._core", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    sys.modules["reference_estimators._core"] = module
+import reference_estimators as rest
+from reference_estimators import _core, kernels
+
+out = {"isa": _core.build_info()["isa"]}
+for f in rest.catalogue():
+    for name in rest.techniques(f):
+        for threads in (1, 2):
+            e = rest.integrate(f, name, 100_000, seed=3, threads=threads)
+            fields = (e.mean, e.variance, e.skewness, e.kurtosis, e.min, e.max)
+            out[f"{f.name}/{name}/{threads}"] = [float(v).hex() for v in fields] + [e.n]
+rng = np.random.default_rng(0)
+x = np.concatenate([rng.uniform(-746, 710, 20_000), rng.uniform(-745.2, -708, 2_000),
+                    [np.nan, np.inf, -np.inf]])
+out["exp"] = kernels.fast_exp(x).tobytes().hex()
+u = rng.random(20_000)
+out["log"] = kernels.fast_log(u * 10.0 ** rng.uniform(-300, 300, u.size)).tobytes().hex()
+out["sincos"] = b"".join(a.tobytes() for a in kernels.fast_sincos_2pi(u * 6 - 3)).hex()
+print(json.dumps(out))
+"""
+
+
+def build(march: str) -> str:
+    """Configures and builds the core for -march=<march>; returns the module's path."""
+    out = os.path.join(ROOT, "build", f"isa-{march}")
+    configure = ["cmake", "-S", os.path.join(ROOT, "reference_estimators"), "-B", out, "-G", "Ninja",
+                 f"-DRE_MARCH={march}", f"-DPython_EXECUTABLE={sys.executable}", "-DCMAKE_BUILD_TYPE=Release"]
+    for cmd in (configure, ["cmake", "--build", out]):
+        r = subprocess.run(cmd, capture_output=True, text=True)
+        if r.returncode:
+            raise SystemExit(f"building the core for -march={march} failed:\n"
+                             f"{r.stdout[-3000:]}{r.stderr[-3000:]}")
+    (module,) = glob.glob(os.path.join(out, "_core*.so"))
+    return module
+
+
+def digest(core: str) -> dict:
+    r = subprocess.run([sys.executable, "-c", DIGEST, core], capture_output=True, text=True, cwd=ROOT)
+    if r.returncode:
+        raise SystemExit(f"computing with {core or 'the installed core'} failed:\n{r.stderr[-3000:]}")
+    return json.loads(r.stdout)
+
+
+def identity(marches: list[str]) -> int:
+    base = digest("")
+    print(f"installed build: {base['isa']}, {len(base) - 4} estimates and 3 elementary functions")
+    status = 0
+    for march in marches:
+        other = digest(build(march))
+        differ = [k for k in base if k != "isa" and base[k] != other.get(k)]
+        print(f"-march={march} ({other['isa']}): "
+              + ("bitwise identical" if not differ else f"{len(differ)} differ, e.g. {differ[:5]}"))
+        status |= bool(differ)
+    return status
+
+
+def throughput(marches: list[str], extra: list[str]) -> None:
+    for march in marches:
+        script = os.path.join(ROOT, "benchmarks", "uniform_mc.py")
+        cmd = [sys.executable, script, "--core", build(march), *extra]
+        if march == "haswell":
+            cmd += ["--drjit-target", "haswell"]
+        print(f"\n=== -march={march} ===", flush=True)
+        subprocess.run(cmd, check=True)
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--march", nargs="+", default=["haswell", "x86-64"])
+    parser.add_argument("--identity", action="store_true")
+    parser.add_argument("--throughput", action="store_true")
+    parser.add_argument("--samples", default="1e8", help="for --throughput")
+    args = parser.parse_args()
+    if not (args.identity or args.throughput):
+        parser.error("say --identity, --throughput or both")
+    code = identity(args.march) if args.identity else 0
+    if args.throughput:
+        throughput(args.march, ["--samples", args.samples])
+    sys.exit(code)
