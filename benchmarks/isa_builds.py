@@ -37,9 +37,9 @@ if path:
     spec.loader.exec_module(module)
     sys.modules["reference_estimators._core"] = module
 import reference_estimators as rest
-from reference_estimators import _core, kernels
+from reference_estimators import kernels
 
-out = {"isa": _core.build_info()["isa"]}
+out = {"isa": rest.build_info()["isa"]}
 for f in rest.catalogue():
     for name in rest.techniques(f):
         for threads in (1, 2):

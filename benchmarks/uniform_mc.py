@@ -155,24 +155,17 @@ def numpy_mc(n: int) -> float:
 
 def core_stages(rest: Any, n: int, threads: int, repeat: int) -> dict[str, float]:
     """Best seconds of each prefix of the core's pipeline (points; contributions; everything)."""
-    from reference_estimators import _core
-
-    f, t = rest.integrand("gaussian"), rest.technique("gaussian", "uniform")
     best = {"points": np.inf, "contributions": np.inf, "full": np.inf}
     for _ in range(repeat + 1):
-        d = _core.profile_stages(f, t, n, threads=threads)
-        best["points"] = min(best["points"], d["points"])
-        best["contributions"] = min(best["contributions"], d["contributions"])
-        best["full"] = min(best["full"], d["estimate"]["seconds"])
+        d = rest.profile_stages("gaussian", "uniform", n, threads=threads)
+        best = {k: min(v, d[k]) for k, v in best.items()}
     return best
 
 
 def main() -> None:
     rest = load_core(ARGS.core)
-    from reference_estimators import _core
-
     n, repeat = int(float(ARGS.samples)), ARGS.repeat
-    info = _core.build_info()
+    info = rest.build_info()
     print(f"uniform MC of exp(-x^2) on [0,1], n = {n:.0e} float64 samples, best of {repeat}")
     print(f"CPU: {cpu_line()}")
     print(f"core: built for {info['isa']} (-march={info['march'] or '(none)'}, GCC {info['compiler']}), "

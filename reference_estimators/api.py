@@ -23,7 +23,7 @@ __all__ = [
     "points",
     "integrate", "integrate_chunks", "estimate_from_states", "estimate_of_states", "merge_states",
     "contributions", "accumulate", "accumulate_chunk",
-    "estimate_from_samples", "hardware_threads",
+    "estimate_from_samples", "hardware_threads", "side_extremes", "build_info", "profile_stages",
 ]
 
 Integrand = _core.Integrand
@@ -325,6 +325,38 @@ def accumulate(values: Any, *, threads: int | None = None) -> Estimate:
     if y.size == 0:
         raise ValueError("'values' must not be empty")
     return Estimate.from_core(_core.accumulate(y, _threads(threads)))
+
+
+def build_info() -> dict[str, Any]:
+    """How the core was built: ``isa`` its kernels were compiled for (there is no runtime
+    dispatch: they run as built), ``vector_doubles`` per vector, ``rng_lanes`` of PCG32,
+    ``march`` (-march), ``compiler``, ``chunk_size``; and ``cpu_isa``, the best this CPU runs."""
+    return dict(_core.build_info())
+
+
+def profile_stages(f: str | Integrand, t: str | Technique, n: int, *, seed: int = 0,
+                   threads: int | None = None) -> dict[str, Any]:
+    """Wall seconds of each prefix of ``integrate``'s pipeline on the same chunks and threads:
+    ``points`` (the point set alone; 0 for rejection samplers, which draw inside the sampler),
+    ``contributions`` (points, sampling, integrand, estimator arithmetic) and ``full`` (the
+    whole estimate: screening and accumulation too), with ``estimate``, the full run's
+    Estimate (its ``busy`` seconds per thread).  Differences give each stage's cost."""
+    fi = integrand(f)
+    d = _core.profile_stages(fi, technique(fi, t), _count(n, "n"), _seed(seed), _threads(threads))
+    est = Estimate.from_core(d["estimate"])
+    return {"points": d["points"], "contributions": d["contributions"], "full": est.seconds, "estimate": est}
+
+
+def side_extremes(values: Any, center: float, *, upper: bool, keep: int) -> tuple[float, int, np.ndarray]:
+    """The largest positive deviations of ``values`` from ``center`` on one side: d = y - center
+    (``upper``) or center - y, in float64 as numpy computes them, NaN values having none.
+    Returns (peak, ties, below): the largest d (NaN if no d is positive), how many d equal it,
+    and the ``keep`` largest d strictly below it, descending.  One pass in C++."""
+    y = np.ascontiguousarray(values, dtype=np.float64)
+    if y.ndim != 1:
+        raise ValueError(f"'values' must be one-dimensional, got shape {y.shape}")
+    peak, ties, below = _core.side_extremes(y, float(center), bool(upper), _count(keep, "keep"))
+    return peak, ties, below
 
 
 def estimate_from_samples(f: str | Integrand, points: Any, pdf: Any, *, sampler: Sampler | None = None,

@@ -19,6 +19,8 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+import reference_estimators as rest
+
 __all__ = ["TailSample", "Side", "TailEnd", "tail_index_of"]
 
 _MIN_ORDER = 21          # order statistics below which no tail estimate is made
@@ -53,12 +55,12 @@ class Side:
         self.keep, self.peak, self.ties = keep, peak, ties
         self.below = np.asarray(below, dtype=float)
 
-    def add(self, d: np.ndarray) -> None:
-        """Takes a block's deviations ``d`` (only the positive ones count)."""
-        d = d[d > 0]
-        if d.size:
-            top = float(d.max())
-            self.merge(Side(self.keep, top, int(np.count_nonzero(d == top)), self._top(d[d < top])))
+    def add(self, y: np.ndarray, center: float, upper: bool) -> None:
+        """Takes a block's deviations from ``center`` (y - center if ``upper``, else center - y;
+        only the positive ones count), selected in one pass by the core."""
+        peak, ties, below = rest.side_extremes(y, center, upper=upper, keep=self.keep)
+        if ties:
+            self.merge(Side(self.keep, peak, ties, below))
 
     def merge(self, other: Side) -> None:
         """Takes the extremes of another side (about the same centre) into this one."""
@@ -154,8 +156,8 @@ class TailSample:
             return
         if self.center is None:  # a middle value, not an average of two: finite up to 1.8e308
             self.center = float(np.partition(y, y.size // 2)[y.size // 2])
-        self.up.add(y - self.center)
-        self.down.add(self.center - y)
+        self.up.add(y, self.center, upper=True)
+        self.down.add(y, self.center, upper=False)
 
     def state(self) -> dict[str, Any]:
         """JSON-serialisable: what :meth:`from_state` restores (see harness.suite.estimators)."""

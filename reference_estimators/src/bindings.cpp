@@ -14,6 +14,7 @@
 #include <sstream>
 
 #include "estimators.h"
+#include "extremes.h"
 #include "fastmath.h"
 #include "thread_pool.h"
 
@@ -409,6 +410,21 @@ NB_MODULE(_core, m) {
         return estimate_dict(e);
     }, "integrand"_a, "technique"_a, "n"_a, "seed"_a = 0, "case_id"_a = 0, "replica"_a = 0, "threads"_a = 0,
        "higher_moments"_a = true);
+    m.def("side_extremes", [](InArray y, double center, bool upper, int64_t keep) {
+        if (y.ndim() != 1) throw nb::value_error("'values' must be one-dimensional");
+        if (keep < 0) throw nb::value_error("'keep' must be >= 0");
+        SideExtremes s;
+        {
+            nb::gil_scoped_release g;
+            s = side_extremes(y.data(), y.size(), center, upper, size_t(keep));
+        }
+        double *out;
+        OutArray below = new_array(s.below.size(), 0, &out);
+        std::copy(s.below.begin(), s.below.end(), out);
+        return nb::make_tuple(s.peak, s.ties, below);
+    }, "values"_a, "center"_a, "upper"_a, "keep"_a,
+       "(peak, ties, below): the largest positive deviation y - center (upper) or center - y (lower), how many "
+       "equal it, and the `keep` largest strictly below it, descending; peak NaN if none is positive.");
     m.def("profile_stages", [check_pair](const Integrand &f, const Technique &t, int64_t n, uint64_t seed, int threads) {
         check_n(n);
         check_pair(f, t);
