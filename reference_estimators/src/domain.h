@@ -61,6 +61,37 @@ struct Domain {
         return false;
     }
 
+    // How many of the n points x[0..n) (n x dim) contains() rejects: the same tests, written
+    // branch-free per kind so that the loop vectorises (it screens every sampled block).
+    size_t count_outside(const double *x, size_t n) const {
+        size_t out = 0;
+        switch (kind) {
+            case DomainKind::Box:
+                if (dim == 1) {
+                    const double a = lo[0], b = hi[0];
+                    for (size_t i = 0; i < n; ++i) out += !((x[i] >= a) & (x[i] <= b));
+                    return out;
+                }
+                for (size_t i = 0; i < n; ++i) out += !contains(x + i * size_t(dim));
+                return out;
+            case DomainKind::HalfLine:
+                for (size_t i = 0; i < n; ++i)
+                    out += !((x[i] >= 0) & (x[i] <= std::numeric_limits<double>::max()));
+                return out;
+            case DomainKind::Hemisphere:
+            case DomainKind::Sphere: {
+                const bool sphere = kind == DomainKind::Sphere;
+                for (size_t i = 0; i < n; ++i) {
+                    const double *w = x + 3 * i;
+                    double r2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
+                    out += !((std::fabs(r2 - 1.0) <= 1e-5) & (sphere | (w[2] >= 0)));
+                }
+                return out;
+            }
+        }
+        return n;
+    }
+
     std::string kind_name() const {
         switch (kind) {
             case DomainKind::Box: return dim == 1 ? "interval" : (dim == 2 ? "square" : "box");

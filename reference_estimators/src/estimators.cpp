@@ -78,9 +78,8 @@ size_t check_samples(const Domain &dom, const double *x, const double *p, size_t
                      Diagnostics &diag, unsigned char *drop) {
     size_t badp = 0;
     for (size_t i = 0; i < m; ++i) badp += !(p[i] > 0 && p[i] <= kMax);
-    size_t outside = 0;
+    const size_t outside = dom.count_outside(x, m);
     const int d = dom.dim;
-    for (size_t i = 0; i < m; ++i) outside += !dom.contains(x + i * d);
     if (badp == 0 && outside == 0) return 0;
     size_t marked = 0;
     for (size_t i = 0; i < m; ++i) {
