@@ -9,6 +9,16 @@ namespace re {
 
 enum class DomainKind { Box, HalfLine, Hemisphere, Sphere };
 
+// Membership of directions: unit length to 1e-5 in |w|^2 (float32 renderers hand over unit
+// vectors with |w|^2 - 1 of order 1e-7), and z >= 0 for the hemisphere.  Free functions,
+// branch-free, so that the direction samplers' pdf loops vectorise (Domain::contains switches
+// on the kind at run time).
+inline bool on_sphere(const double *w) {
+    double r2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
+    return std::fabs(r2 - 1.0) <= 1e-5;
+}
+inline bool on_hemisphere(const double *w) { return on_sphere(w) & (w[2] >= 0); }
+
 struct Domain {
     DomainKind kind = DomainKind::Box;
     int dim = 1;                   // coordinates per point (3 for directions)
@@ -42,8 +52,7 @@ struct Domain {
         return 0;
     }
 
-    // Closed membership; directions must be unit length to 1e-5 in |w|^2 (float32 renderers
-    // hand over unit vectors with |w|^2 - 1 of order 1e-7).
+    // Closed membership (directions: on_sphere, on_hemisphere).
     bool contains(const double *x) const {
         switch (kind) {
             case DomainKind::Box:
@@ -51,12 +60,8 @@ struct Domain {
                     if (!(x[j] >= lo[j] && x[j] <= hi[j])) return false;
                 return true;
             case DomainKind::HalfLine: return x[0] >= 0 && x[0] <= std::numeric_limits<double>::max();
-            case DomainKind::Hemisphere:
-            case DomainKind::Sphere: {
-                double r2 = x[0] * x[0] + x[1] * x[1] + x[2] * x[2];
-                if (!(std::fabs(r2 - 1.0) <= 1e-5)) return false;
-                return kind == DomainKind::Sphere || x[2] >= 0;
-            }
+            case DomainKind::Hemisphere: return on_hemisphere(x);
+            case DomainKind::Sphere: return on_sphere(x);
         }
         return false;
     }
@@ -79,15 +84,11 @@ struct Domain {
                     out += !((x[i] >= 0) & (x[i] <= std::numeric_limits<double>::max()));
                 return out;
             case DomainKind::Hemisphere:
-            case DomainKind::Sphere: {
-                const bool sphere = kind == DomainKind::Sphere;
-                for (size_t i = 0; i < n; ++i) {
-                    const double *w = x + 3 * i;
-                    double r2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
-                    out += !((std::fabs(r2 - 1.0) <= 1e-5) & (sphere | (w[2] >= 0)));
-                }
+                for (size_t i = 0; i < n; ++i) out += !on_hemisphere(x + 3 * i);
                 return out;
-            }
+            case DomainKind::Sphere:
+                for (size_t i = 0; i < n; ++i) out += !on_sphere(x + 3 * i);
+                return out;
         }
         return n;
     }

@@ -142,7 +142,7 @@ class UniformHemisphere final : public Pointwise<UniformHemisphere> {
   public:
     UniformHemisphere() { name = "uniform_hemisphere"; domain = Domain::hemisphere(); udim = 2; }
     double sample_one(const double *u, double *w) const { sample_uniform_hemisphere(u[0], u[1], w); return uniform_hemisphere_pdf(w); }
-    double pdf_one(const double *w) const { return domain.contains(w) ? uniform_hemisphere_pdf(w) : 0.0; }
+    double pdf_one(const double *w) const { return on_hemisphere(w) ? uniform_hemisphere_pdf(w) : 0.0; }
     void invert_one(const double *w, double *u) const {
         bool in = domain.contains(w);
         u[0] = in ? w[2] : kNaN;
@@ -154,7 +154,7 @@ class UniformSphere final : public Pointwise<UniformSphere> {
   public:
     UniformSphere() { name = "uniform_sphere"; domain = Domain::sphere(); udim = 2; }
     double sample_one(const double *u, double *w) const { sample_uniform_sphere(u[0], u[1], w); return uniform_sphere_pdf(w); }
-    double pdf_one(const double *w) const { return domain.contains(w) ? uniform_sphere_pdf(w) : 0.0; }
+    double pdf_one(const double *w) const { return on_sphere(w) ? uniform_sphere_pdf(w) : 0.0; }
     void invert_one(const double *w, double *u) const {
         bool in = domain.contains(w);
         u[0] = in ? (1 - w[2]) / 2 : kNaN;
@@ -166,7 +166,7 @@ class CosineHemisphere final : public Pointwise<CosineHemisphere> {
   public:
     CosineHemisphere() { name = "cosine_hemisphere"; domain = Domain::hemisphere(); udim = 2; }
     double sample_one(const double *u, double *w) const { sample_cosine_hemisphere(u[0], u[1], w); return cosine_hemisphere_pdf(w); }
-    double pdf_one(const double *w) const { return domain.contains(w) ? cosine_hemisphere_pdf(w) : 0.0; }
+    double pdf_one(const double *w) const { return on_hemisphere(w) ? cosine_hemisphere_pdf(w) : 0.0; }
     void invert_one(const double *w, double *u) const {
         bool in = domain.contains(w);
         u[0] = in ? w[0] * w[0] + w[1] * w[1] : kNaN;
@@ -180,7 +180,7 @@ class UniformCone final : public Pointwise<UniformCone> {
         name = "uniform_cone"; params = {{"cos_max", cos_max}}; domain = Domain::sphere(); udim = 2;
     }
     double sample_one(const double *u, double *w) const { sample_uniform_cone(u[0], u[1], c_, w); return uniform_cone_pdf(w, c_); }
-    double pdf_one(const double *w) const { return domain.contains(w) ? uniform_cone_pdf(w, c_) : 0.0; }
+    double pdf_one(const double *w) const { return on_sphere(w) ? uniform_cone_pdf(w, c_) : 0.0; }
     void invert_one(const double *w, double *u) const {
         bool in = domain.contains(w) && w[2] >= c_;
         u[0] = in ? (1 - w[2]) / (1 - c_) : kNaN;
@@ -194,7 +194,7 @@ class Ggx final : public Pointwise<Ggx> {
   public:
     explicit Ggx(double alpha) : a_(alpha) { name = "ggx"; params = {{"alpha", alpha}}; domain = Domain::hemisphere(); udim = 2; }
     double sample_one(const double *u, double *w) const { sample_ggx(u[0], u[1], a_, w); return ggx_pdf(w, a_); }
-    double pdf_one(const double *w) const { return domain.contains(w) ? ggx_pdf(w, a_) : 0.0; }
+    double pdf_one(const double *w) const { return on_hemisphere(w) ? ggx_pdf(w, a_) : 0.0; }
     void invert_one(const double *w, double *u) const {
         bool in = domain.contains(w) && w[2] > 0;
         double t2 = (w[0] * w[0] + w[1] * w[1]) / (w[2] * w[2]), a2 = a_ * a_;
