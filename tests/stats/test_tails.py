@@ -86,6 +86,6 @@ def test_tail_index_reads_heavy_light_and_bounded_tails():
 
 def test_a_side_without_values_has_no_end_and_an_infinite_index():
     s = Side(50)
-    s.add(np.array([-1.0, 0.0]))
+    s.add(np.array([-1.0, 0.0]), center=0.0, upper=True)  # no deviation above the centre
     assert s.peak is None and s.end(0.01) is None and s.tail_index() == math.inf
     assert s.descending().size == 0
