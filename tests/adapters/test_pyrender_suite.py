@@ -116,8 +116,12 @@ def test_a_planted_offset_bias_is_found(tmp_path, monkeypatch):
     summary = run_suite(suite, tmp_path / "shifted.sqlite")
     b = summary["render"].results[0].bias
     assert [v["bias"] for v in summary["render"].verdicts] == ["biased (expected)"]
-    # a shift keeps the image's mean: a fine scale (pixels or small tiles along the edges) finds it
-    assert b.worst_scale.size in (1, 2, 4) and b.worst_scale.rejected and b.pvalue_mean > suite.alpha
+    # a shift keeps the image's mean: fine scales (pixels or small tiles along the edges) find it,
+    # the whole image's mean does not (which scale is the most significant depends on the render
+    # seeds, which follow the core's build: 8x8 tiles along an edge may beat the pixels)
+    fine = [s for s in b.scales if s.size in (1, 2, 4)]
+    assert any(s.rejected for s in fine), [(s.size, s.pvalue, s.alpha) for s in b.scales]
+    assert b.pvalue_mean > suite.alpha
 
 
 def test_nan_frames_are_counted_not_averaged(tmp_path, monkeypatch):
