@@ -67,7 +67,7 @@ import numpy as np
 from scipy.stats import qmc
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from uniform_mc import DRJIT_TARGETS, Drjit, alternating, best_of, cpu_line, load_core  # noqa: E402
+from uniform_mc import Drjit, add_core_arguments, alternating, best_of, cpu_line, load_core  # noqa: E402
 
 BATCH = 1 << 21             # numpy samples per batch
 N_VALIDATE = 1 << 18        # samples of each validation run
@@ -583,9 +583,6 @@ if __name__ == "__main__":
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--samples", default="2e7", help="samples (contributions) a row")
     parser.add_argument("--repeat", type=int, default=3)
-    parser.add_argument("--core", help="path of another build of reference_estimators/_core")
-    parser.add_argument("--drjit-target", choices=sorted(DRJIT_TARGETS),
-                        help="make drjit's LLVM backend target this CPU (AVX2: haswell)")
-    parser.add_argument("--no-drjit", action="store_true", help="leave drjit out")
+    add_core_arguments(parser)
     ARGS = parser.parse_args()
     main()

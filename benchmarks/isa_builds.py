@@ -28,15 +28,11 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 # Runs in a subprocess with one build of the core loaded: digests of everything it computes.
 DIGEST = r"""
-import importlib.util, json, sys
+import json, sys
 import numpy as np
-path = sys.argv[1]
-if path:
-    spec = importlib.util.spec_from_file_location("reference_estimators._core", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    sys.modules["reference_estimators._core"] = module
-import reference_estimators as rest
+sys.path.insert(0, "benchmarks")
+from uniform_mc import load_core
+rest = load_core(sys.argv[1])
 from reference_estimators import kernels
 
 out = {"isa": rest.build_info()["isa"]}

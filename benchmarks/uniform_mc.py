@@ -56,13 +56,16 @@ def load_core(path: str | None) -> Any:
 
 
 def best_of(repeat: int, fn: Callable[[], Any]) -> float:
-    fn()
-    times = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return min(times)
+    """Best time of `repeat` runs of fn after one warm-up."""
+    return alternating(repeat, {None: fn})[None]
+
+
+def add_core_arguments(parser: argparse.ArgumentParser) -> None:
+    """--core, --drjit-target and --no-drjit: which core build and which drjit to compare."""
+    parser.add_argument("--core", help="path of another build of reference_estimators/_core")
+    parser.add_argument("--drjit-target", choices=sorted(DRJIT_TARGETS),
+                        help="make drjit's LLVM backend target this CPU (AVX2: haswell)")
+    parser.add_argument("--no-drjit", action="store_true", help="leave drjit out")
 
 
 def alternating(repeat: int, runs: dict[Any, Callable[[], Any]]) -> dict[Any, float]:
@@ -238,9 +241,6 @@ if __name__ == "__main__":
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--samples", default="1e8")
     parser.add_argument("--repeat", type=int, default=5)
-    parser.add_argument("--core", help="path of another build of reference_estimators/_core")
-    parser.add_argument("--drjit-target", choices=sorted(DRJIT_TARGETS),
-                        help="make drjit's LLVM backend target this CPU (AVX2: haswell)")
-    parser.add_argument("--no-drjit", action="store_true", help="leave drjit out")
+    add_core_arguments(parser)
     ARGS = parser.parse_args()
     main()

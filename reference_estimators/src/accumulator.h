@@ -97,8 +97,6 @@ using simd::i64v;
 constexpr size_t kVecWidth = simd::kWidth;
 constexpr size_t kLanes = 8, kParts = kLanes / kVecWidth;
 
-RE_INLINE f64v loadv(const double *p) { return simd::load(p); }
-
 // Sum of the 8 logical lanes of parts[0..kParts), always in the same tree order.
 template <class V>
 RE_INLINE double lane_sum(const V (&parts)[kParts]) {
@@ -126,7 +124,7 @@ RE_INLINE BlockScan scan_block(const double *y, size_t count) {
     for (size_t k = 0; k < kParts; ++k) { s[k] = zero; lo[k] = inf; hi[k] = -inf; }
     for (size_t i = 0; i < full; i += kLanes)
         for (size_t k = 0; k < kParts; ++k) {
-            f64v v = loadv(y + i + k * kVecWidth);
+            f64v v = simd::load(y + i + k * kVecWidth);
             s[k] += v;
             lo[k] = v < lo[k] ? v : lo[k];
             hi[k] = v > hi[k] ? v : hi[k];
@@ -167,7 +165,7 @@ RE_INLINE void accumulate_block(Moments &acc, const double *y, size_t count, boo
         f64v s[kParts];
         for (size_t k = 0; k < kParts; ++k) s[k] = zero;
         for (size_t i = 0; i < full; i += kLanes)
-            for (size_t k = 0; k < kParts; ++k) s[k] += loadv(y + i + k * kVecWidth) * scale;
+            for (size_t k = 0; k < kParts; ++k) s[k] += simd::load(y + i + k * kVecWidth) * scale;
         sum = lane_sum(s);
         for (size_t i = full; i < count; ++i) sum += y[i] * scale;
     }
@@ -179,7 +177,7 @@ RE_INLINE void accumulate_block(Moments &acc, const double *y, size_t count, boo
     if (higher) {
         for (size_t i = 0; i < full; i += kLanes)
             for (size_t k = 0; k < kParts; ++k) {
-                f64v d = simd::fma(loadv(y + i + k * kVecWidth), vscale, vmean), d2 = d * d;
+                f64v d = simd::fma(simd::load(y + i + k * kVecWidth), vscale, vmean), d2 = d * d;
                 c2[k] += d2;
                 c3[k] = simd::fma(d2, d, c3[k]);
                 c4[k] = simd::fma(d2, d2, c4[k]);
@@ -187,7 +185,7 @@ RE_INLINE void accumulate_block(Moments &acc, const double *y, size_t count, boo
     } else {
         for (size_t i = 0; i < full; i += kLanes)
             for (size_t k = 0; k < kParts; ++k) {
-                f64v d = simd::fma(loadv(y + i + k * kVecWidth), vscale, vmean);
+                f64v d = simd::fma(simd::load(y + i + k * kVecWidth), vscale, vmean);
                 c2[k] += d * d;  // as above: M2 does not depend on `higher`
             }
     }

@@ -368,32 +368,40 @@ Estimate integrate(const Integrand &f, const Technique &t, uint64_t n, const Run
     });
 }
 
+// fn(stream, scratch, diag, first, m) for every block of every chunk of an n-sample estimate
+// by kernel k, chunks on the pool (each worker with its own scratch, each chunk its stream and
+// diagnostics), for the callers that keep no accumulator state.
+template <class BlockFn>
+void for_each_kernel_block(const Kernel &k, uint64_t n, const RunOptions &opt, BlockFn fn) {
+    const int threads = resolve_threads(opt.threads);
+    PerWorker<Scratch> scratch(threads);
+    ThreadPool::instance().run(chunk_count(n), threads, [&](size_t c, int w) {
+        UniformStream stream(chunk_key(opt.key, c));
+        Scratch &s = scratch.get(w, [&] { return k.scratch(); });
+        Diagnostics diag;
+        uint64_t first = c * kChunkSize, count = std::min(kChunkSize, n - first);
+        for_each_block(count, [&](uint64_t b, size_t m) { fn(stream, s, diag, c, first + b, m); });
+    });
+}
+
 StageTimes profile_stages(const Integrand &f, const Technique &t, uint64_t n, const RunOptions &opt) {
     check_technique(f, t);
     const Kernel k(f, t, n, opt.key);
-    const uint64_t nc = chunk_count(n);
-    const int threads = resolve_threads(opt.threads);
     const bool rejection = t.sampler->method == SamplingMethod::Rejection;
-    PerWorker<Scratch> scratch(threads);
     // One pass stopping after the points or after the contributions; each chunk keeps one of
     // its values (sink), so nothing computed can be optimised away.
     auto pass = [&](bool with_contributions) {
-        std::vector<double> sink(nc, 0.0);
+        std::vector<double> sink(chunk_count(n), 0.0);
         auto t0 = std::chrono::steady_clock::now();
-        ThreadPool::instance().run(nc, threads, [&](size_t c, int w) {
-            UniformStream stream(chunk_key(opt.key, c));
-            Scratch &s = scratch.get(w, [&] { return k.scratch(); });
-            Diagnostics diag;
-            uint64_t first = c * kChunkSize, count = std::min(kChunkSize, n - first);
-            for_each_block(count, [&](uint64_t b, size_t m) {
-                if (with_contributions) {
-                    block_contributions(k, stream, m, first + b, s, diag);
-                    sink[c] += s.y[m - 1];
-                } else if (!rejection) {
-                    fill_points(k.points, stream, first + b, m, k.ud, s.u.data());
-                    sink[c] += s.u[m * size_t(k.ud) - 1];
-                }
-            });
+        for_each_kernel_block(k, n, opt, [&](UniformStream &stream, Scratch &s, Diagnostics &diag, size_t c,
+                                             uint64_t first, size_t m) {
+            if (with_contributions) {
+                block_contributions(k, stream, m, first, s, diag);
+                sink[c] += s.y[m - 1];
+            } else if (!rejection) {
+                fill_points(k.points, stream, first, m, k.ud, s.u.data());
+                sink[c] += s.u[m * size_t(k.ud) - 1];
+            }
         });
         return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     };
@@ -407,18 +415,10 @@ StageTimes profile_stages(const Integrand &f, const Technique &t, uint64_t n, co
 void contributions(const Integrand &f, const Technique &t, uint64_t n, const RunOptions &opt, double *out) {
     check_technique(f, t);
     const Kernel k(f, t, n, opt.key);
-    const uint64_t nc = chunk_count(n);
-    const int threads = resolve_threads(opt.threads);
-    PerWorker<Scratch> scratch(threads);
-    ThreadPool::instance().run(nc, threads, [&](size_t c, int w) {
-        UniformStream stream(chunk_key(opt.key, c));
-        Scratch &s = scratch.get(w, [&] { return k.scratch(); });
-        Diagnostics diag;
-        uint64_t first = c * kChunkSize, count = std::min(kChunkSize, n - first);
-        for_each_block(count, [&](uint64_t b, size_t m) {
-            size_t dropped = block_contributions(k, stream, m, first + b, s, diag);
-            for (size_t i = 0; i < m; ++i) out[first + b + i] = dropped && s.drop[i] ? std::nan("") : s.y[i];
-        });
+    for_each_kernel_block(k, n, opt, [&](UniformStream &stream, Scratch &s, Diagnostics &diag, size_t,
+                                         uint64_t first, size_t m) {
+        size_t dropped = block_contributions(k, stream, m, first, s, diag);
+        for (size_t i = 0; i < m; ++i) out[first + i] = dropped && s.drop[i] ? std::nan("") : s.y[i];
     });
 }
 
