@@ -37,6 +37,7 @@ import reference_estimators as rest
 
 from harness.samplers.cubature import cell_integrals
 from harness.samplers.domains import Domain, as_domain
+from harness.samplers.reported import reported_pdf_failure
 from harness.stats import holm
 from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
 from harness.usercode import UserCodeError, array_result, call, callable_name
@@ -53,9 +54,11 @@ SAMPLE_CASE = 0x5A3F
 class SamplerCheck:
     """Outcome of :func:`check_sampler` (also of ``mcmc_crosscheck`` and of the Mitsuba
     adapter's ``check_mitsuba_sampler``).  ``passed`` is False when a deterministic check
-    failed (``failures``) or the Holm-combined statistical tests reject at ``alpha``.
-    ``pvalue`` is the smallest Holm-adjusted p-value of the tests (a valid p-value of the
-    whole check); ``n`` the number of samples drawn."""
+    failed (``failures``), the Holm-combined statistical tests reject at ``alpha``, or the
+    check could not reach a verdict (``inconclusive`` holds why, e.g. an MCMC chain too short
+    for its autocorrelation time; its ``pvalue`` is then 1: nothing was rejected).  ``pvalue``
+    is the smallest Holm-adjusted p-value of the tests (a valid p-value of the whole check);
+    ``n`` the number of samples drawn."""
 
     passed: bool
     pvalue: float                 # smallest Holm-adjusted p-value of the statistical tests
@@ -67,11 +70,16 @@ class SamplerCheck:
     residuals: dict[str, np.ndarray] = field(default_factory=dict)  # standardised, per grid; NaN: pooled cell
     # per axis "s0", "s1": observed and expected counts at <= 128 bins (for plots)
     marginals: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
+    inconclusive: str = ""        # why no verdict could be reached ("" where one was)
 
     @property
     def verdict(self) -> str:
-        """"passed" or "failed"."""
-        return "passed" if self.passed else "failed"
+        """"passed", "failed", or "inconclusive" (no failure and no rejection, but no verdict
+        either: ``inconclusive`` says why)."""
+        if self.passed:
+            return "passed"
+        undecided = self.inconclusive and not self.failures and self.pvalue > self.alpha
+        return "inconclusive" if undecided else "failed"
 
     @property
     def statistic(self) -> float:
@@ -90,10 +98,11 @@ class SamplerCheck:
         return ConfidenceInterval(total - err, total + err)
 
     def to_payload(self) -> dict[str, Any]:
-        """JSON-able form a suite stores: passed, pvalue, tests (records), failures (plain
-        dicts), normalization, and for the report's heatmaps and marginal plots the residuals
-        (rounded to 2 decimals, pooled cells None) and marginals (rounded to 2 decimals)."""
-        return {"passed": self.passed, "pvalue": self.pvalue,
+        """JSON-able form a suite stores: passed, pvalue, inconclusive (the reason, "" where
+        a verdict was reached), tests (records), failures (plain dicts), normalization, and
+        for the report's heatmaps and marginal plots the residuals (rounded to 2 decimals,
+        pooled cells None) and marginals (rounded to 2 decimals)."""
+        return {"passed": self.passed, "pvalue": self.pvalue, "inconclusive": self.inconclusive,
                 "tests": json.loads(self.tests.to_json(orient="records")),
                 "failures": json.loads(json.dumps([f.to_dict() for f in self.failures], default=float)),
                 "normalization": [float(v) for v in self.normalization],
@@ -115,6 +124,8 @@ class SamplerCheck:
     def _why(self) -> str:
         if self.passed:
             return f"no deterministic failure and no test rejects at alpha = {self.alpha}"
+        if self.verdict == "inconclusive":
+            return f"inconclusive: {self.inconclusive}"
         parts = []
         if self.failures:
             parts.append("failed deterministic checks: " + ", ".join(f.check for f in self.failures))
@@ -133,7 +144,7 @@ class SamplerTest:
     def __init__(self, pdf: Callable[[np.ndarray], np.ndarray], domain: str | tuple | Domain, *,
                  sample_count: int = 1_000_000, alpha: float = 0.01):
         self.dom = dom = as_domain(domain)
-        self.pdf = _checked_pdf(pdf)
+        self.pdf = self.claimed_pdf = _checked_pdf(pdf)   # claimed_pdf: the pdf as given (for_total keeps it)
         self.n = n = int(sample_count)
         if n < 1000:
             raise ValueError(f"'sample_count' must be at least 1000, got {sample_count!r}")
@@ -189,12 +200,13 @@ class SamplerTest:
               udim: int | None = None) -> SamplerCheck:
         """Draws ``sample_count`` points from ``sample`` (uniforms of stream ``seed``,
         :data:`SAMPLE_CASE`) and runs the checks of :func:`check_sampler` on them."""
-        _, x = _draw(sample, self.dom, self.n, seed, udim)
-        return self.check_points(x)
+        _, x, reported = _draw(sample, self.dom, self.n, seed, udim)
+        return self.check_points(x, reported)
 
-    def check_points(self, x: np.ndarray) -> SamplerCheck:
+    def check_points(self, x: np.ndarray, reported: np.ndarray | None = None) -> SamplerCheck:
         """The checks of :func:`check_sampler` on ``sample_count`` points already drawn, (N,)
-        on an interval or (N, point_dim)."""
+        on an interval or (N, point_dim); ``reported``: the pdf values the sampler returned
+        with them, if it did (checked against the claimed pdf, :mod:`harness.samplers.reported`)."""
         dom, n, base = self.dom, self.n, self.base
         if x.shape[0] != n:
             raise ValueError(f"expected the {n} points this test was built for, got {x.shape[0]}")
@@ -216,6 +228,10 @@ class SamplerTest:
         zero = (p == 0) & inside
         if zero.any():
             fail("zero_pdf", zero, "sampled points where the pdf is 0", p)
+        if reported is not None:
+            mismatch = reported_pdf_failure(x, reported, self.claimed_pdf)
+            if mismatch is not None:
+                failures.append(mismatch)
         if self.quadrature_faults:
             failures.append(Failure("bad_pdf_quadrature", self.quadrature_faults,
                                     "pdf NaN or infinite inside cells (cubature)"))
@@ -269,7 +285,9 @@ def check_sampler(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.ndarray
     """Test that ``sample`` draws points with the density ``pdf`` claims.
 
     ``sample`` maps canonical uniforms of shape (N, udim) (default: 1 for intervals, 2 else)
-    to points; it may return (points, pdf values), as the core's samplers do.  ``pdf`` maps
+    to points; it may return (points, pdf values), as the core's samplers do, and then the
+    pdf values it reports must equal ``pdf`` at the points (a deterministic "reported_pdf"
+    failure otherwise: :mod:`harness.samplers.reported` states the float32 tolerance).  ``pdf`` maps
     points to the claimed density (per unit length, area, or solid angle; 0 outside its
     support).  Points: (N,) on an interval, (N, 2) on the square and disk, unit vectors
     (N, 3) on the hemisphere and sphere; ``domain`` is one of "interval" ([0, 1]), ("interval",
@@ -298,10 +316,10 @@ def check_sampler(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.ndarray
     """
     dom = as_domain(domain)
     n = _sample_count(sample_count)
-    u, x = _draw(sample, dom, n, seed, udim)
+    u, x, reported = _draw(sample, dom, n, seed, udim)
     if total is None and np.isfinite(x).all():
-        return SamplerTest(pdf, dom, sample_count=n, alpha=alpha).check_points(x)
-    return _check_drawn(u, x, pdf, dom, alpha, total)
+        return SamplerTest(pdf, dom, sample_count=n, alpha=alpha).check_points(x, reported)
+    return _check_drawn(u, x, reported, pdf, dom, alpha, total)
 
 
 def failure_pvalue(failed: int, n: int, total: float, total_err: float) -> float:
@@ -332,13 +350,15 @@ def check_with_missing(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.nd
     The tests table holds a "failed samples" row (the count, and its binomial p-value);
     ``normalization`` the cubature's P and its error bound."""
     dom = as_domain(domain)
-    u, x = _draw(sample, dom, _sample_count(sample_count), seed, udim)
-    return _check_drawn(u, x, pdf, dom, alpha, total)
+    u, x, reported = _draw(sample, dom, _sample_count(sample_count), seed, udim)
+    return _check_drawn(u, x, reported, pdf, dom, alpha, total)
 
 
-def _check_drawn(u: np.ndarray, x: np.ndarray, pdf: Callable[[np.ndarray], np.ndarray], dom: Domain,
-                 alpha: float, total: float | None) -> SamplerCheck:
-    """check_with_missing on points x already drawn from uniforms u."""
+def _check_drawn(u: np.ndarray, x: np.ndarray, reported: np.ndarray | None,
+                 pdf: Callable[[np.ndarray], np.ndarray], dom: Domain, alpha: float,
+                 total: float | None) -> SamplerCheck:
+    """check_with_missing on points x already drawn from uniforms u (``reported``: the pdf
+    values the sampler returned with them, or None)."""
     if total is not None and not (isinstance(total, (int, float)) and 0 < total <= 1):
         raise ValueError(f"'total' must be the pdf's integral over the domain, in (0, 1], got {total!r}")
     n = x.shape[0]
@@ -373,7 +393,7 @@ def _check_drawn(u: np.ndarray, x: np.ndarray, pdf: Callable[[np.ndarray], np.nd
             failures.append(Failure("normalization", 1,
                                     f"pdf integrates to {cubature:.6f} ± {cubature_err:.1e} over the "
                                     f"{dom.kind}, more than 1"))
-    shape = raw.for_total(p_total).check_points(produced)
+    shape = raw.for_total(p_total).check_points(produced, None if reported is None else reported[~failed])
     index = np.flatnonzero(~failed)  # the shape check's examples index the produced samples
     for f in shape.failures:
         if f.check != "normalization":
@@ -411,12 +431,14 @@ def _draw(sample: Callable[[np.ndarray], Any], dom: Domain, n: int, seed: int,
     """The check's uniforms (stream ``seed``, :data:`SAMPLE_CASE`) and the points ``sample``
     draws from them."""
     u = rest.points(n, udim or dom.udim, seed=seed, case_id=SAMPLE_CASE)
-    return u, _drawn(sample, u, dom)
+    return (u, *_drawn(sample, u, dom))
 
 
-def _drawn(sample: Callable[[np.ndarray], Any], u: np.ndarray, dom: Domain) -> np.ndarray:
+def _drawn(sample: Callable[[np.ndarray], Any], u: np.ndarray,
+           dom: Domain) -> tuple[np.ndarray, np.ndarray | None]:
     """The points ``sample`` draws from uniforms u, as float64 of shape (N,) on an interval
-    or (N, point_dim); a (points, pdf) tuple gives its points.  Errors name the sampler."""
+    or (N, point_dim), and the pdf values it reported with them: a (points, pdf) tuple gives
+    both, a bare array None.  Errors name the sampler."""
     name = callable_name(sample)
     n = u.shape[0]
     want = (n,) if dom.point_dim == 1 else (n, dom.point_dim)
@@ -425,7 +447,14 @@ def _drawn(sample: Callable[[np.ndarray], Any], u: np.ndarray, dom: Domain) -> n
     if x.size != n * dom.point_dim:
         raise UserCodeError(f"{name} returned points of shape {x.shape} for uniforms of shape {u.shape}; "
                             f"expected shape {want} on the {dom.kind}")
-    return x.reshape(want)
+    reported = None
+    if isinstance(out, tuple) and len(out) >= 2 and out[1] is not None:
+        reported = array_result(out[1], None, name, f"uniforms of shape {u.shape}")
+        if reported.size != n:
+            raise UserCodeError(f"{name} returned {reported.size} pdf values with {n} points for uniforms of "
+                                f"shape {u.shape}; expected one pdf value per point")
+        reported = reported.reshape(n)
+    return x.reshape(want), reported
 
 
 def _checked_pdf(pdf: Callable[[np.ndarray], Any]) -> Callable[[np.ndarray], np.ndarray]:

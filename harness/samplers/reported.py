@@ -1,0 +1,91 @@
+"""Does the pdf a sampler reports with each sample equal its pdf() at the returned point?
+
+MIS weights and path throughputs use the reported value, so a mismatch biases renders while
+every test of where the samples go passes: the sampled lobe's pdf reported instead of the
+mixture's, a mask's opacity factor left out.  The comparison is deterministic, per sample.
+
+Tolerance: ``rtol`` relative (default 1e-4, about 800 float32 ulps: the reported value may be
+computed along another path of float32 operations) plus what float32 rounding of the point
+can explain, measured, not guessed: the largest change of pdf() when one coordinate of the
+point moves by 4 float32 ulps either way (computed only for the samples beyond the relative
+tolerance).  That term matters where the pdf is steep (a lobe's edge, a texel boundary, the
+poles of a lat-long map); a mismatch by a factor off 1 by more than ``rtol`` is reported
+wherever the pdf is not steep at that scale.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+
+import numpy as np
+
+from harness.stats.results import Failure
+
+__all__ = ["NUDGE_ULPS", "reported_pdf_failure", "rounding_spread"]
+
+#: How many float32 ulps :func:`rounding_spread` moves each coordinate by.
+NUDGE_ULPS = 4
+
+
+def _nudged(x32: np.ndarray) -> Iterator[np.ndarray]:
+    """Copies of the float32 points x32 (N, d) with one coordinate moved by NUDGE_ULPS float32
+    ulps up or down: 2 d copies, as float64."""
+    for c in range(x32.shape[1]):
+        for to in (np.inf, -np.inf):
+            y = x32.copy()
+            col = y[:, c]
+            for _ in range(NUDGE_ULPS):
+                col = np.nextafter(col, np.float32(to), dtype=np.float32)
+            y[:, c] = col
+            yield y.astype(np.float64)
+
+
+def rounding_spread(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """max |f(x') - at| over the nudged copies x' of the points x ((N,) or (N, d)): what float32
+    rounding of a point can change f(x) = ``at`` by (a non-finite change counts as infinite).
+    f takes points of x's shape (and may return (N,) or (N, channels), as ``at``)."""
+    flat = np.asarray(x, dtype=float)
+    cols = flat.reshape(flat.shape[0], -1).astype(np.float32)
+    spread = np.zeros_like(at, dtype=float)
+    for y in _nudged(cols):
+        with np.errstate(all="ignore"):
+            d = np.abs(np.asarray(f(y.reshape(flat.shape)), dtype=float) - at)
+        spread = np.maximum(spread, np.where(np.isfinite(d), d, np.inf))
+    return spread
+
+
+def reported_pdf_failure(x: np.ndarray, reported: np.ndarray, pdf: Callable[[np.ndarray], np.ndarray], *,
+                         rtol: float = 1e-4, max_examples: int = 5) -> Failure | None:
+    """A "reported_pdf" Failure (count, largest relative difference, examples) where the pdf
+    a sampler reported with its samples x differs from pdf(x) beyond the module's tolerance,
+    else None.  Rows of x that are not finite (samples not produced) are skipped; a reported
+    value that is NaN, infinite or negative at a produced sample is a mismatch."""
+    x = np.asarray(x, dtype=float)
+    n = x.shape[0]
+    rep = np.asarray(reported, dtype=float).reshape(-1)
+    if rep.size != n:
+        return Failure("reported_pdf", n, f"the sampler reported {rep.size} pdf values for {n} samples", ())
+    produced = np.flatnonzero(np.all(np.isfinite(x.reshape(n, -1)), axis=1))
+    if produced.size == 0:
+        return None
+    xs, rs = x[produced], rep[produced]
+    p = np.asarray(pdf(xs), dtype=float).reshape(-1)
+    with np.errstate(all="ignore"):
+        diff = np.abs(rs - p)
+        bad = ~(diff <= rtol * np.abs(p)) | ~np.isfinite(rs) | (rs < 0)
+        if bad.any():
+            sel = np.flatnonzero(bad & np.isfinite(rs) & (rs >= 0) & np.isfinite(p))
+            if sel.size:
+                flat_pdf = lambda y: np.asarray(pdf(y), dtype=float).reshape(-1)  # noqa: E731
+                spread = rounding_spread(flat_pdf, xs[sel], p[sel])
+                bad[sel] = ~(diff[sel] <= rtol * np.abs(p[sel]) + spread)
+    if not bad.any():
+        return None
+    with np.errstate(all="ignore"):
+        rel = np.where(p[bad] > 0, diff[bad] / p[bad], np.inf)
+    worst = float(np.nanmax(rel)) if rel.size else float("nan")
+    ex = tuple({"index": int(produced[i]), "point": np.atleast_1d(xs[i]).tolist(), "reported": float(rs[i]),
+                "pdf": float(p[i])} for i in np.flatnonzero(bad)[:max_examples])
+    return Failure("reported_pdf", int(bad.sum()),
+                   f"the pdf reported with the sample differs from pdf() at the sampled point beyond "
+                   f"{rtol:g} relative + float32 rounding of the point (largest relative difference "
+                   f"{worst:.3g})", ex)
