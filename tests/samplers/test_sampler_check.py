@@ -103,8 +103,8 @@ def test_payload_is_plain_json():
     r = check_sampler(s.sample, s.pdf, s.domain, sample_count=10_000)
     payload = r.to_payload()
     assert json.loads(json.dumps(payload)) == payload
-    assert list(payload) == ["passed", "pvalue", "tests", "failures", "normalization", "residuals",
-                             "marginals"]
+    assert list(payload) == ["passed", "pvalue", "inconclusive", "tests", "failures", "normalization",
+                             "residuals", "marginals"]
     assert payload["failures"] == [f.to_dict() for f in r.failures]
     assert [Failure.from_dict(d) for d in payload["failures"]] == r.failures
     assert payload["tests"][0]["test"] == "chi-square 16" and len(payload["residuals"]["fine"]) == 512
