@@ -424,8 +424,10 @@ def _marginal(lay: _Layout, left: float, bottom: float, width: float, height: fl
         _log_ticks(top)
     top.set_ylabel("density")
     top.legend(loc="best", frameon=False, fontsize=7)
-    top.set_title(f"marginal {axis} ({bins} bins shown)\n{_stat_text(_test(tests, f'marginal {axis}'))}",
-                  loc="left", fontsize=8)
+    cvm = _test(tests, f"Cramer-von Mises u{axis[1:]}")
+    label = ("" if cvm is None else
+             f"Cramér–von Mises on u{axis[1:]}: W² = {cvm['statistic']:.3g}, p = {cvm['pvalue']:.2g}")
+    top.set_title(f"marginal {axis} ({bins} bins shown)\n{label}", loc="left", fontsize=8)
     top.tick_params(labelbottom=False)
     with np.errstate(invalid="ignore", divide="ignore"):
         z = np.clip(np.where(exp >= 5, (obs - exp) / np.sqrt(exp), 0.0), -5, 5)

@@ -38,6 +38,7 @@ import reference_estimators as rest
 from harness.samplers.cubature import cell_integrals
 from harness.samplers.domains import Domain, as_domain
 from harness.samplers.reported import reported_pdf_failure
+from harness.samplers.transform import STRIPS, Transform, cramer_von_mises, equiprobable_counts
 from harness.stats import holm
 from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
 from harness.usercode import UserCodeError, array_result, call, callable_name
@@ -175,6 +176,7 @@ class SamplerTest:
         self.mass, self.err = mass3[:, 0].reshape(base), err3[:, 0].reshape(base)
         self.h_moments = (float(mass3[:, 1].sum()), float(mass3[:, 2].sum()), float(err3[:, 1].sum()))
         self.normalization = (float(self.mass.sum()), float(self.err.sum()))
+        self.transform = Transform.build(self.q, dom.k, n)
 
     def q(self, sp: np.ndarray) -> np.ndarray:
         """The claimed density in parameter space: |D| pdf(x(s))."""
@@ -251,15 +253,13 @@ class SamplerTest:
             tests.append((f"chi-square {'x'.join(map(str, shape))}", stat, df,
                           stats.chi2.sf(stat, df) if df > 0 else 1.0, detects))
         marginals = {}
-        for axis in range(dom.k):
+        for axis in range(dom.k):  # for the report's plots: observed and expected counts per axis
             shape = tuple(base[a] if a == axis else 1 for a in range(dom.k))
-            o, e, r = (_coarsen(a, shape) for a in (counts, self.mass, self.err))
-            stat, df, _ = _chi_square(o.reshape(-1), n * e.reshape(-1), n * r.reshape(-1))
-            tests.append((f"marginal s{axis} ({base[axis]} bins)", stat, df,
-                          stats.chi2.sf(stat, df) if df > 0 else 1.0, "fine structure along one axis"))
+            o, e = (_coarsen(a, shape) for a in (counts, self.mass))
             bins = min(base[axis], 128)
             marginals[f"s{axis}"] = {"observed": o.reshape(bins, -1).sum(axis=1),
                                      "expected": n * e.reshape(bins, -1).sum(axis=1)}
+        tests += self._transform_tests(s[inside])
         # pdf moment: sample mean of h(p(X)) against its cubature value; the variance adds the
         # cubature error and a rounding floor (a constant pdf makes h constant)
         e1, e2, e1_err = self.h_moments
@@ -277,6 +277,32 @@ class SamplerTest:
         passed = not failures and not rejected.any()
         return SamplerCheck(passed, float(adjusted.min()), self.alpha, n, table, failures, self.normalization,
                             residuals, marginals)
+
+    def _transform_tests(self, s: np.ndarray) -> list[tuple]:
+        """Tests on the Rosenblatt transform u of the parameter points s inside the domain
+        (:mod:`harness.samplers.transform`): Cramer-von Mises on u0 and, on the square, on u1
+        given the strip of s0 (each carrying the tabulation's error bound), and a chi-square on
+        cells of equal claimed probability (bins of u0; strips x bins of u1), the tabulation's
+        error in each cell's variance."""
+        t, m = self.transform, s.shape[0]
+        if m == 0:
+            return []
+        u = t(s)
+        tables = [t.marginal] if t.conditional is None else [t.marginal, t.conditional]
+        names = ["u0 = F(s0)", "u1 = F(s1 | strip of s0)"]
+        tests = []
+        for axis, table in enumerate(tables):
+            w2, p = cramer_von_mises(u[:, axis], table.error)
+            tests.append((f"Cramer-von Mises {names[axis]}", w2, 0, p,
+                          f"smooth warps below the bin width (CDF error bound {table.error:.1e} carried)"))
+        bins = min(1024, max(m // 50, 16)) if t.conditional is None else 64
+        observed, prob = equiprobable_counts(t, s, u, bins)
+        stat, df, _ = _chi_square(observed, m * prob, 2 * m * t.error * prob * bins)
+        cells = "x".join(map(str, (bins,) if t.conditional is None else (STRIPS, bins)))
+        p = stats.chi2.sf(stat, df) if df > 0 else 1.0
+        tests.append((f"chi-square equiprobable {cells}", stat, df, p,
+                      "narrow lobes: as many cells where the density is high as elsewhere"))
+        return tests
 
 
 def check_sampler(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.ndarray], np.ndarray],

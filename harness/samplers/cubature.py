@@ -1,4 +1,4 @@
-"""Adaptive cubature over the cells of a regular grid on [0, 1]^k, thousands of cells at once.
+"""Adaptive cubature over many boxes of [0, 1]^k at once (the cells of a grid, or any boxes).
 
 The expected cell counts of a sampler check come from tensor Gauss-Legendre cubature of the
 claimed density q over each cell, refined where two rules disagree, until the error is far
@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-__all__ = ["cell_integrals"]
+__all__ = ["box_integrals", "cell_integrals"]
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(4)
 _GL_X, _GL_W = (_GL_X + 1) / 2, _GL_W / 2  # on [0, 1]
@@ -49,21 +49,30 @@ def _halves(lo: np.ndarray, hi: np.ndarray, axis: int) -> tuple[np.ndarray, np.n
 def cell_integrals(q: Callable[[np.ndarray], np.ndarray], shape: tuple[int, ...], tol: np.ndarray | float,
                    max_depth: int = 24, max_evals: int = 40_000_000) -> tuple[np.ndarray, np.ndarray]:
     """Integrals of q (scalar or vector valued, (M,) or (M, m)) over the cells of a regular
-    grid on [0, 1]^k, and their error bounds: arrays (cells, m).
-
-    Each box is integrated by the 4-point tensor rule on itself and on its two halves along
-    every axis; where the best split still changes the integral (component 0) by more than
-    the box's share of its cell's tolerance, the box is halved along the axis that changed
-    most, and so on (up to ``max_depth`` splits or ``max_evals`` evaluations).  Splitting
-    along one axis at a time follows a lobe that is thin in one direction only.  The error
-    is the change of the last split: honest for smooth parts, an overestimate at steps and
-    singularities.
-    """
+    grid on [0, 1]^k, and their error bounds: arrays (cells, m), cells in C order.  See
+    :func:`box_integrals`."""
     k = len(shape)
     idx = np.stack(np.meshgrid(*[np.arange(n) for n in shape], indexing="ij"), axis=-1).reshape(-1, k)
     size = np.array(shape, dtype=float)
-    lo, hi = idx / size, (idx + 1) / size
-    ncell = lo.shape[0]
+    return box_integrals(q, idx / size, (idx + 1) / size, tol, max_depth=max_depth, max_evals=max_evals)
+
+
+def box_integrals(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.ndarray,
+                  tol: np.ndarray | float, *, max_depth: int = 24,
+                  max_evals: int = 40_000_000) -> tuple[np.ndarray, np.ndarray]:
+    """Integrals of q (scalar or vector valued, (M,) or (M, m)) over the boxes [lo, hi]
+    (arrays (B, k) inside [0, 1]^k), and their error bounds: arrays (B, m).
+
+    Each box is integrated by the 4-point tensor rule on itself and on its two halves along
+    every axis; where the best split still changes the integral (component 0) by more than
+    the box's share of its tolerance ``tol`` (absolute, per box or one for all), the box is
+    halved along the axis that changed most, and so on (up to ``max_depth`` splits or
+    ``max_evals`` evaluations).  Splitting along one axis at a time follows a lobe that is
+    thin in one direction only.  The error is the change of the last split: honest for
+    smooth parts, an overestimate at steps and singularities.
+    """
+    lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+    ncell, k = lo.shape
     tol = np.broadcast_to(np.asarray(tol, dtype=float), (ncell,))
     owner = np.arange(ncell)
     whole = _rule(q, lo, hi)

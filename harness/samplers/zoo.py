@@ -12,7 +12,7 @@ import numpy as np
 
 import reference_estimators as rest
 
-__all__ = ["ZooSampler", "correct", "wrong"]
+__all__ = ["ZooSampler", "correct", "smooth_warps", "wrong"]
 
 
 @dataclass(frozen=True)
@@ -153,4 +153,31 @@ def wrong() -> list[ZooSampler]:
         ZooSampler("sphere, azimuth u^1.02", "sphere", sphere_skewed_azimuth,
                    lambda w: np.full(w.shape[0], 0.25 / math.pi), "azimuth slightly non-uniform"),
         _envmap(_env_table(), scale_texel=np.unravel_index(np.argmax(_env_table()), (16, 32))),  # brightest
+    ]
+
+
+def smooth_warps() -> list[ZooSampler]:
+    """Mutants below any bin width: smooth warps of a correct sampler that a binned test at
+    1e6 samples misses (issue 17's measured cases), for the transform tests to catch."""
+    cos = rest.sampler("cosine_hemisphere")
+    ggx, ggx_off = rest.sampler("ggx", alpha=0.1), rest.sampler("ggx", alpha=0.1003)
+
+    def cosine_azimuth_warp(u):
+        return cos.sample(np.column_stack([u[:, 0], u[:, 1] ** 1.005]))[0]
+
+    def sphere_tilt(u):
+        # density (1 + t z) / (4 pi) by inversion in s = (1 - z) / 2: s + t (s - s^2) = u0
+        t = 0.002
+        s = ((1 + t) - np.sqrt((1 + t) ** 2 - 4 * t * u[:, 0])) / (2 * t)
+        z, ph = 1 - 2 * s, 2 * math.pi * u[:, 1]
+        r = np.sqrt(np.maximum(0, 1 - z * z))
+        return np.column_stack([r * np.cos(ph), r * np.sin(ph), z])
+
+    return [
+        ZooSampler("cosine hemisphere, azimuth u^1.005", "hemisphere", cosine_azimuth_warp, cos.pdf,
+                   "azimuth warped by u^1.005"),
+        ZooSampler("ggx alpha 0.1003 sampled, 0.1 claimed", "hemisphere", lambda u: ggx_off.sample(u)[0],
+                   ggx.pdf, "lobe 0.3 % too wide"),
+        ZooSampler("sphere, density tilted 0.2 %", "sphere", sphere_tilt,
+                   lambda w: np.full(w.shape[0], 0.25 / math.pi), "density (1 + 0.002 z) / 4 pi"),
     ]

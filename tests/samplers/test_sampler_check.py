@@ -82,8 +82,9 @@ def test_result_is_a_table_not_a_bare_bool():
     s = CORRECT[4]
     r = check_sampler(s.sample, s.pdf, s.domain, sample_count=50_000, seed=1)
     assert list(r.tests.columns) == ["test", "statistic", "df", "pvalue", "detects", "adjusted"]
-    assert list(r.tests["test"]) == ["chi-square 16x32", "chi-square 64x128", "marginal s0 (128 bins)",
-                                     "marginal s1 (256 bins)", "pdf moment"]
+    assert list(r.tests["test"]) == ["chi-square 16x32", "chi-square 64x128", "Cramer-von Mises u0 = F(s0)",
+                                     "Cramer-von Mises u1 = F(s1 | strip of s0)",
+                                     "chi-square equiprobable 32x64", "pdf moment"]
     assert r.passed and r.verdict == "passed" and "PASSED" in str(r)
     assert r.residuals["fine"].shape == (64, 128)
     assert not hasattr(type(r), "__bool__")

@@ -1,0 +1,264 @@
+"""The probability-integral (Rosenblatt) transform of a sampler's points through the claimed
+density, and the tests on the transformed points that see below any bin width.
+
+In the domain's equal-measure parameter space (:mod:`harness.samplers.domains`) the claimed
+density q(s) gives, for a point s,
+
+    u0 = F0(s0)                       the marginal CDF of the first coordinate;
+    u1 = F1(s1 | s0 in strip g)       on the square, the CDF of the second coordinate given
+                                      the strip of s0 it lies in: G strips of equal claimed
+                                      mass (u0 in [g/G, (g+1)/G)).
+
+Under H0 (the points have density q) u0 and u1 are each exactly uniform on [0, 1]: given the
+strip, s1 follows the strip's conditional law, whatever the strip.  So a smooth warp that no
+bin resolves (an azimuth u^1.005, a lobe 0.3 % too wide) moves the empirical CDF of u0 or u1,
+which :func:`cramer_von_mises` sees; and the strips with bins of u1 are cells of equal claimed
+probability (:func:`equiprobable_counts`): a narrow lobe gets as many cells as the rest of the
+sphere.
+
+The CDFs are tabulated once per claimed pdf (:class:`Transform`, sample-independent) from box
+integrals of q (:func:`harness.samplers.cubature.box_integrals`): piecewise linear through the
+quarter points of leaves refined until the deviation of the CDF from linearity at the quarter
+points (exact for a linear density, and within a factor 2 of the largest deviation for any
+density monotone on the leaf) is below ``eps``; the bound reached, plus the cubature's own
+error, is :attr:`Transform.error`, a bound on |table - CDF| in units of the strip's mass, and
+the tests carry it: a statistic is computed as if every u were that much off in its favour.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import special
+
+from harness.samplers.cubature import box_integrals
+
+__all__ = ["AxisCdf", "Transform", "cramer_von_mises", "cvm_sf", "equiprobable_counts"]
+
+#: Strips of equal claimed mass along s0 on the square (the conditioning of u1), each
+#: integrated across as SUBSTRIPS boxes of equal claimed mass.
+STRIPS = 32
+SUBSTRIPS = 4
+_MARGINAL_PIECES = 64   # boxes across the square for the marginal of s0
+_MAX_DEPTH = 40         # leaf halvings along the axis: leaves down to 2^-40 of the start
+_MAX_BOXES = 4_000_000  # box integrals a tabulation may spend (then it stops with its bound)
+
+
+@dataclass(frozen=True)
+class AxisCdf:
+    """A CDF along one axis of parameter space within each of a set of strips: piecewise
+    linear over leaves [lo, hi) sorted by (strip, lo), ``start`` the CDF at lo and ``mass``
+    the leaf's share of its strip's mass.  ``error`` bounds |table - CDF| (units of the
+    strip's mass) for every strip."""
+
+    strip: np.ndarray   # (L,) int
+    lo: np.ndarray      # (L,)
+    hi: np.ndarray      # (L,)
+    start: np.ndarray   # (L,)
+    mass: np.ndarray    # (L,)
+    strip_mass: np.ndarray  # (S,) each strip's integral of q
+    error: float
+
+    def __call__(self, strip: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """The CDF at coordinates x of points in strips ``strip`` (arrays (N,)), in [0, 1]."""
+        u = np.empty(x.shape[0])
+        bounds = np.searchsorted(self.strip, np.arange(self.strip_mass.size + 1))
+        for g in range(self.strip_mass.size):
+            sel = np.flatnonzero(strip == g)
+            if sel.size == 0:
+                continue
+            a, b = bounds[g], bounds[g + 1]
+            i = a + np.clip(np.searchsorted(self.lo[a:b], x[sel], side="right") - 1, 0, b - a - 1)
+            t = np.clip((x[sel] - self.lo[i]) / (self.hi[i] - self.lo[i]), 0.0, 1.0)
+            u[sel] = self.start[i] + self.mass[i] * t
+        return np.clip(u, 0.0, 1.0)
+
+
+def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: np.ndarray, leaves: int,
+              eps: float, max_share: float = 1.0) -> AxisCdf:
+    """The CDF of q along ``axis`` within each strip: strip g spans all of [0, 1] along
+    ``axis`` (cut into ``leaves`` leaves to start) and, on the square, the pieces
+    pieces[g, j] = (lo, hi) across it (arrays (S, P, 2); each leaf quarter is integrated as one
+    box per piece, so the cubature starts where the mass is).  Leaves are halved while the
+    CDF deviates from linearity by more than eps (times the strip's mass) at a quarter point
+    or a quarter holds more than ``max_share`` of it, or until _MAX_DEPTH / _MAX_BOXES."""
+    nstrip, npiece = pieces.shape[:2]
+    strip = np.repeat(np.arange(nstrip), leaves)
+    a = np.tile(np.arange(leaves) / leaves, nstrip)
+    b = np.tile((np.arange(leaves) + 1) / leaves, nstrip)
+
+    def quarters(strip: np.ndarray, a: np.ndarray, b: np.ndarray, strip_tol: np.ndarray):
+        """(L, 4) quarter integrals of leaves and their (L,) summed cubature error."""
+        edges = a[:, None] + (b - a)[:, None] * np.arange(5)[None, :] / 4      # (L, 5)
+        qa, qb = edges[:, :4].reshape(-1), edges[:, 1:].reshape(-1)           # (4L,)
+        g = np.repeat(strip, 4)
+        tol = np.repeat(strip_tol[g] * (qb - qa) / npiece, npiece)
+        lo, hi = np.empty((qa.size * npiece, k)), np.empty((qa.size * npiece, k))
+        lo[:, axis], hi[:, axis] = np.repeat(qa, npiece), np.repeat(qb, npiece)
+        if k == 2:
+            lo[:, 1 - axis], hi[:, 1 - axis] = pieces[g, :, 0].reshape(-1), pieces[g, :, 1].reshape(-1)
+        val, err = box_integrals(q, lo, hi, tol, max_depth=16)
+        val = np.nan_to_num(val[:, 0], nan=0.0, posinf=0.0, neginf=0.0)
+        err = np.nan_to_num(err[:, 0], nan=0.0, posinf=0.0, neginf=0.0)
+        return (np.maximum(val, 0).reshape(-1, 4, npiece).sum(axis=2),
+                err.reshape(-1, 4 * npiece).sum(axis=1))
+
+    # a first pass at a tolerance relative to the boxes' measure finds the strips' masses
+    measure = np.ones(nstrip) if k == 1 else np.sum(pieces[:, :, 1] - pieces[:, :, 0], axis=1)
+    qs, errs = quarters(strip, a, b, 1e-3 * eps * measure)
+    strip_mass = np.bincount(strip, qs.sum(axis=1), minlength=nstrip)
+    strip_tol = 0.1 * eps * np.maximum(strip_mass, 1e-300)   # cubature error: a tenth of eps
+    err_sum = np.bincount(strip, errs, minlength=nstrip)
+    done: list[tuple[np.ndarray, ...]] = []
+    spent = qs.size * npiece
+    for depth in range(_MAX_DEPTH + 1):
+        m = qs.sum(axis=1)
+        cum = np.cumsum(qs, axis=1)[:, :3]
+        gap = np.max(np.abs(cum - m[:, None] * np.array([0.25, 0.5, 0.75])), axis=1)
+        bound = np.minimum(2 * gap, qs.max(axis=1))     # a quarter's mass bounds any CDF within it
+        fine = (bound <= eps * strip_mass[strip]) & (qs.max(axis=1) <= max_share * strip_mass[strip])
+        ok = fine | (depth == _MAX_DEPTH) | (spent > _MAX_BOXES)
+        done.append((strip[ok], a[ok], b[ok], qs[ok], bound[ok]))
+        if ok.all():
+            break
+        s, lo, hi = strip[~ok], a[~ok], b[~ok]
+        mid = (lo + hi) / 2
+        strip, a, b = np.repeat(s, 2), np.stack([lo, mid], 1).reshape(-1), np.stack([mid, hi], 1).reshape(-1)
+        qs, errs = quarters(strip, a, b, strip_tol)
+        err_sum += np.bincount(strip, errs, minlength=nstrip)
+        spent += qs.size * npiece
+    strip, a, b, qs, bound = (np.concatenate(v) for v in zip(*done))
+    # quarter sub-leaves, sorted by (strip, lo), cumulated within their strip
+    edges = a[:, None] + (b - a)[:, None] * np.arange(5)[None, :] / 4
+    sub_strip = np.repeat(strip, 4)
+    sub_lo, sub_hi, sub_q = edges[:, :4].reshape(-1), edges[:, 1:].reshape(-1), qs.reshape(-1)
+    order = np.lexsort((sub_lo, sub_strip))
+    sub_strip, sub_lo, sub_hi, sub_q = sub_strip[order], sub_lo[order], sub_hi[order], sub_q[order]
+    total = np.bincount(sub_strip, sub_q, minlength=nstrip)
+    norm = np.where(total > 0, total, 1.0)
+    cum = np.cumsum(sub_q)
+    before = cum - sub_q - np.concatenate([[0.0], np.cumsum(total)[:-1]])[sub_strip]
+    worst = np.zeros(nstrip)
+    np.maximum.at(worst, strip, bound)
+    error = float(np.max((worst + err_sum) / norm))
+    return AxisCdf(sub_strip, sub_lo, sub_hi, before / norm[sub_strip], sub_q / norm[sub_strip], total, error)
+
+
+def _snapped_levels(marginal: AxisCdf, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """count + 1 cuts of s0 near the marginal's quantiles j / count, each moved to the nearest
+    edge of the marginal's leaves (where a step of the density lies, the leaves are refined,
+    so no cut leaves a sliver of mass beside a step for the cubature to miss); the first and
+    last at the support's ends.  (cuts, the tabulated CDF at them)."""
+    edges = np.append(marginal.lo, marginal.hi[-1])
+    cdf = np.append(marginal.start, 1.0)
+    cdf[-1] = 1.0
+    target = np.arange(count + 1) / count
+    i = np.clip(np.searchsorted(cdf, target), 1, cdf.size - 1)
+    i = np.where(np.abs(cdf[i - 1] - target) <= np.abs(cdf[i] - target), i - 1, i)
+    i[0] = np.searchsorted(cdf, 0.0, side="right") - 1                  # the support's start
+    i[-1] = min(np.searchsorted(cdf, 1.0 - 1e-12), cdf.size - 1)         # and its end
+    i = np.maximum.accumulate(i)
+    return edges[i], cdf[i]
+
+
+@dataclass(frozen=True)
+class Transform:
+    """The Rosenblatt transform of parameter points through a claimed density q, tabulated
+    once: ``marginal`` (u0) and, on the square, ``conditional`` (u1 given the strip of s0;
+    strips of equal claimed mass, their s0 edges ``edges``).  ``error`` bounds |u - exact u|
+    for any point (units of probability)."""
+
+    marginal: AxisCdf
+    conditional: AxisCdf | None
+    edges: np.ndarray
+    probability: np.ndarray   # each strip's claimed probability (from the marginal)
+    error: float
+
+    @classmethod
+    def build(cls, q: Callable[[np.ndarray], np.ndarray], k: int, n: int) -> Transform:
+        """Tabulates q's CDFs for a test of ``n`` points: to eps = 0.02 / sqrt(n) on the
+        square, so that the carried error moves sqrt(n W^2) by at most about 0.02, and ten
+        times finer on an interval (cheap there), where the equiprobable chi-square's up to
+        1024 bins would otherwise feel the error.  On the square the strips'
+        edges are the marginal's quantiles g / STRIPS, each strip integrated across as
+        SUBSTRIPS pieces of equal claimed mass; a strip whose integral disagrees with the
+        marginal's 1 / STRIPS (mass the cubature missed) adds the disagreement to the bound."""
+        eps = 0.02 / math.sqrt(n)
+        if k == 1:
+            eps /= 10
+            marginal = _tabulate(q, 1, 0, np.zeros((1, 1, 2)), 1024, eps)
+            return cls(marginal, None, np.array([0.0, 1.0]), np.ones(1), marginal.error)
+        cuts = np.arange(_MARGINAL_PIECES + 1) / _MARGINAL_PIECES
+        marginal = _tabulate(q, 2, 0, np.stack([cuts[:-1], cuts[1:]], axis=1)[None], 128, eps,
+                             max_share=1 / (4 * STRIPS * SUBSTRIPS))
+        levels, cdf = _snapped_levels(marginal, STRIPS * SUBSTRIPS)
+        pieces = np.stack([levels[:-1], levels[1:]], axis=1).reshape(STRIPS, SUBSTRIPS, 2)
+        conditional = _tabulate(q, 2, 1, pieces, 64, eps)
+        probability = np.diff(cdf[::SUBSTRIPS])
+        share = marginal.strip_mass[0] * probability
+        missed = np.abs(conditional.strip_mass - share) / np.maximum(share, 1e-300)
+        error_u1 = conditional.error + float(missed.max())
+        conditional = dataclasses.replace(conditional, error=error_u1)
+        return cls(marginal, conditional, levels[::SUBSTRIPS], probability, max(marginal.error, error_u1))
+
+    def strips(self, s: np.ndarray) -> np.ndarray:
+        """The strip (0 .. STRIPS - 1) of each parameter point's s0."""
+        return np.clip(np.searchsorted(self.edges, s[:, 0], side="right") - 1, 0, self.edges.size - 2)
+
+    def __call__(self, s: np.ndarray) -> np.ndarray:
+        """u (N, k) of parameter points s (N, k)."""
+        u0 = self.marginal(np.zeros(s.shape[0], dtype=np.int64), s[:, 0])
+        if self.conditional is None:
+            return u0[:, None]
+        return np.column_stack([u0, self.conditional(self.strips(s), s[:, 1])])
+
+
+def cvm_sf(w2: float) -> float:
+    """P(W^2 > w2) under H0 for the Cramer-von Mises statistic of n uniform points, in its
+    n -> infinity law (accurate for the n >= 1000 of a sampler check): 1 - CDF from Anderson
+    and Darling's (1952) series in Bessel K_{1/4} (to about 1e-12), and where that leaves
+    under 1e-8 the tail of the law's first eigenterm, sqrt(2) erfc(pi sqrt(w2 / 2))
+    (W^2 = sum_k Z_k^2 / (k pi)^2, the product over k >= 2 of (1 - 1/k^2)^(-1/2) being
+    sqrt 2), within 2 % of the series there and decreasing: a p-value down to 1e-300."""
+    if not w2 > 0:
+        return 1.0
+    j = np.arange(30)
+    z = (4 * j + 1) ** 2 / (16 * w2)
+    # Gamma(j + 1/2) / (Gamma(1/2) Gamma(j + 1)), by logs; exp(-z) K(z) = exp(-2 z) kve(z)
+    coef = np.exp(special.gammaln(j + 0.5) - special.gammaln(0.5) - special.gammaln(j + 1))
+    terms = coef * np.sqrt(4 * j + 1) * np.exp(-2 * z) * special.kve(0.25, z)
+    sf = 1.0 - float(terms.sum() / (math.pi * math.sqrt(w2)))
+    if sf >= 1e-8:
+        return min(sf, 1.0)
+    return math.sqrt(2) * math.erfc(math.pi * math.sqrt(w2 / 2))
+
+
+def cramer_von_mises(u: np.ndarray, error: float) -> tuple[float, float]:
+    """(W^2, p) of the points u (N,) against the uniform law, every u allowed to be off by
+    ``error`` from its exact value: by the triangle inequality in R^N the statistic's root
+    part sqrt(W^2 - 1/(12 N)) can then exceed the exact one by at most sqrt(N) * error, so
+    that much is taken off before the p-value (conservative: the level holds).  W^2 is the
+    reported statistic, the p-value that of the reduced one."""
+    n = u.size
+    x = np.sort(u)
+    c = (2 * np.arange(1, n + 1) - 1) / (2 * n)
+    root = float(np.sqrt(np.sum((c - x) ** 2)))
+    w2 = root * root + 1 / (12 * n)
+    reduced = max(root - math.sqrt(n) * error, 0.0) ** 2 + 1 / (12 * n)
+    return w2, cvm_sf(reduced)
+
+
+def equiprobable_counts(t: Transform, s: np.ndarray, u: np.ndarray,
+                        bins: int) -> tuple[np.ndarray, np.ndarray]:
+    """Observed and expected probabilities of cells of equal claimed probability: bins of u0
+    on an interval; strips x bins of u1 on the square.  (counts (C,), probabilities (C,))."""
+    if t.conditional is None:
+        counts = np.bincount(np.minimum((u[:, 0] * bins).astype(np.int64), bins - 1), minlength=bins)
+        return counts.astype(float), np.full(bins, 1.0 / bins)
+    g = t.strips(s)
+    j = np.minimum((u[:, 1] * bins).astype(np.int64), bins - 1)
+    counts = np.bincount(g * bins + j, minlength=STRIPS * bins).astype(float)
+    return counts, np.repeat(t.probability / bins, bins)
