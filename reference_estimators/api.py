@@ -23,7 +23,8 @@ __all__ = [
     "points",
     "integrate", "integrate_chunks", "estimate_from_states", "estimate_of_states", "merge_states",
     "contributions", "accumulate", "accumulate_chunk",
-    "estimate_from_samples", "hardware_threads", "side_extremes", "build_info", "profile_stages",
+    "estimate_from_samples", "hardware_threads", "side_extremes", "piecewise_linear_lookup", "build_info",
+    "profile_stages",
 ]
 
 Integrand = _core.Integrand
@@ -357,6 +358,19 @@ def side_extremes(values: Any, center: float, *, upper: bool, keep: int) -> tupl
         raise ValueError(f"'values' must be one-dimensional, got shape {y.shape}")
     peak, ties, below = _core.side_extremes(y, float(center), bool(upper), _count(keep, "keep"))
     return peak, ties, below
+
+
+def piecewise_linear_lookup(lo: Any, hi: Any, start: Any, mass: Any, offsets: Any, strip: Any,
+                            x: Any) -> np.ndarray:
+    """A piecewise-linear table looked up at points x (N,) of strips ``strip`` (N,): for the leaf
+    i of the point's strip (leaves offsets[g] .. offsets[g + 1] - 1, sorted by ``lo``) with the
+    largest lo[i] <= x (the strip's first leaf if none), start[i] + mass[i] * t with t the
+    point's place in [lo[i], hi[i]] clamped to [0, 1]; the result clamped to [0, 1], NaN for a
+    strip outside the table.  One pass in C++ with the GIL released."""
+    as64 = [np.ascontiguousarray(a, dtype=np.float64).reshape(-1) for a in (lo, hi, start, mass, x)]
+    off = np.ascontiguousarray(offsets, dtype=np.int64).reshape(-1)
+    g = np.ascontiguousarray(strip, dtype=np.int64).reshape(-1)
+    return _core.piecewise_linear_lookup(*as64[:4], off, g, as64[4])
 
 
 def estimate_from_samples(f: str | Integrand, points: Any, pdf: Any, *, sampler: Sampler | None = None,

@@ -287,7 +287,7 @@ class SamplerTest:
         t, m = self.transform, s.shape[0]
         if m == 0:
             return []
-        u = t(s)
+        u, strip = t.apply(s)
         tables = [t.marginal] if t.conditional is None else [t.marginal, t.conditional]
         names = ["u0 = F(s0)", "u1 = F(s1 | strip of s0)"]
         tests = []
@@ -296,7 +296,7 @@ class SamplerTest:
             tests.append((f"Cramer-von Mises {names[axis]}", w2, 0, p,
                           f"smooth warps below the bin width (CDF error bound {table.error:.1e} carried)"))
         bins = min(1024, max(m // 50, 16)) if t.conditional is None else 64
-        observed, prob = equiprobable_counts(t, s, u, bins)
+        observed, prob = equiprobable_counts(t, strip, u, bins)
         stat, df, _ = _chi_square(observed, m * prob, 2 * m * t.error * prob * bins)
         cells = "x".join(map(str, (bins,) if t.conditional is None else (STRIPS, bins)))
         p = stats.chi2.sf(stat, df) if df > 0 else 1.0

@@ -34,6 +34,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import special
 
+import reference_estimators as rest
+
 from harness.samplers.cubature import box_integrals
 
 __all__ = ["AxisCdf", "Transform", "cramer_von_mises", "cvm_sf", "equiprobable_counts"]
@@ -42,8 +44,9 @@ __all__ = ["AxisCdf", "Transform", "cramer_von_mises", "cvm_sf", "equiprobable_c
 #: integrated across as SUBSTRIPS boxes of equal claimed mass.
 STRIPS = 32
 SUBSTRIPS = 4
-_MARGINAL_PIECES = 64   # boxes across the square for the marginal of s0
+_MARGINAL_PIECES = 32   # boxes across the square for the marginal of s0
 _MAX_DEPTH = 40         # leaf halvings along the axis: leaves down to 2^-40 of the start
+_MIN_WIDTH = 2.0**-30   # nor below this width: a domain map loses its precision near a pole
 _MAX_BOXES = 4_000_000  # box integrals a tabulation may spend (then it stops with its bound)
 
 
@@ -64,17 +67,8 @@ class AxisCdf:
 
     def __call__(self, strip: np.ndarray, x: np.ndarray) -> np.ndarray:
         """The CDF at coordinates x of points in strips ``strip`` (arrays (N,)), in [0, 1]."""
-        u = np.empty(x.shape[0])
-        bounds = np.searchsorted(self.strip, np.arange(self.strip_mass.size + 1))
-        for g in range(self.strip_mass.size):
-            sel = np.flatnonzero(strip == g)
-            if sel.size == 0:
-                continue
-            a, b = bounds[g], bounds[g + 1]
-            i = a + np.clip(np.searchsorted(self.lo[a:b], x[sel], side="right") - 1, 0, b - a - 1)
-            t = np.clip((x[sel] - self.lo[i]) / (self.hi[i] - self.lo[i]), 0.0, 1.0)
-            u[sel] = self.start[i] + self.mass[i] * t
-        return np.clip(u, 0.0, 1.0)
+        offsets = np.searchsorted(self.strip, np.arange(self.strip_mass.size + 1))
+        return rest.piecewise_linear_lookup(self.lo, self.hi, self.start, self.mass, offsets, strip, x)
 
 
 def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: np.ndarray, leaves: int,
@@ -84,7 +78,9 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
     pieces[g, j] = (lo, hi) across it (arrays (S, P, 2); each leaf quarter is integrated as one
     box per piece, so the cubature starts where the mass is).  Leaves are halved while the
     CDF deviates from linearity by more than eps (times the strip's mass) at a quarter point
-    or a quarter holds more than ``max_share`` of it, or until _MAX_DEPTH / _MAX_BOXES."""
+    or a quarter holds more than ``max_share`` of it, or until _MAX_DEPTH, _MIN_WIDTH or
+    _MAX_BOXES.  A box whose integral is not finite counts as mass 0 with error 1 (the bound
+    then covers the whole strip: its tests lose their power, never their level)."""
     nstrip, npiece = pieces.shape[:2]
     strip = np.repeat(np.arange(nstrip), leaves)
     a = np.tile(np.arange(leaves) / leaves, nstrip)
@@ -95,14 +91,18 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
         edges = a[:, None] + (b - a)[:, None] * np.arange(5)[None, :] / 4      # (L, 5)
         qa, qb = edges[:, :4].reshape(-1), edges[:, 1:].reshape(-1)           # (4L,)
         g = np.repeat(strip, 4)
-        tol = np.repeat(strip_tol[g] * (qb - qa) / npiece, npiece)
+        # a box's share of the strip's tolerance by its length along the axis, never below a
+        # 1/4096 leaf's: deep leaves at a singularity or step would otherwise drive the cubature
+        # to its depth limit for error it cannot reach (what error remains is summed and carried)
+        tol = np.repeat(strip_tol[g] * np.maximum(qb - qa, 1 / 4096) / npiece, npiece)
         lo, hi = np.empty((qa.size * npiece, k)), np.empty((qa.size * npiece, k))
         lo[:, axis], hi[:, axis] = np.repeat(qa, npiece), np.repeat(qb, npiece)
         if k == 2:
             lo[:, 1 - axis], hi[:, 1 - axis] = pieces[g, :, 0].reshape(-1), pieces[g, :, 1].reshape(-1)
         val, err = box_integrals(q, lo, hi, tol, max_depth=16)
-        val = np.nan_to_num(val[:, 0], nan=0.0, posinf=0.0, neginf=0.0)
-        err = np.nan_to_num(err[:, 0], nan=0.0, posinf=0.0, neginf=0.0)
+        bad = ~(np.isfinite(val[:, 0]) & np.isfinite(err[:, 0]))   # a pdf infinite at a node
+        val = np.where(bad, 0.0, val[:, 0])
+        err = np.where(bad, 1.0, err[:, 0])     # unknown mass: the bound becomes the whole strip
         return (np.maximum(val, 0).reshape(-1, 4, npiece).sum(axis=2),
                 err.reshape(-1, 4 * npiece).sum(axis=1))
 
@@ -120,7 +120,7 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
         gap = np.max(np.abs(cum - m[:, None] * np.array([0.25, 0.5, 0.75])), axis=1)
         bound = np.minimum(2 * gap, qs.max(axis=1))     # a quarter's mass bounds any CDF within it
         fine = (bound <= eps * strip_mass[strip]) & (qs.max(axis=1) <= max_share * strip_mass[strip])
-        ok = fine | (depth == _MAX_DEPTH) | (spent > _MAX_BOXES)
+        ok = fine | (depth == _MAX_DEPTH) | (b - a < _MIN_WIDTH) | (spent > _MAX_BOXES)
         done.append((strip[ok], a[ok], b[ok], qs[ok], bound[ok]))
         if ok.all():
             break
@@ -224,10 +224,15 @@ class Transform:
 
     def __call__(self, s: np.ndarray) -> np.ndarray:
         """u (N, k) of parameter points s (N, k)."""
+        return self.apply(s)[0]
+
+    def apply(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(u (N, k), the strip of each point (N,); all 0 on an interval)."""
+        g = self.strips(s) if self.conditional is not None else np.zeros(s.shape[0], dtype=np.int64)
         u0 = self.marginal(np.zeros(s.shape[0], dtype=np.int64), s[:, 0])
         if self.conditional is None:
-            return u0[:, None]
-        return np.column_stack([u0, self.conditional(self.strips(s), s[:, 1])])
+            return u0[:, None], g
+        return np.column_stack([u0, self.conditional(g, s[:, 1])]), g
 
 
 def cvm_sf(w2: float) -> float:
@@ -243,7 +248,9 @@ def cvm_sf(w2: float) -> float:
     z = (4 * j + 1) ** 2 / (16 * w2)
     # Gamma(j + 1/2) / (Gamma(1/2) Gamma(j + 1)), by logs; exp(-z) K(z) = exp(-2 z) kve(z)
     coef = np.exp(special.gammaln(j + 0.5) - special.gammaln(0.5) - special.gammaln(j + 1))
-    terms = coef * np.sqrt(4 * j + 1) * np.exp(-2 * z) * special.kve(0.25, z)
+    live = z < 350                       # beyond, exp(-2 z) underflows (and kve may be NaN)
+    terms = np.where(live, coef * np.sqrt(4 * j + 1) * np.exp(-2 * np.where(live, z, 0.0))
+                     * special.kve(0.25, np.where(live, z, 1.0)), 0.0)
     sf = 1.0 - float(terms.sum() / (math.pi * math.sqrt(w2)))
     if sf >= 1e-8:
         return min(sf, 1.0)
@@ -265,14 +272,14 @@ def cramer_von_mises(u: np.ndarray, error: float) -> tuple[float, float]:
     return w2, cvm_sf(reduced)
 
 
-def equiprobable_counts(t: Transform, s: np.ndarray, u: np.ndarray,
+def equiprobable_counts(t: Transform, strip: np.ndarray, u: np.ndarray,
                         bins: int) -> tuple[np.ndarray, np.ndarray]:
-    """Observed and expected probabilities of cells of equal claimed probability: bins of u0
-    on an interval; strips x bins of u1 on the square.  (counts (C,), probabilities (C,))."""
+    """Observed counts and claimed probabilities of cells of equal claimed probability: bins
+    of u0 on an interval; strips x bins of u1 on the square (``strip``, ``u`` from
+    :meth:`Transform.apply`).  (counts (C,), probabilities (C,))."""
     if t.conditional is None:
         counts = np.bincount(np.minimum((u[:, 0] * bins).astype(np.int64), bins - 1), minlength=bins)
         return counts.astype(float), np.full(bins, 1.0 / bins)
-    g = t.strips(s)
     j = np.minimum((u[:, 1] * bins).astype(np.int64), bins - 1)
-    counts = np.bincount(g * bins + j, minlength=STRIPS * bins).astype(float)
+    counts = np.bincount(strip * bins + j, minlength=STRIPS * bins).astype(float)
     return counts, np.repeat(t.probability / bins, bins)

@@ -16,6 +16,7 @@
 #include "estimators.h"
 #include "extremes.h"
 #include "fastmath.h"
+#include "tables.h"
 #include "thread_pool.h"
 
 namespace nb = nanobind;
@@ -425,6 +426,29 @@ NB_MODULE(_core, m) {
     }, "values"_a, "center"_a, "upper"_a, "keep"_a,
        "(peak, ties, below): the largest positive deviation y - center (upper) or center - y (lower), how many "
        "equal it, and the `keep` largest strictly below it, descending; peak NaN if none is positive.");
+    m.def("piecewise_linear_lookup", [](InArray lo, InArray hi, InArray start, InArray mass,
+                                        nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu> offsets,
+                                        nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu> strip,
+                                        InArray x) {
+        const size_t leaves = lo.size();
+        if (hi.size() != leaves || start.size() != leaves || mass.size() != leaves)
+            throw nb::value_error("'lo', 'hi', 'start' and 'mass' must have one value per leaf");
+        if (offsets.size() < 1 || offsets.data()[0] != 0 || size_t(offsets.data()[offsets.size() - 1]) != leaves)
+            throw nb::value_error("'offsets' must run from 0 to the number of leaves");
+        for (size_t g = 1; g < offsets.size(); ++g)
+            if (offsets.data()[g] < offsets.data()[g - 1]) throw nb::value_error("'offsets' must not decrease");
+        if (strip.size() != x.size()) throw nb::value_error("'strip' and 'x' must have one value per point");
+        double *out;
+        OutArray u = new_array(x.size(), 0, &out);
+        {
+            nb::gil_scoped_release g;
+            piecewise_linear_lookup(lo.data(), hi.data(), start.data(), mass.data(), offsets.data(),
+                                    int64_t(offsets.size()) - 1, strip.data(), x.data(), x.size(), out);
+        }
+        return u;
+    }, "lo"_a, "hi"_a, "start"_a, "mass"_a, "offsets"_a, "strip"_a, "x"_a,
+       "u = start[i] + mass[i] * clamp((x - lo[i]) / (hi[i] - lo[i]), 0, 1) for the leaf i of the point's strip "
+       "(leaves offsets[g] .. offsets[g+1]-1, sorted by lo) with the largest lo <= x; NaN for a strip out of range.");
     m.def("profile_stages", [check_pair](const Integrand &f, const Technique &t, int64_t n, uint64_t seed, int threads) {
         check_n(n);
         check_pair(f, t);

@@ -28,6 +28,8 @@ def test_cvm_law_is_a_survival_function_down_to_tiny_p():
     sf = np.array([cvm_sf(v) for v in x])
     assert np.all(np.diff(sf) <= 0) and sf[0] < 1 and 0 < sf[-1] < 1e-40
     assert cvm_sf(0.0) == 1.0 and cvm_sf(-1.0) == 1.0
+    tiny = np.array([cvm_sf(v) for v in np.logspace(-12, -2, 50)])   # 1 / (12 n) and below
+    assert np.all((tiny > 0.99) & (tiny <= 1.0))
 
 
 def test_cvm_holds_alpha_on_uniform_points_and_the_carried_error_only_raises_p():
