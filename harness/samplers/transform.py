@@ -244,6 +244,9 @@ def cvm_sf(w2: float) -> float:
     sqrt 2), within 2 % of the series there and decreasing: a p-value down to 1e-300."""
     if not w2 > 0:
         return 1.0
+    tail = math.sqrt(2) * math.erfc(math.pi * math.sqrt(w2 / 2))
+    if tail < 1e-8:            # w2 > 3.4; the series would also need more terms beyond w2 ~ 50
+        return tail
     j = np.arange(30)
     z = (4 * j + 1) ** 2 / (16 * w2)
     # Gamma(j + 1/2) / (Gamma(1/2) Gamma(j + 1)), by logs; exp(-z) K(z) = exp(-2 z) kve(z)
@@ -251,10 +254,7 @@ def cvm_sf(w2: float) -> float:
     live = z < 350                       # beyond, exp(-2 z) underflows (and kve may be NaN)
     terms = np.where(live, coef * np.sqrt(4 * j + 1) * np.exp(-2 * np.where(live, z, 0.0))
                      * special.kve(0.25, np.where(live, z, 1.0)), 0.0)
-    sf = 1.0 - float(terms.sum() / (math.pi * math.sqrt(w2)))
-    if sf >= 1e-8:
-        return min(sf, 1.0)
-    return math.sqrt(2) * math.erfc(math.pi * math.sqrt(w2 / 2))
+    return float(min(max(1.0 - float(terms.sum() / (math.pi * math.sqrt(w2))), 0.0), 1.0))
 
 
 def cramer_von_mises(u: np.ndarray, error: float) -> tuple[float, float]:
