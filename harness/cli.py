@@ -189,11 +189,15 @@ def _check_sampler(args) -> int:
     print(result)
     ok = result.passed
     if args.mcmc:
-        m = mcmc_crosscheck(user.sample, user.pdf, domain, seed=args.seed, alpha=args.alpha, udim=user.udim)
-        print(f"\nMCMC cross-check (emcee): {'PASSED' if m.passed else 'FAILED'}, "
-              f"Holm-adjusted p = {m.pvalue:.3g}")
-        print(m.tests.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
-        ok = ok and m.passed
+        try:
+            m = mcmc_crosscheck(user.sample, user.pdf, domain, seed=args.seed, alpha=args.alpha,
+                                udim=user.udim)
+        except ValueError as e:  # the user's code failing (UserCodeError names it)
+            print(f"harness: {e}", file=sys.stderr)
+            return 2
+        print("\nMCMC cross-check (emcee):")
+        print(m)
+        ok = ok and m.verdict != "failed"  # inconclusive (chain too short) fails nothing
     print(f"summary: {int(ok)} passed, {int(not ok)} failed")
     return 0 if ok else 1
 

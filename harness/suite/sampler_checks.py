@@ -126,7 +126,8 @@ class SamplerKind:
 
 
 def _judge(results: list[SamplerResult], alpha: float) -> tuple[list[dict[str, str]], list[dict[str, float]]]:
-    """Verdict per sampler check ('passed' or 'failed'; deterministic failures always fail)
+    """Verdict per sampler check ('passed', 'failed' or 'inconclusive': an MCMC chain too
+    short for its autocorrelation time, which fails no run; deterministic failures always fail)
     and its Holm-adjusted p-value, Holm over all of the suite's checks at family-wise alpha."""
     flat = [(i, m, c) for i, r in enumerate(results) for m, c in r.checks.items()]
     pvalues = [c["pvalue"] for _, _, c in flat]
@@ -134,7 +135,8 @@ def _judge(results: list[SamplerResult], alpha: float) -> tuple[list[dict[str, s
     verdicts: list[dict[str, str]] = [{} for _ in results]
     adj_of: list[dict[str, float]] = [{} for _ in results]
     for (i, m, c), rej, adj in zip(flat, rejected, adjusted):
-        verdicts[i][m] = "failed" if (rej or c["failures"]) else "passed"
+        failed = rej or c["failures"]
+        verdicts[i][m] = "failed" if failed else "inconclusive" if c.get("inconclusive") else "passed"
         adj_of[i][m] = adj
     return verdicts, adj_of
 
@@ -177,8 +179,9 @@ def _format_table(results: list[SamplerResult], verdicts: list[dict[str, str]], 
              f"{'weight':>8s}  verdict (Holm, α={alpha:.3g})"]
     for r, v in zip(results, verdicts):
         cs, mc = r.checks.get("chi_square"), r.checks.get("mcmc")
-        verdict = "failed" if "failed" in v.values() else "passed"
-        notes = "; ".join(f"{f['check']}: {f['count']}" for c in r.checks.values() for f in c["failures"])
+        verdict = next((w for w in ("failed", "inconclusive") if w in v.values()), "passed")
+        notes = "; ".join([f"{f['check']}: {f['count']}" for c in r.checks.values() for f in c["failures"]]
+                          + [c["inconclusive"] for c in r.checks.values() if c.get("inconclusive")])
         p_cs = f"{cs['pvalue']:.3g}" if cs else "—"
         p_mc = f"{mc['pvalue']:.3g}" if mc else "—"
         w = r.checks.get("weight")

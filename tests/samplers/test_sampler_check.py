@@ -1,4 +1,4 @@
-"""check_sampler and mcmc_crosscheck: false alarms and power on the sampler zoo, the
+"""check_sampler: false alarms and power on the sampler zoo, the
 deterministic checks, and the command line."""
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from scipy import stats
 
 import reference_estimators as rest
 
-from harness.samplers import Domain, SamplerTest, as_domain, check_sampler, mcmc_crosscheck, zoo
+from harness.samplers import Domain, SamplerTest, as_domain, check_sampler, zoo
 from harness.stats import ConfidenceInterval, Failure
 from harness.usercode import UserCodeError
 
@@ -153,20 +153,6 @@ def test_wrong_point_shapes_are_named():
                        match=r"<lambda> returned points of shape \(5000, 2\) for uniforms of shape "
                              r"\(5000, 2\); expected shape \(5000, 3\) on the hemisphere"):
         check_sampler(lambda u: u, lambda x: np.ones(len(x)), "hemisphere", sample_count=5000)
-
-
-@pytest.mark.slow
-def test_mcmc_crosscheck_holds_alpha_and_sees_a_wrong_sampler():
-    """emcee draws from the claimed pdf, thinned by 2 tau: 20 seeds of a correct sampler at
-    alpha = 0.01 may fail at most 3 times (Binomial(20, 0.01) upper 1e-3 quantile); a
-    cosine-weighted sampler claiming a uniform hemisphere fails."""
-    cos = rest.sampler("cosine_hemisphere")
-    fails = sum(not mcmc_crosscheck(lambda u: cos.sample(u)[0], cos.pdf, "hemisphere", sample_count=5000,
-                                    seed=seed).passed for seed in range(20))
-    assert fails <= stats.binom.isf(1e-3, 20, 0.01), fails
-    r = mcmc_crosscheck(lambda u: cos.sample(u)[0], lambda w: np.full(len(w), 0.5 / math.pi), "hemisphere",
-                        sample_count=5000)
-    assert not r.passed and r.tests.attrs["thin"] >= 1
 
 
 def test_cli_check_sampler(tmp_path):
