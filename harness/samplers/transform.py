@@ -47,7 +47,9 @@ SUBSTRIPS = 4
 _MARGINAL_PIECES = 32   # boxes across the square for the marginal of s0
 _MAX_DEPTH = 40         # leaf halvings along the axis: leaves down to 2^-40 of the start
 _MIN_WIDTH = 2.0**-30   # nor below this width: a domain map loses its precision near a pole
-_MAX_BOXES = 4_000_000  # box integrals a tabulation may spend (then it stops with its bound)
+_MAX_BOXES = 300_000    # box integrals a tabulation may spend (then it stops with its bound)
+_MAX_EVALS = 6_000_000  # pdf evaluations one round of box integrals may spend: a float32 pdf's
+                        # rounding noise would otherwise drive every box to the depth limit
 
 
 @dataclass(frozen=True)
@@ -99,7 +101,7 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
         lo[:, axis], hi[:, axis] = np.repeat(qa, npiece), np.repeat(qb, npiece)
         if k == 2:
             lo[:, 1 - axis], hi[:, 1 - axis] = pieces[g, :, 0].reshape(-1), pieces[g, :, 1].reshape(-1)
-        val, err = box_integrals(q, lo, hi, tol, max_depth=16)
+        val, err = box_integrals(q, lo, hi, tol, max_depth=8, max_evals=_MAX_EVALS)
         bad = ~(np.isfinite(val[:, 0]) & np.isfinite(err[:, 0]))   # a pdf infinite at a node
         val = np.where(bad, 0.0, val[:, 0])
         err = np.where(bad, 1.0, err[:, 0])     # unknown mass: the bound becomes the whole strip
