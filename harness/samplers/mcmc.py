@@ -214,71 +214,72 @@ def _initial(log_q: Callable[[np.ndarray], np.ndarray], k: int, nw: int,
     return pick
 
 
-def _stretch_move(emcee: Any, log_q: Callable[[np.ndarray], np.ndarray]) -> Any:
+_Proposal = Callable[[Any, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
+def _red_blue_move(emcee: Any, log_q: Callable[[np.ndarray], np.ndarray], half_proposal: _Proposal) -> Any:
+    """An emcee move that updates the ensemble in two random halves, each from the other (held
+    fixed, so every half-update leaves q invariant): ``half_proposal(random, s, c)`` proposes Y
+    for the moving walkers s from the complement c and returns (Y, log of the proposal's
+    Metropolis-Hastings factor); acceptance is vectorised over the walkers."""
+
+    class RedBlue(emcee.moves.StretchMove):
+        def propose(self, model: Any, state: Any) -> tuple[Any, np.ndarray]:
+            nw = state.coords.shape[0]
+            accepted = np.zeros(nw, dtype=bool)
+            halves = np.arange(nw) % 2
+            model.random.shuffle(halves)
+            for half in (0, 1):
+                mine = halves == half
+                y, log_factor = half_proposal(model.random, state.coords[mine], state.coords[~mine])
+                lq = log_q(y)
+                with np.errstate(invalid="ignore"):
+                    ratio = lq - state.log_prob[mine] + log_factor
+                accepted[mine] = np.nan_to_num(ratio, nan=-np.inf) > np.log(model.random.rand(y.shape[0]))
+                state = self.update(state, emcee.State(y, log_prob=lq), accepted, mine)
+            return state, accepted
+
+    return RedBlue()
+
+
+def _stretch_move(emcee: Any, log_q: Callable[[np.ndarray], np.ndarray], a: float = 2.0) -> Any:
     """emcee's stretch move (a = 2, red-blue halves) with its acceptance vectorised: emcee's own
     loops over walkers in Python (15 us a walker step), this one costs the same for 1000
     walkers as for 32, so the ensemble can be large.  Same proposal and acceptance as
     ``emcee.moves.StretchMove``: Y = X_c + z (X_j - X_c), z ~ g(z) on [1/a, a], accepted with
     probability min(1, z^(k-1) q(Y) / q(X_j))."""
+    def propose(random: Any, s: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        z = ((a - 1.0) * random.rand(s.shape[0]) + 1) ** 2 / a
+        other = c[random.randint(c.shape[0], size=s.shape[0])]
+        return other - (other - s) * z[:, None], (s.shape[1] - 1) * np.log(z)
 
-    class VectorStretch(emcee.moves.StretchMove):
-        def propose(self, model: Any, state: Any) -> tuple[Any, np.ndarray]:
-            nw, k = state.coords.shape
-            accepted = np.zeros(nw, dtype=bool)
-            halves = np.arange(nw) % 2
-            model.random.shuffle(halves)
-            for half in (0, 1):
-                mine = halves == half
-                s, c = state.coords[mine], state.coords[~mine]
-                z = ((self.a - 1.0) * model.random.rand(s.shape[0]) + 1) ** 2 / self.a
-                other = c[model.random.randint(c.shape[0], size=s.shape[0])]
-                y = other - (other - s) * z[:, None]
-                lq = log_q(y)
-                accepted[mine] = (k - 1) * np.log(z) + lq - state.log_prob[mine] > \
-                    np.log(model.random.rand(s.shape[0]))
-                state = self.update(state, emcee.State(y, log_prob=lq), accepted, mine)
-            return state, accepted
-
-    return VectorStretch()
+    return _red_blue_move(emcee, log_q, propose)
 
 
 def _kde_move(emcee: Any, log_q: Callable[[np.ndarray], np.ndarray]) -> Any:
     """An independence proposal from a Gaussian kernel density estimate of the complementary
     half of the ensemble (as ``emcee.moves.KDEMove``, with a diagonal bandwidth by Silverman's
-    robust rule), its Metropolis-Hastings ratio q(Y) g(X) / (q(X) g(Y)) vectorised.  The complement is fixed
-    while a half moves, so each half-update leaves q invariant; where the ensemble already
-    looks like q, it decorrelates a walker in a few steps (the stretch move alone needs 20-100)."""
+    robust rule), its Metropolis-Hastings ratio q(Y) g(X) / (q(X) g(Y)) vectorised.  Where the
+    ensemble already looks like q, it decorrelates a walker in a few steps (the stretch move
+    alone needs 20-100)."""
+    def propose(random: Any, s: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        k = s.shape[1]
+        iqr = np.subtract(*np.percentile(c, [75, 25], axis=0)) / 1.349
+        spread = np.where(iqr > 0, np.minimum(c.std(axis=0), iqr), c.std(axis=0))
+        h = np.maximum(0.9 * spread * c.shape[0] ** (-1.0 / (k + 4)), 1e-12)  # Silverman, robust
+        y = c[random.randint(c.shape[0], size=s.shape[0])] + h * random.randn(*s.shape)
+        ch = c / h
+        cc = (ch * ch).sum(axis=1)
 
-    class KernelMove(emcee.moves.StretchMove):
-        def propose(self, model: Any, state: Any) -> tuple[Any, np.ndarray]:
-            nw, k = state.coords.shape
-            accepted = np.zeros(nw, dtype=bool)
-            halves = np.arange(nw) % 2
-            model.random.shuffle(halves)
-            for half in (0, 1):
-                mine = halves == half
-                s, c = state.coords[mine], state.coords[~mine]
-                iqr = np.subtract(*np.percentile(c, [75, 25], axis=0)) / 1.349
-                spread = np.where(iqr > 0, np.minimum(c.std(axis=0), iqr), c.std(axis=0))
-                h = np.maximum(0.9 * spread * c.shape[0] ** (-1.0 / (k + 4)), 1e-12)  # Silverman, robust
-                y = c[model.random.randint(c.shape[0], size=s.shape[0])] + h * model.random.randn(*s.shape)
-                ch = c / h
-                cc = (ch * ch).sum(axis=1)
+        def log_g(p: np.ndarray) -> np.ndarray:  # log of the kernel sum, up to a constant
+            ph = p / h
+            e = (ph @ ch.T) - 0.5 * cc[None, :] - 0.5 * (ph * ph).sum(axis=1)[:, None]
+            m = e.max(axis=1)
+            return m + np.log(np.exp(e - m[:, None]).sum(axis=1))
 
-                def log_g(p: np.ndarray) -> np.ndarray:  # log of the kernel sum, up to a constant
-                    ph = p / h
-                    e = (ph @ ch.T) - 0.5 * cc[None, :] - 0.5 * (ph * ph).sum(axis=1)[:, None]
-                    m = e.max(axis=1)
-                    return m + np.log(np.exp(e - m[:, None]).sum(axis=1))
+        return y, log_g(s) - log_g(y)
 
-                lq = log_q(y)
-                with np.errstate(invalid="ignore"):
-                    ratio = lq - state.log_prob[mine] + log_g(s) - log_g(y)
-                accepted[mine] = np.nan_to_num(ratio, nan=-np.inf) > np.log(model.random.rand(s.shape[0]))
-                state = self.update(state, emcee.State(y, log_prob=lq), accepted, mine)
-            return state, accepted
-
-    return KernelMove()
+    return _red_blue_move(emcee, log_q, propose)
 
 
 class _Chain:
