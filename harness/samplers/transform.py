@@ -101,7 +101,7 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
         lo[:, axis], hi[:, axis] = np.repeat(qa, npiece), np.repeat(qb, npiece)
         if k == 2:
             lo[:, 1 - axis], hi[:, 1 - axis] = pieces[g, :, 0].reshape(-1), pieces[g, :, 1].reshape(-1)
-        val, err = box_integrals(q, lo, hi, tol, max_depth=8, max_evals=_MAX_EVALS)
+        val, err = box_integrals(q, lo, hi, tol, max_depth=16 if k == 1 else 8, max_evals=_MAX_EVALS)
         bad = ~(np.isfinite(val[:, 0]) & np.isfinite(err[:, 0]))   # a pdf infinite at a node
         val = np.where(bad, 0.0, val[:, 0])
         err = np.where(bad, 1.0, err[:, 0])     # unknown mass: the bound becomes the whole strip
