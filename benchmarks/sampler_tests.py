@@ -9,7 +9,9 @@ For each sampler (the zoo's correct ones, its mutants and the smooth warps below
 width): how many of the seeds each test rejected (false alarms for correct samplers at
 alpha = 0.01, catches for wrong ones) and the seconds per test.  Mitsuba's is timed whole
 (its sampler calls included); ours is split into the setup done once per claimed pdf (the
-cubature and the CDF tables), the sampler's own time and the check's time per seed.
+cubature and the CDF tables), the sampler's own time and the check's time per seed; the
+check's time includes one call of the user's pdf at the sampled points, timed again alone
+('pdf s'), and 'own s' is the check's own work (check s - pdf s).
 """
 from __future__ import annotations
 
@@ -64,15 +66,19 @@ def mitsuba_test(mi, s, n: int, seed: int) -> tuple[bool, float]:
     return ok, time.perf_counter() - t
 
 
-def ours(test: SamplerTest, s, seed: int) -> tuple[bool, float, float]:
-    """(passed, the sampler's own seconds, the check's seconds) for one seed."""
+def ours(test: SamplerTest, s, seed: int) -> tuple[bool, float, float, float]:
+    """(passed, the sampler's own seconds, the check's seconds, the pdf's seconds) for one seed:
+    the check's time includes its one call of the user's pdf at the sampled points, timed
+    again alone for the last figure, so that check - pdf is the check's own work."""
     n = test.n
     u = rest.points(n, as_domain(s.domain).udim, seed=seed, case_id=SAMPLE_CASE)
     t0 = time.perf_counter()
     x = s.sample(u)
     t1 = time.perf_counter()
     ok = test.check(lambda _u, x=x: x, seed=seed).passed   # the same uniforms, the points already drawn
-    return ok, t1 - t0, time.perf_counter() - t1
+    t2 = time.perf_counter()
+    s.pdf(x)
+    return ok, t1 - t0, t2 - t1, time.perf_counter() - t2
 
 
 def main() -> None:
@@ -90,17 +96,18 @@ def main() -> None:
           f"'rejected' = failed tests of {args.seeds}; ours: the pdf's cubature and CDF tables once per "
           f"sampler ('setup'), then per seed the sampler's own time and the check's\n")
     print(f"{'sampler':50s} {'truth':7s} {'Mitsuba rej':>11s} {'s/test':>7s} {'ours rej':>8s} "
-          f"{'setup s':>8s} {'sampler s':>9s} {'check s':>8s}")
+          f"{'setup s':>8s} {'sampler s':>9s} {'check s':>8s} {'pdf s':>6s} {'own s':>6s}")
     for s in sampler_zoo.correct() + sampler_zoo.wrong() + sampler_zoo.smooth_warps():
         m = [mitsuba_test(mi, s, n, seed) for seed in range(args.seeds)]
         t0 = time.perf_counter()
         test = SamplerTest(s.pdf, s.domain, sample_count=n)
         setup = time.perf_counter() - t0
         o = [ours(test, s, seed) for seed in range(args.seeds)]
+        check, pdf = statistics.median(r[2] for r in o), statistics.median(r[3] for r in o)
         print(f"{s.name[:50]:50s} {'wrong' if s.fault else 'correct':7s} "
               f"{sum(not ok for ok, _ in m):>11d} {statistics.median(t for _, t in m):7.2f} "
-              f"{sum(not ok for ok, _, _ in o):>8d} {setup:8.2f} "
-              f"{statistics.median(t for _, t, _ in o):9.3f} {statistics.median(t for _, _, t in o):8.3f}",
+              f"{sum(not r[0] for r in o):>8d} {setup:8.2f} "
+              f"{statistics.median(r[1] for r in o):9.3f} {check:8.3f} {pdf:6.3f} {check - pdf:6.3f}",
               flush=True)
 
 

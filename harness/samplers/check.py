@@ -38,7 +38,7 @@ import reference_estimators as rest
 from harness.samplers.cubature import cell_integrals
 from harness.samplers.domains import Domain, as_domain
 from harness.samplers.reported import reported_pdf_failure
-from harness.samplers.transform import STRIPS, Transform, cramer_von_mises, equiprobable_counts
+from harness.samplers.transform import STRIPS, Transform, cramer_von_mises_columns, equiprobable_counts
 from harness.stats import holm
 from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
 from harness.usercode import UserCodeError, array_result, call, callable_name
@@ -221,15 +221,16 @@ class SamplerTest:
             failures.append(Failure(check, int(mask.sum()), detail, tuple(ex)))
 
         s, inside = dom.to_params(x)
-        if not inside.all():
+        all_inside = bool(inside.all())
+        if not all_inside:
             fail("outside_domain", ~inside, f"points outside the {dom.kind}")
         p = self.pdf(x)
-        bad = ~np.isfinite(p) | (p < 0)
-        if bad.any():
-            fail("bad_pdf", bad, "pdf NaN, infinite or negative at sampled points", p)
-        zero = (p == 0) & inside
-        if zero.any():
-            fail("zero_pdf", zero, "sampled points where the pdf is 0", p)
+        measure = 1.0 if dom.kind == "half_line" else float(dom.jacobian(s))
+        n_bad, n_zero, used, h_sum = rest.pdf_summary(dom.kind, measure, s, inside, p, self.c)
+        if n_bad:
+            fail("bad_pdf", ~np.isfinite(p) | (p < 0), "pdf NaN, infinite or negative at sampled points", p)
+        if n_zero:
+            fail("zero_pdf", (p == 0) & inside, "sampled points where the pdf is 0", p)
         if reported is not None:
             mismatch = reported_pdf_failure(x, reported, self.claimed_pdf)
             if mismatch is not None:
@@ -242,7 +243,7 @@ class SamplerTest:
             failures.append(Failure("normalization", 1, f"pdf integrates to {total:.6f} ± {total_err:.1e} "
                                                         f"over the {dom.kind}, not 1"))
 
-        counts = histogram(np.clip(s[inside], 0, np.nextafter(1, 0)), base)
+        counts = rest.grid_histogram(s, inside, base)
         grids = {"coarse": (16,) if dom.k == 1 else (16, 32), "fine": (512,) if dom.k == 1 else (64, 128)}
         tests, residuals = [], {}
         for name, shape in grids.items():
@@ -259,15 +260,14 @@ class SamplerTest:
             bins = min(base[axis], 128)
             marginals[f"s{axis}"] = {"observed": o.reshape(bins, -1).sum(axis=1),
                                      "expected": n * e.reshape(bins, -1).sum(axis=1)}
-        tests += self._transform_tests(s[inside])
-        # pdf moment: sample mean of h(p(X)) against its cubature value; the variance adds the
-        # cubature error and a rounding floor (a constant pdf makes h constant)
+        tests += self._transform_tests(s if all_inside else s[inside])
+        # pdf moment: sample mean of h(p(X)) against its cubature value (h summed over the
+        # inside points with a good pdf by pdf_summary above; 0 where there are none or c = 0);
+        # the variance adds the cubature error and a rounding floor (a constant pdf makes h constant)
         e1, e2, e1_err = self.h_moments
-        jac = dom.jacobian(s)
-        ps = (p * jac)[inside & ~bad] if np.ndim(jac) else p[inside & ~bad] * jac
-        hs = ps / (ps + self.c) if self.c > 0 and ps.size else np.zeros(1)
-        denom = math.sqrt(max(e2 - e1 * e1, 0.0) / max(hs.size, 1) + e1_err**2 + 1e-24)
-        z = (float(hs.mean()) - e1) / denom
+        h_mean = h_sum / used if self.c > 0 and used else 0.0
+        denom = math.sqrt(max(e2 - e1 * e1, 0.0) / max(used if self.c > 0 else 1, 1) + e1_err**2 + 1e-24)
+        z = (h_mean - e1) / denom
         tests.append(("pdf moment", z * z, 1, float(stats.chi2.sf(z * z, 1)),
                       "density wrong where it is high or low"))
 
@@ -291,8 +291,8 @@ class SamplerTest:
         tables = [t.marginal] if t.conditional is None else [t.marginal, t.conditional]
         names = ["u0 = F(s0)", "u1 = F(s1 | strip of s0)"]
         tests = []
-        for axis, table in enumerate(tables):
-            w2, p = cramer_von_mises(u[:, axis], table.error)
+        cvm = cramer_von_mises_columns(u, [table.error for table in tables])
+        for axis, (table, (w2, p)) in enumerate(zip(tables, cvm)):
             tests.append((f"Cramer-von Mises {names[axis]}", w2, 0, p,
                           f"smooth warps below the bin width (CDF error bound {table.error:.1e} carried)"))
         bins = min(1024, max(m // 50, 16)) if t.conditional is None else 64
@@ -504,11 +504,9 @@ def _checked_pdf(pdf: Callable[[np.ndarray], Any]) -> Callable[[np.ndarray], np.
 
 def histogram(s: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     """Counts of parameter points ``s`` (N, k), each in [0, 1), on the regular grid ``shape``
-    over [0, 1]^k (cells of equal measure): an array of ``shape``."""
-    idx = np.zeros(s.shape[0], dtype=np.int64)
-    for axis, m in enumerate(shape):
-        idx = idx * m + np.minimum((s[:, axis] * m).astype(np.int64), m - 1)
-    return np.bincount(idx, minlength=int(np.prod(shape))).astype(float).reshape(shape)
+    over [0, 1]^k (cells of equal measure): an array of ``shape`` (float64).  One pass in the
+    core (:func:`reference_estimators.grid_histogram`)."""
+    return rest.grid_histogram(s, np.ones(s.shape[0], dtype=bool), shape)
 
 
 def _coarsen(a: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:

@@ -14,6 +14,8 @@ from collections.abc import Callable
 
 import numpy as np
 
+import reference_estimators as rest
+
 __all__ = ["box_integrals", "cell_integrals"]
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(4)
@@ -23,15 +25,8 @@ _GL_X, _GL_W = (_GL_X + 1) / 2, _GL_W / 2  # on [0, 1]
 def _rule(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Tensor 4-point Gauss-Legendre integrals of q over boxes [lo, hi] (M, k): (M, m)."""
     m, k = lo.shape
-    if k == 1:
-        pts = (lo[:, None, 0] + (hi - lo)[:, None, 0] * _GL_X[None, :]).reshape(-1, 1)
-        w = _GL_W
-    else:
-        gx, gy = np.meshgrid(_GL_X, _GL_X, indexing="ij")
-        w = np.outer(_GL_W, _GL_W).reshape(-1)
-        px = lo[:, None, 0] + (hi - lo)[:, None, 0] * gx.reshape(1, -1)
-        py = lo[:, None, 1] + (hi - lo)[:, None, 1] * gy.reshape(1, -1)
-        pts = np.column_stack([px.reshape(-1), py.reshape(-1)])
+    pts = rest.cubature_nodes(lo, hi, _GL_X)
+    w = _GL_W if k == 1 else np.outer(_GL_W, _GL_W).reshape(-1)
     vals = np.asarray(q(pts), dtype=float)
     vals = vals.reshape(m, w.size, -1)
     return np.einsum("mwc,w->mc", vals, w) * np.prod(hi - lo, axis=1)[:, None]

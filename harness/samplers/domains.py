@@ -20,6 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+import reference_estimators as rest
+
 __all__ = ["DOMAINS", "Domain", "as_domain"]
 
 DOMAINS = ("interval", "half_line", "square", "disk", "hemisphere", "sphere")
@@ -57,44 +59,15 @@ class Domain:
                 "sphere": 4 * math.pi}[self.kind]
 
     def to_points(self, s: np.ndarray) -> np.ndarray:
-        """Points x(s) of parameters s (N, k): (N,) or (N, point_dim)."""
-        if self.kind == "interval":
-            return self.lo + (self.hi - self.lo) * s[:, 0]
-        if self.kind == "half_line":
-            return s[:, 0] / (1.0 - s[:, 0])
-        if self.kind == "square":
-            return s.copy()
-        phi = 2 * math.pi * s[:, 1]
-        if self.kind == "disk":
-            r = np.sqrt(s[:, 0])
-            return np.column_stack([r * np.cos(phi), r * np.sin(phi)])
-        z = s[:, 0] if self.kind == "hemisphere" else 1 - 2 * s[:, 0]
-        r = np.sqrt(np.maximum(0.0, 1 - z * z))
-        return np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
+        """Points x(s) of parameters s (N, k): (N,) or (N, point_dim).  One pass in the core
+        (:func:`reference_estimators.domain_points`)."""
+        return rest.domain_points(self.kind, s, self.lo, self.hi)
 
     def to_params(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(s of shape (N, k), mask of points inside the domain).  Unit vectors may be off
-        by 1e-5 in squared norm (float32 renderers)."""
-        x = np.asarray(x, dtype=float)
-        if self.kind == "interval":
-            x = x.reshape(-1)
-            s = ((x - self.lo) / (self.hi - self.lo))[:, None]
-            return s, np.isfinite(x) & (x >= self.lo) & (x <= self.hi)
-        if self.kind == "half_line":
-            x = x.reshape(-1)
-            return (x / (1.0 + x))[:, None], np.isfinite(x) & (x >= 0)
-        if self.kind == "square":
-            return x.copy(), np.all(np.isfinite(x), axis=1) & np.all((x >= 0) & (x <= 1), axis=1)
-        phi = np.mod(np.arctan2(x[:, 1], x[:, 0]) / (2 * math.pi), 1.0)
-        if self.kind == "disk":
-            r2 = x[:, 0] ** 2 + x[:, 1] ** 2
-            return np.column_stack([r2, phi]), np.all(np.isfinite(x), axis=1) & (r2 <= 1 + 1e-12)
-        norm = np.einsum("ij,ij->i", x, x)
-        ok = np.all(np.isfinite(x), axis=1) & (np.abs(norm - 1) <= 1e-5)  # float32 unit vectors
-        z = np.clip(x[:, 2], -1, 1)
-        if self.kind == "hemisphere":
-            return np.column_stack([z, phi]), ok & (x[:, 2] >= -1e-12)
-        return np.column_stack([(1 - z) / 2, phi]), ok
+        by 1e-5 in squared norm (float32 renderers).  One pass in the core
+        (:func:`reference_estimators.domain_params`)."""
+        return rest.domain_params(self.kind, x, self.lo, self.hi)
 
 
 def as_domain(d: str | tuple | Domain) -> Domain:

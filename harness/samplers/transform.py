@@ -38,7 +38,8 @@ import reference_estimators as rest
 
 from harness.samplers.cubature import box_integrals
 
-__all__ = ["AxisCdf", "Transform", "cramer_von_mises", "cvm_sf", "equiprobable_counts"]
+__all__ = ["AxisCdf", "Transform", "cramer_von_mises", "cramer_von_mises_columns", "cvm_sf",
+           "equiprobable_counts"]
 
 #: Strips of equal claimed mass along s0 on the square (the conditioning of u1), each
 #: integrated across as SUBSTRIPS boxes of equal claimed mass.
@@ -67,10 +68,16 @@ class AxisCdf:
     strip_mass: np.ndarray  # (S,) each strip's integral of q
     error: float
 
+    @property
+    def table(self) -> tuple[np.ndarray, ...]:
+        """(lo, hi, start, mass, offsets), the form the core's lookups take: strip g's leaves
+        are offsets[g] .. offsets[g + 1] - 1."""
+        offsets = np.searchsorted(self.strip, np.arange(self.strip_mass.size + 1))
+        return self.lo, self.hi, self.start, self.mass, offsets
+
     def __call__(self, strip: np.ndarray, x: np.ndarray) -> np.ndarray:
         """The CDF at coordinates x of points in strips ``strip`` (arrays (N,)), in [0, 1]."""
-        offsets = np.searchsorted(self.strip, np.arange(self.strip_mass.size + 1))
-        return rest.piecewise_linear_lookup(self.lo, self.hi, self.start, self.mass, offsets, strip, x)
+        return rest.piecewise_linear_lookup(*self.table, strip, x)
 
 
 def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: np.ndarray, leaves: int,
@@ -220,21 +227,15 @@ class Transform:
         conditional = dataclasses.replace(conditional, error=error_u1)
         return cls(marginal, conditional, levels[::SUBSTRIPS], probability, max(marginal.error, error_u1))
 
-    def strips(self, s: np.ndarray) -> np.ndarray:
-        """The strip (0 .. STRIPS - 1) of each parameter point's s0."""
-        return np.clip(np.searchsorted(self.edges, s[:, 0], side="right") - 1, 0, self.edges.size - 2)
-
     def __call__(self, s: np.ndarray) -> np.ndarray:
         """u (N, k) of parameter points s (N, k)."""
         return self.apply(s)[0]
 
     def apply(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(u (N, k), the strip of each point (N,); all 0 on an interval)."""
-        g = self.strips(s) if self.conditional is not None else np.zeros(s.shape[0], dtype=np.int64)
-        u0 = self.marginal(np.zeros(s.shape[0], dtype=np.int64), s[:, 0])
-        if self.conditional is None:
-            return u0[:, None], g
-        return np.column_stack([u0, self.conditional(g, s[:, 1])]), g
+        """(u (N, k), the strip of each point (N,); all 0 on an interval).  One pass in the
+        core (:func:`reference_estimators.rosenblatt`)."""
+        conditional = None if self.conditional is None else self.conditional.table
+        return rest.rosenblatt(self.marginal.table, conditional, self.edges, s)
 
 
 def cvm_sf(w2: float) -> float:
@@ -265,23 +266,28 @@ def cramer_von_mises(u: np.ndarray, error: float) -> tuple[float, float]:
     part sqrt(W^2 - 1/(12 N)) can then exceed the exact one by at most sqrt(N) * error, so
     that much is taken off before the p-value (conservative: the level holds).  W^2 is the
     reported statistic, the p-value that of the reduced one."""
-    n = u.size
-    x = np.sort(u)
-    c = (2 * np.arange(1, n + 1) - 1) / (2 * n)
-    root = float(np.sqrt(np.sum((c - x) ** 2)))
-    w2 = root * root + 1 / (12 * n)
-    reduced = max(root - math.sqrt(n) * error, 0.0) ** 2 + 1 / (12 * n)
-    return w2, cvm_sf(reduced)
+    return cramer_von_mises_columns(np.asarray(u).reshape(-1, 1), [error])[0]
+
+
+def cramer_von_mises_columns(u: np.ndarray, errors: list[float]) -> list[tuple[float, float]]:
+    """:func:`cramer_von_mises` of each column of u (N, k), column j with ``errors[j]``, in one
+    call to the core (strided columns read in place)."""
+    n = u.shape[0]
+    roots = rest.cramer_von_mises_root(u)   # sqrt(sum_i ((2 i - 1) / (2 n) - u_(i))^2), u sorted
+    out = []
+    for root, error in zip(roots, errors):
+        w2 = root * root + 1 / (12 * n)
+        reduced = max(root - math.sqrt(n) * error, 0.0) ** 2 + 1 / (12 * n)
+        out.append((float(w2), cvm_sf(reduced)))
+    return out
 
 
 def equiprobable_counts(t: Transform, strip: np.ndarray, u: np.ndarray,
                         bins: int) -> tuple[np.ndarray, np.ndarray]:
     """Observed counts and claimed probabilities of cells of equal claimed probability: bins
     of u0 on an interval; strips x bins of u1 on the square (``strip``, ``u`` from
-    :meth:`Transform.apply`).  (counts (C,), probabilities (C,))."""
+    :meth:`Transform.apply`).  (counts (C,), probabilities (C,)).  Counting: one pass in the
+    core (:func:`reference_estimators.strip_bin_counts`)."""
     if t.conditional is None:
-        counts = np.bincount(np.minimum((u[:, 0] * bins).astype(np.int64), bins - 1), minlength=bins)
-        return counts.astype(float), np.full(bins, 1.0 / bins)
-    j = np.minimum((u[:, 1] * bins).astype(np.int64), bins - 1)
-    counts = np.bincount(strip * bins + j, minlength=STRIPS * bins).astype(float)
-    return counts, np.repeat(t.probability / bins, bins)
+        return rest.strip_bin_counts(strip, u[:, 0], 1, bins), np.full(bins, 1.0 / bins)
+    return rest.strip_bin_counts(strip, u[:, 1], STRIPS, bins), np.repeat(t.probability / bins, bins)

@@ -11,9 +11,11 @@
 #include <nanobind/stl/vector.h>
 
 #include <cmath>
+#include <memory>
 #include <sstream>
 
 #include "estimators.h"
+#include "checks.h"
 #include "extremes.h"
 #include "fastmath.h"
 #include "tables.h"
@@ -53,6 +55,58 @@ size_t check_points(const InArray &x, int dim, const char *arg) {
     }
     return x.shape(0);
 }
+
+// A new numpy bool array of n values that owns its memory.
+nb::ndarray<nb::numpy, bool> new_bool_array(size_t n, bool **data) {
+    bool *p = new bool[n > 0 ? n : 1];
+    nb::capsule owner(p, [](void *q) noexcept { delete[] static_cast<bool *>(q); });
+    *data = p;
+    return nb::ndarray<nb::numpy, bool>(p, {n}, owner);
+}
+
+using I64Array = nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+using BoolArray = nb::ndarray<const bool, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+using StridedArray = nb::ndarray<const double, nb::ndim<1>, nb::device::cpu>;
+
+CheckDomain check_domain(int kind) {
+    if (kind < 0 || kind > 5) throw nb::value_error("'kind' must be a domain code 0 .. 5");
+    return CheckDomain(kind);
+}
+
+// Parameter points s: shape (n, k), or (n,) when k == 1.
+size_t check_params(const InArray &s, size_t k) {
+    if (!((s.ndim() == 2 && s.shape(1) == k) || (k == 1 && s.ndim() == 1)))
+        throw nb::value_error(k == 1 ? "'s' must have shape (N, 1) or (N,)" : "'s' must have shape (N, 2)");
+    return s.shape(0);
+}
+
+// A piecewise-linear table given as (lo, hi, start, mass, offsets), validated, with its
+// bucket index; the arrays are kept alive (and unchanged) by the caller's tuple.
+struct BoundTable {
+    InArray lo, hi, start, mass;
+    I64Array offsets;
+    std::unique_ptr<PiecewiseLinearTable> table;
+
+    explicit BoundTable(nb::handle t) {
+        nb::tuple parts = nb::cast<nb::tuple>(t);
+        if (parts.size() != 5) throw nb::value_error("a table must be (lo, hi, start, mass, offsets)");
+        lo = nb::cast<InArray>(parts[0]);
+        hi = nb::cast<InArray>(parts[1]);
+        start = nb::cast<InArray>(parts[2]);
+        mass = nb::cast<InArray>(parts[3]);
+        offsets = nb::cast<I64Array>(parts[4]);
+        const size_t leaves = lo.size();
+        if (hi.size() != leaves || start.size() != leaves || mass.size() != leaves)
+            throw nb::value_error("'lo', 'hi', 'start' and 'mass' must have one value per leaf");
+        if (leaves >= (size_t(1) << 31)) throw nb::value_error("a table must have fewer than 2^31 leaves");
+        if (offsets.size() < 1 || offsets.data()[0] != 0 || size_t(offsets.data()[offsets.size() - 1]) != leaves)
+            throw nb::value_error("'offsets' must run from 0 to the number of leaves");
+        for (size_t g = 1; g < offsets.size(); ++g)
+            if (offsets.data()[g] < offsets.data()[g - 1]) throw nb::value_error("'offsets' must not decrease");
+        table = std::make_unique<PiecewiseLinearTable>(lo.data(), hi.data(), start.data(), mass.data(),
+                                                       offsets.data(), int64_t(offsets.size()) - 1);
+    }
+};
 
 nb::dict diagnostics_dict(const Diagnostics &d) {
     nb::dict counts;
@@ -426,6 +480,127 @@ NB_MODULE(_core, m) {
     }, "values"_a, "center"_a, "upper"_a, "keep"_a,
        "(peak, ties, below): the largest positive deviation y - center (upper) or center - y (lower), how many "
        "equal it, and the `keep` largest strictly below it, descending; peak NaN if none is positive.");
+    m.def("domain_params", [](int kind, double lo, double hi, InArray x) {
+        const CheckDomain d = check_domain(kind);
+        const int pdim = domain_point_dim(d), k = domain_param_dim(d);
+        const size_t n = check_points(x, pdim, "x");
+        double *s;
+        bool *inside;
+        OutArray sa = new_array(n, size_t(k), &s);
+        auto ia = new_bool_array(n, &inside);
+        {
+            nb::gil_scoped_release g;
+            domain_params(d, lo, hi, x.data(), n, s, inside);
+        }
+        return nb::make_tuple(sa, ia);
+    }, "kind"_a, "lo"_a, "hi"_a, "x"_a,
+       "(s (N, k), inside (N,)): the equal-measure parameters of points x on domain `kind` "
+       "(0 interval [lo, hi], 1 half line, 2 square, 3 disk, 4 hemisphere, 5 sphere).");
+    m.def("domain_points", [](int kind, double lo, double hi, InArray s) {
+        const CheckDomain d = check_domain(kind);
+        const int pdim = domain_point_dim(d), k = domain_param_dim(d);
+        const size_t n = check_params(s, size_t(k));
+        double *x;
+        OutArray xa = new_array(n, pdim == 1 ? 0 : size_t(pdim), &x);
+        {
+            nb::gil_scoped_release g;
+            domain_points(d, lo, hi, s.data(), n, x);
+        }
+        return xa;
+    }, "kind"_a, "lo"_a, "hi"_a, "s"_a, "Points x(s) (N,) or (N, point_dim) of parameters s (N, k) on domain `kind`.");
+    m.def("cubature_nodes", [](InArray lo, InArray hi, InArray nodes) {
+        if (lo.ndim() != 2 || hi.ndim() != 2 || lo.shape(0) != hi.shape(0) || lo.shape(1) != hi.shape(1) ||
+            (lo.shape(1) != 1 && lo.shape(1) != 2))
+            throw nb::value_error("'lo' and 'hi' must both have shape (M, 1) or (M, 2)");
+        const size_t boxes = lo.shape(0), k = lo.shape(1), g = nodes.size();
+        const size_t per = k == 1 ? g : g * g;
+        double *out;
+        OutArray pts = new_array(boxes * per, k, &out);
+        {
+            nb::gil_scoped_release r;
+            cubature_nodes(lo.data(), hi.data(), boxes, k, nodes.data(), g, out);
+        }
+        return pts;
+    }, "lo"_a, "hi"_a, "nodes"_a,
+       "(M g^k, k) nodes of the tensor rule with points `nodes` per axis on the boxes [lo, hi] (M, k), box by box.");
+    m.def("grid_histogram", [](InArray s, BoolArray inside, const std::vector<int64_t> &shape) {
+        if (shape.empty() || shape.size() > 2 || shape[0] < 1 || (shape.size() == 2 && shape[1] < 1))
+            throw nb::value_error("'shape' must be one or two positive cell counts");
+        const size_t n = check_params(s, shape.size());
+        if (inside.size() != n) throw nb::value_error("'inside' must have one flag per point");
+        double *c;
+        OutArray counts = new_array(size_t(shape[0]), shape.size() == 2 ? size_t(shape[1]) : 0, &c);
+        {
+            nb::gil_scoped_release g;
+            grid_histogram(s.data(), n, inside.data(), shape[0], shape.size() == 2 ? shape[1] : 0, c);
+        }
+        return counts;
+    }, "s"_a, "inside"_a, "shape"_a,
+       "Counts of the inside points s (N, k) in [0, 1]^k on the regular grid `shape`, coordinates clamped "
+       "to [0, 1).");
+    m.def("rosenblatt", [](nb::handle marginal, nb::handle conditional, InArray edges, InArray s) {
+        const bool square = !conditional.is_none();
+        const size_t k = square ? 2 : 1;
+        const size_t n = check_params(s, k);
+        const BoundTable m0(marginal);
+        std::unique_ptr<BoundTable> m1;
+        if (square) {
+            m1 = std::make_unique<BoundTable>(conditional);
+            if (edges.size() != m1->offsets.size())
+                throw nb::value_error("'edges' must hold one more value than the conditional has strips");
+        }
+        double *u;
+        OutArray ua = new_array(n, k, &u);
+        int64_t *g = new int64_t[n > 0 ? n : 1];
+        nb::capsule owner(g, [](void *q) noexcept { delete[] static_cast<int64_t *>(q); });
+        nb::ndarray<nb::numpy, int64_t> strip(g, {n}, owner);
+        {
+            nb::gil_scoped_release r;
+            rosenblatt(*m0.table, square ? m1->table.get() : nullptr, edges.data(), edges.size(), s.data(), k, n,
+                       u, g);
+        }
+        return nb::make_tuple(ua, strip);
+    }, "marginal"_a, "conditional"_a.none(), "edges"_a, "s"_a,
+       "(u (N, k), strip (N,)): the Rosenblatt transform of parameter points s through the marginal table "
+       "and, on the square, the conditional one given the strip of s0 among `edges`; tables are "
+       "(lo, hi, start, mass, offsets).");
+    m.def("strip_bin_counts", [](I64Array strip, StridedArray u, int64_t strips, int64_t bins) {
+        if (strip.size() != u.size()) throw nb::value_error("'strip' and 'u' must have one value per point");
+        if (strips < 1 || bins < 1) throw nb::value_error("'strips' and 'bins' must be positive");
+        double *c;
+        OutArray counts = new_array(size_t(strips * bins), 0, &c);
+        {
+            nb::gil_scoped_release g;
+            strip_bin_counts(strip.data(), u.data(), size_t(u.stride(0)), u.size(), strips, bins, c);
+        }
+        return counts;
+    }, "strip"_a, "u"_a, "strips"_a, "bins"_a,
+       "Counts (strips * bins,) of points in cell strip * bins + min(floor(u bins), bins - 1).");
+    m.def("cramer_von_mises_root", [](nb::ndarray<const double, nb::ndim<2>, nb::device::cpu> u) {
+        const size_t n = u.shape(0), k = u.shape(1);
+        double *r;
+        OutArray roots = new_array(k, 0, &r);
+        {
+            nb::gil_scoped_release g;
+            for (size_t c = 0; c < k; ++c)
+                r[c] = cramer_von_mises_root(u.data() + c * size_t(u.stride(1)), size_t(u.stride(0)), n);
+        }
+        return roots;
+    }, "u"_a, "For each column of u (N, k): sqrt(sum_i ((2 i - 1) / (2 N) - u_(i))^2) over its sorted values; "
+       "NaN for a column holding a NaN.");
+    m.def("pdf_summary", [](int kind, double measure, InArray s, BoolArray inside, InArray p, double c) {
+        const CheckDomain d = check_domain(kind);
+        const size_t n = check_params(s, size_t(domain_param_dim(d)));
+        if (inside.size() != n || p.size() != n) throw nb::value_error("'inside' and 'p' must have one value per point");
+        PdfSummary r;
+        {
+            nb::gil_scoped_release g;
+            r = pdf_summary(d, measure, s.data(), inside.data(), p.data(), n, c);
+        }
+        return nb::make_tuple(r.bad, r.zero, r.used, r.h_sum);
+    }, "kind"_a, "measure"_a, "s"_a, "inside"_a, "p"_a, "c"_a,
+       "(bad, zero, used, h_sum): pdf values NaN/infinite/negative, zero at inside points, good inside ones, "
+       "and the sum of h = p J / (p J + c) over those.");
     m.def("piecewise_linear_lookup", [](InArray lo, InArray hi, InArray start, InArray mass,
                                         nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu> offsets,
                                         nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu> strip,
@@ -433,6 +608,7 @@ NB_MODULE(_core, m) {
         const size_t leaves = lo.size();
         if (hi.size() != leaves || start.size() != leaves || mass.size() != leaves)
             throw nb::value_error("'lo', 'hi', 'start' and 'mass' must have one value per leaf");
+        if (leaves >= (size_t(1) << 31)) throw nb::value_error("a table must have fewer than 2^31 leaves");
         if (offsets.size() < 1 || offsets.data()[0] != 0 || size_t(offsets.data()[offsets.size() - 1]) != leaves)
             throw nb::value_error("'offsets' must run from 0 to the number of leaves");
         for (size_t g = 1; g < offsets.size(); ++g)

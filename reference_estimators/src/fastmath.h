@@ -128,4 +128,50 @@ inline void sincos_2pi(double u, double &s, double &c) {
     c = cc;
 }
 
+// |x| and the sign bit of x (true for -0 and negative NaNs), for double or simd::f64v.
+RE_INLINE double abs(double x) { return std::fabs(x); }
+RE_INLINE simd::f64v abs(simd::f64v x) { return simd::from_bits(simd::bits(x) & 0x7fffffffffffffffULL); }
+RE_INLINE bool sign_bit(double x) { return std::signbit(x); }
+RE_INLINE simd::i64v sign_bit(simd::f64v x) { return (simd::i64v)(simd::bits(x) >> 63) != 0; }
+
+// atan2(y, x) / (2 pi) taken mod 1, in [0, 1): the azimuth of (x, y) in turns, as numpy's
+// mod(arctan2(y, x) / (2 pi), 1) gives it (signed zeros as atan2 treats them; NaN for a NaN
+// coordinate or two infinite ones), for double or simd::f64v (the same bits lane by lane),
+// within 2 ulp (tested against long double atan2 in tests/core/test_fastmath.py).  libm's
+// atan2 is a scalar call with branches, twice the time of the rest of a domain map.
+// t = min/max(|x|, |y|) in [0, 1]; above tan(pi/8), atan t = pi/4 + atan((t - 1) / (t + 1));
+// then atan r = r + r z g(z), z = r^2 <= tan^2(pi/8), g a degree-10 polynomial interpolating
+// (atan r - r) / (r z) at Chebyshev nodes (fitted in long double by tools/fit_atan_turns.py:
+// truncation below 1e-17 relative); the octant is restored in turns, where the constants
+// 1/8, 1/4 and 1/2 are exact.
+template <class D>
+RE_INLINE D atan2_turns(D y, D x) {
+    using simd::fma;
+    const D zero{}, one = zero + 1.0;
+    const D ax = abs(x), ay = abs(y);
+    const D mn = ax < ay ? ax : ay, mx = ax < ay ? ay : ax;
+    const D t = mn / (mx == zero ? one : mx);   // divisions unconditional, selects after: a
+    const D reduced = (t - 1.0) / (t + 1.0);    // conditional division blocks vectorisation
+    const auto big = t > zero + 0.41421356237309503;  // tan(pi/8)
+    const D r = big ? reduced : t;
+    const D z = r * r;
+    D g = zero - 0x1.3a331903e1769p-6;
+    g = fma(g, z, zero + 0x1.4163550d329f5p-5);
+    g = fma(g, z, zero - 0x1.a099d072df655p-5);
+    g = fma(g, z, zero + 0x1.dfe65376724e6p-5);
+    g = fma(g, z, zero - 0x1.10fa7842b94e9p-4);
+    g = fma(g, z, zero + 0x1.3b12631038debp-4);
+    g = fma(g, z, zero - 0x1.745d0b290bd9bp-4);
+    g = fma(g, z, zero + 0x1.c71c71853f824p-4);
+    g = fma(g, z, zero - 0x1.249249243621ep-3);
+    g = fma(g, z, zero + 0x1.999999999934cp-3);
+    g = fma(g, z, zero - 0x1.5555555555555p-2);
+    D turns = fma(r * z, g, r) / 6.283185307179586;
+    turns = big ? turns + 0.125 : turns;
+    turns = ay > ax ? 0.25 - turns : turns;
+    turns = sign_bit(x) ? 0.5 - turns : turns;
+    turns = sign_bit(y) ? zero - turns : turns;
+    return turns < zero ? turns + 1.0 : turns + 0.0;  // + 0.0: a zero comes out +0, as numpy's mod
+}
+
 }  // namespace re::fm

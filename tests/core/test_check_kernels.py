@@ -1,0 +1,283 @@
+"""The sampler check's batch kernels (src/checks.h, src/tables.h) against the numpy code they
+replace, on random input with the edge values mixed in: 0 and 1, points on the boundary of a
+domain, outside it, NaN and infinite.  Each reference below is the numpy implementation the
+check used before the kernels existed.  Equal means bitwise equal, except where stated: the
+azimuth (fastmath's atan2_turns, within 2 ulp of numpy's) and sums (compensated in the core,
+pairwise in numpy: relative 1e-12)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import reference_estimators as rest
+
+N = 20_000
+
+
+# --- references: the numpy code the kernels replace -----------------------------------------
+def params_reference(kind: str, x: np.ndarray, lo: float = 0.0, hi: float = 1.0):
+    x = np.asarray(x, dtype=float)
+    if kind == "interval":
+        x = x.reshape(-1)
+        return ((x - lo) / (hi - lo))[:, None], np.isfinite(x) & (x >= lo) & (x <= hi)
+    if kind == "half_line":
+        x = x.reshape(-1)
+        with np.errstate(invalid="ignore"):   # inf / inf
+            return (x / (1.0 + x))[:, None], np.isfinite(x) & (x >= 0)
+    if kind == "square":
+        return x.copy(), np.all(np.isfinite(x), axis=1) & np.all((x >= 0) & (x <= 1), axis=1)
+    with np.errstate(invalid="ignore"):
+        phi = np.mod(np.arctan2(x[:, 1], x[:, 0]) / (2 * math.pi), 1.0)
+    if kind == "disk":
+        r2 = x[:, 0] ** 2 + x[:, 1] ** 2
+        return np.column_stack([r2, phi]), np.all(np.isfinite(x), axis=1) & (r2 <= 1 + 1e-12)
+    norm = np.einsum("ij,ij->i", x, x)
+    with np.errstate(invalid="ignore"):
+        ok = np.all(np.isfinite(x), axis=1) & (np.abs(norm - 1) <= 1e-5)
+        z = np.clip(x[:, 2], -1, 1)
+    if kind == "hemisphere":
+        return np.column_stack([z, phi]), ok & (x[:, 2] >= -1e-12)
+    return np.column_stack([(1 - z) / 2, phi]), ok
+
+
+def points(kind: str, rng: np.random.Generator) -> np.ndarray:
+    """Random points of the domain and around it, with edge values and non-finite ones."""
+    if kind in ("interval", "half_line"):
+        if kind == "interval":
+            x = rng.uniform(-0.5, 1.5, N)
+        else:
+            x = rng.exponential(1.0, N) * rng.choice([1, -1e-3], N)
+        x[:8] = [0.0, 1.0, -0.0, np.nan, np.inf, -np.inf, 1e300, 5e-324]
+        return x
+    if kind in ("square", "disk"):
+        x = rng.uniform(-1.2, 1.2, (N, 2))
+        x[:10] = [[0, 0], [1, 1], [0, 1], [-0.0, 0.0], [0.0, -0.0], [-0.0, -0.0], [np.nan, 0.5],
+                  [0.5, np.inf], [1.0, 0.0], [-1.0, 0.0]]
+        return x
+    x = rng.normal(size=(N, 3))
+    x /= np.linalg.norm(x, axis=1)[:, None]
+    x[: N // 4] *= 1 + rng.uniform(-2e-5, 2e-5, (N // 4, 1))   # around the 1e-5 norm tolerance
+    x[:10] = [[0, 0, 1], [0, 0, -1], [1, 0, 0], [-1, 0, 0], [0, -1, 0], [0, 0, -1e-12], [0, 0, -2e-12],
+              [np.nan, 0, 1], [0, np.inf, 0], [0.6, 0.8, 0.0]]
+    return x
+
+
+def azimuth_reference(x: np.ndarray) -> np.ndarray:
+    """mod(atan2(y, x) / (2 pi), 1) in long double, rounded to double."""
+    ld = np.longdouble
+    t = np.arctan2(x[:, 1].astype(ld), x[:, 0].astype(ld)) / (2 * np.pi * ld(1))
+    return np.mod(t, ld(1)).astype(float)
+
+
+def circular_ulps(got: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    d = np.abs(got - ref)
+    d = np.minimum(d, 1 - d)                   # 0 and 1 are the same azimuth
+    return d / np.spacing(np.maximum(np.maximum(np.abs(ref), np.abs(got)), 2.0**-1022))
+
+
+# --- domain maps -----------------------------------------------------------------------------
+@pytest.mark.parametrize("kind", rest.CHECK_DOMAINS)
+def test_domain_params_match_numpy(kind):
+    rng = np.random.default_rng(1)
+    x = points(kind, rng)
+    lo, hi = (-0.25, 1.25) if kind == "interval" else (0.0, 1.0)
+    s, inside = rest.domain_params(kind, x, lo, hi)
+    ref_s, ref_inside = params_reference(kind, x, lo, hi)
+    assert s.shape == ref_s.shape and inside.dtype == bool
+    np.testing.assert_array_equal(inside, ref_inside)
+    np.testing.assert_array_equal(s[:, 0], ref_s[:, 0])     # no azimuth: the same operations
+    if s.shape[1] == 2 and kind != "square":
+        fin = np.all(np.isfinite(x[:, :2]), axis=1)
+        assert np.all(np.isnan(s[~fin & ~np.isinf(x[:, :2]).any(axis=1), 1]))
+        err = circular_ulps(s[fin, 1], ref_s[fin, 1])
+        assert np.all(err <= 2), f"azimuth off by {err.max():.3g} ulp at {x[fin][np.argmax(err)]}"
+        assert np.all((s[fin, 1] >= 0) & (s[fin, 1] <= 1))
+    elif kind == "square":
+        np.testing.assert_array_equal(s, ref_s)
+
+
+def test_azimuth_is_within_2_ulp_of_long_double_atan2_and_keeps_signed_zeros():
+    rng = np.random.default_rng(2)
+    mag = 10.0 ** rng.uniform(-300, 300, (200_000, 2))
+    x = mag * rng.choice([-1.0, 1.0], mag.shape)
+    x[:6] = [[0.0, 0.0], [-0.0, 0.0], [0.0, -0.0], [-0.0, -0.0], [1.0, 1.0], [-1.0, -1.0]]
+    s, _ = rest.domain_params("disk", x)
+    err = circular_ulps(s[:, 1], azimuth_reference(x))
+    assert np.all(err <= 2), f"worst {err.max():.3g} ulp at {x[np.argmax(err)]}"
+    # signed zeros as numpy's mod(arctan2(y, x) / (2 pi), 1): +0 for (+0, +-0) and 0.5 for (-0, +-0)
+    assert list(s[:4, 1]) == [0.0, 0.5, 0.0, 0.5] and not np.signbit(s[0, 1]) and not np.signbit(s[2, 1])
+    assert s[4, 1] == 0.125 and s[5, 1] == 0.625
+
+
+def test_domain_params_reject_a_wrong_shape_or_kind():
+    with pytest.raises(ValueError, match="shape"):
+        rest.domain_params("sphere", np.zeros((5, 2)))
+    with pytest.raises(ValueError, match="'kind' must be one of"):
+        rest.domain_params("torus", np.zeros((5, 2)))
+
+
+# --- histogram -------------------------------------------------------------------------------
+def histogram_reference(s: np.ndarray, inside: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    s = np.clip(s[inside], 0, np.nextafter(1, 0))
+    idx = np.zeros(s.shape[0], dtype=np.int64)
+    for axis, m in enumerate(shape):
+        idx = idx * m + np.minimum((s[:, axis] * m).astype(np.int64), m - 1)
+    return np.bincount(idx, minlength=int(np.prod(shape))).astype(float).reshape(shape)
+
+
+@pytest.mark.parametrize("shape", [(4096,), (16,), (128, 256), (3, 5)])
+def test_grid_histogram_matches_numpy_with_clamping_and_the_inside_mask(shape):
+    rng = np.random.default_rng(3)
+    s = rng.uniform(-0.01, 1.01, (N, len(shape)))
+    s[:4] = 0.0
+    s[4:8] = 1.0
+    s[8:12] = np.nextafter(1, 0)
+    inside = rng.random(N) < 0.9
+    got = rest.grid_histogram(s, inside, shape)
+    np.testing.assert_array_equal(got, histogram_reference(s, inside, shape))
+    assert got.sum() == inside.sum()
+
+
+def test_grid_histogram_counts_no_nan():
+    s = np.array([[0.5, np.nan], [np.nan, 0.5], [0.25, 0.75]])
+    got = rest.grid_histogram(s, np.ones(3, dtype=bool), (2, 2))
+    np.testing.assert_array_equal(got, [[0, 1], [0, 0]])
+
+
+# --- Rosenblatt transform --------------------------------------------------------------------
+def random_table(rng: np.random.Generator, strips: int, leaves: int):
+    """Leaves of very different widths (down to 1e-9) tiling [0, 1] in each strip; a CDF
+    through them."""
+    parts = []
+    for _ in range(strips):
+        cuts = np.unique(np.concatenate([[0.0, 1.0], rng.random(leaves - 1),
+                                         0.3 + 1e-9 * np.arange(5)]))      # a crowd of narrow leaves
+        mass = rng.gamma(0.5, 1.0, cuts.size - 1)
+        mass /= mass.sum()
+        parts.append((cuts[:-1], cuts[1:], np.concatenate([[0.0], np.cumsum(mass)[:-1]]), mass))
+    lo, hi, start, mass = (np.concatenate(v) for v in zip(*parts))
+    offsets = np.concatenate([[0], np.cumsum([p[0].size for p in parts])])
+    return lo, hi, start, mass, offsets
+
+
+def rosenblatt_reference(marginal, conditional, edges, s):
+    """Transform.apply as it was: searchsorted strips, one table lookup per axis."""
+    n = s.shape[0]
+    u0 = rest.piecewise_linear_lookup(*marginal, np.zeros(n, dtype=np.int64), s[:, 0])
+    if conditional is None:
+        return u0[:, None], np.zeros(n, dtype=np.int64)
+    g = np.clip(np.searchsorted(edges, s[:, 0], side="right") - 1, 0, edges.size - 2)
+    return np.column_stack([u0, rest.piecewise_linear_lookup(*conditional, g, s[:, 1])]), g
+
+
+def lookup_reference(lo, hi, start, mass, offsets, strip, x):
+    """The table's definition, leaf by leaf with numpy's searchsorted."""
+    out = np.full(x.size, np.nan)
+    for g in range(offsets.size - 1):
+        a, b = offsets[g], offsets[g + 1]
+        sel = (strip == g) & ~np.isnan(x)
+        if b <= a or not sel.any():
+            continue
+        i = a + np.maximum(np.searchsorted(lo[a:b], x[sel], side="right") - 1, 0)
+        w = hi[i] - lo[i]
+        t = np.clip(np.where(w > 0, (x[sel] - lo[i]) / np.where(w > 0, w, 1), 0.0), 0, 1)
+        out[sel] = np.clip(start[i] + mass[i] * t, 0, 1)
+    return out
+
+
+@pytest.mark.parametrize("strips, leaves", [(1, 4000), (32, 256), (3, 1)])
+def test_piecewise_linear_lookup_matches_its_definition(strips, leaves):
+    rng = np.random.default_rng(4)
+    table = random_table(rng, strips, leaves)
+    x = rng.uniform(-0.1, 1.1, N)
+    x[:6] = [0.0, 1.0, 0.3, 0.3 + 2e-9, np.nan, 0.3 - 1e-12]
+    g = rng.integers(-1, strips + 1, N)      # out-of-range strips give NaN
+    got = rest.piecewise_linear_lookup(*table, g, x)
+    np.testing.assert_array_equal(got, lookup_reference(*table, g, x))
+
+
+@pytest.mark.parametrize("square", [False, True])
+def test_rosenblatt_matches_the_lookups_it_replaces(square):
+    rng = np.random.default_rng(5)
+    marginal = random_table(rng, 1, 3000)
+    conditional = random_table(rng, 32, 200) if square else None
+    edges = np.concatenate([[0.0], np.sort(rng.random(31)), [1.0]])
+    s = rng.random((N, 2 if square else 1))
+    s[:5, 0] = [0.0, 1.0, edges[7], np.nextafter(edges[7], 0), edges[-2]]
+    if square:
+        s[5, 0], s[6, 0] = -0.5, 1.5
+    u, strip = rest.rosenblatt(marginal, conditional, edges, s)
+    ref_u, ref_strip = rosenblatt_reference(marginal, conditional, edges, s)
+    np.testing.assert_array_equal(strip, ref_strip)
+    np.testing.assert_array_equal(u, ref_u)
+
+
+def test_rosenblatt_puts_a_nan_point_in_the_last_strip_as_searchsorted_does():
+    rng = np.random.default_rng(6)
+    marginal, conditional = random_table(rng, 1, 10), random_table(rng, 4, 10)
+    edges = np.array([0.0, 0.25, 0.5, 0.75, 1.0])
+    s = np.array([[np.nan, 0.5], [0.5, np.nan]])
+    u, strip = rest.rosenblatt(marginal, conditional, edges, s)
+    assert list(strip) == [3, 2] and np.isnan(u[0, 0]) and np.isnan(u[1, 1])
+
+
+# --- equiprobable cells, Cramer-von Mises, pdf summary --------------------------------------
+def test_strip_bin_counts_match_bincount():
+    rng = np.random.default_rng(7)
+    u = rng.random((N, 2))
+    u[:3, 1] = [0.0, 1.0, np.nextafter(1, 0)]
+    strip = rng.integers(0, 32, N)
+    got = rest.strip_bin_counts(strip, u[:, 1], 32, 64)      # a strided column, read in place
+    j = np.minimum((u[:, 1] * 64).astype(np.int64), 63)
+    np.testing.assert_array_equal(got, np.bincount(strip * 64 + j, minlength=32 * 64).astype(float))
+
+
+def cvm_root_reference(u: np.ndarray) -> float:
+    n = u.size
+    c = (2 * np.arange(1, n + 1) - 1) / (2 * n)
+    return float(np.sqrt(np.sum((c - np.sort(u)) ** 2)))
+
+
+@pytest.mark.parametrize("case", ["uniform", "ties", "crowded", "edges", "outside", "tiny"])
+def test_cramer_von_mises_root_matches_numpy(case):
+    rng = np.random.default_rng(8)
+    u = {"uniform": lambda: rng.random(N),
+         "ties": lambda: rng.integers(0, 50, N) / 49.0,
+         "crowded": lambda: 0.5 + 1e-9 * rng.random(N),          # all in one key: std::sort takes over
+         "edges": lambda: np.concatenate([np.zeros(500), np.ones(500), rng.random(N)]),
+         "outside": lambda: rng.uniform(-0.5, 1.5, N),
+         "tiny": lambda: np.array([0.3])}[case]()
+    assert rest.cramer_von_mises_root(u)[0] == pytest.approx(cvm_root_reference(u), rel=1e-12)
+
+
+def test_cramer_von_mises_root_by_column_and_nan():
+    rng = np.random.default_rng(9)
+    u = rng.random((N, 2))
+    got = rest.cramer_von_mises_root(u)
+    assert got == pytest.approx([cvm_root_reference(u[:, 0]), cvm_root_reference(u[:, 1])], rel=1e-12)
+    assert rest.cramer_von_mises_root(u[::-1, 1])[0] == pytest.approx(cvm_root_reference(u[:, 1]), rel=1e-12)
+    u[17, 1] = np.nan
+    got = rest.cramer_von_mises_root(u)
+    assert np.isfinite(got[0]) and np.isnan(got[1])
+
+
+@pytest.mark.parametrize("kind", ["interval", "half_line", "sphere"])
+def test_pdf_summary_matches_numpy(kind):
+    rng = np.random.default_rng(10)
+    k = 1 if kind in ("interval", "half_line") else 2
+    s = rng.random((N, k))
+    inside = rng.random(N) < 0.95
+    p = rng.exponential(1.0, N)
+    p[:6] = [0.0, -1.0, np.nan, np.inf, -0.0, 5e-324]
+    inside[:6] = True
+    inside[6:9], p[6:9] = False, [0.0, np.nan, 2.0]
+    measure, c = (1.0 if kind == "half_line" else 4 * math.pi), 0.7
+    bad, zero, used, h_sum = rest.pdf_summary(kind, measure, s, inside, p, c)
+    ref_bad = ~np.isfinite(p) | (p < 0)
+    jac = 1.0 / (1.0 - s[:, 0]) ** 2 if kind == "half_line" else measure
+    ps = (p * jac)[inside & ~ref_bad] if kind == "half_line" else p[inside & ~ref_bad] * jac
+    assert bad == int(ref_bad.sum()) and zero == int(((p == 0) & inside).sum()) and used == ps.size
+    assert h_sum == pytest.approx(float(np.sum(ps / (ps + c))), rel=1e-12)
+    assert rest.pdf_summary(kind, measure, s, inside, p, 0.0)[3] == 0.0
