@@ -255,6 +255,10 @@ def _show(args) -> int:
     cols = (["run"] if args.all else []) + ["suite", "integrand", "technique", "measurement", "value", "lo",
                                             "hi", "n", "pvalue", "alpha", "verdict"]
     print(df[cols].to_string(index=False, float_format=lambda v: f"{v:.6g}"))
+    if df["measurement"].isin(["log10_efficiency", "log10_efficiency_clock"]).any():
+        print("log10_efficiency: 1/(V·T), T in seconds, its 95 % interval of that run's machine state only "
+              "(other runs differ by more); log10_efficiency_clock: T in ticks of the reference clock timed "
+              "beside each replica, its interval holds across runs (harness.stats.timing.CLOCK)")
     return 0
 
 

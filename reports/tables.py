@@ -25,8 +25,10 @@ __all__ = ["Cell", "Column", "value_of", "wide_table", "summary_columns", "sampl
 
 # measurements in display order; others follow alphabetically
 ORDER = ("bias", "variance", "convergence_slope", "convergence", "efficiency_ratio", "efficiency",
-         "log10_efficiency", "rmse", "relmse", "target_half_width", "chi_square", "mcmc")
-# in CSV only: the efficiency ratio says it better; a render's error_vs_time value is its relMSE,
+         "log10_efficiency_clock", "log10_efficiency", "rmse", "relmse", "target_half_width", "chi_square",
+         "mcmc")
+# in CSV only: the efficiency ratio and the efficiency in clock ticks say it better (the one in
+# 1/s has an interval of one run's machine state); a render's error_vs_time value is its relMSE,
 # and the RMSE at the top budget is drawn, with its interval, in the convergence figure
 HIDDEN = {"variance", "log10_efficiency", "error_vs_time", "rmse"}
 LABELS = {
@@ -39,6 +41,12 @@ LABELS = {
     "efficiency_ratio": ("1/(V·T) ratio [95% CI]", "efficiency 1/(variance × time) as a ratio "
                                                          "against the baseline technique, 95 % interval; "
                                                          "n = samples"),
+    "log10_efficiency_clock": ("log10 1/(V·T_clock) [95% CI]",
+                               "efficiency 1/(variance × time) per technique, time in ticks of the "
+                               "reference clock timed beside each replica, so the machine's state "
+                               "cancels: other runs on this machine type fall in its 95 % interval "
+                               "(the figure in 1/s, in the CSV, has an interval of this run's machine "
+                               "state only); n = samples"),
     "efficiency": ("efficiency ratio [95% CI]", "efficiency ratio against the baseline configuration "
                                                       "(1/(relMSE × time) for renders), 95 % interval"),
     "rmse": ("RMSE [95% CI]", "root-mean-square error at the largest budget, 95 % interval; "

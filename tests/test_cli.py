@@ -64,7 +64,7 @@ def test_csv_output(tmp_path):
     df = pd.read_csv(out)
     assert {"integrand", "technique", "n", "estimate", "stderr", "exact", "z", "pvalue", "verdict", "slope",
             "slope_lo", "slope_hi", "log10_efficiency", "efficiency_ratio", "ratio_lo", "ratio_hi",
-            "notes"} <= set(df)
+            "log10_efficiency_clock", "clock_lo", "clock_hi", "clock_ticks_per_estimate", "notes"} <= set(df)
     assert list(df["technique"]) == ["uniform", "uniform/stratified", "clamped:uniform(0.9)"]
     assert list(df["verdict"]) == ["unbiased", "unbiased", "biased (expected)"]
     assert df["n"].tolist() == [65536] * 3

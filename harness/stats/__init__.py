@@ -5,7 +5,8 @@
 ``multiple``  multiple testing (holm);
 ``estimator`` what estimates come from: a catalogue pair or a user's contributions callable;
 ``replicas``  replicas, convergence rates, efficiency, error against time;
-``timing``    an estimate's wall time and its error from blocks of replicas (median_time);
+``timing``    an estimate's wall time and its error from blocks of replicas (median_time), in
+              seconds or in ticks of the reference clock (clock_time, reference_clock);
 ``results``   the result family every check returns (ConfidenceInterval, Failure);
 ``merge``     Chan's merge of (count, mean, variance) summaries, with the third moment;
 ``validate``  argument validators shared across the harness;
@@ -31,13 +32,14 @@ from harness.stats.replicas import (
 )
 from harness.stats.results import ConfidenceInterval, Failure, failure_counts, failures_from_counts
 from harness.stats.tails import TailSample
-from harness.stats.timing import median_time
+from harness.stats.timing import CLOCK, clock_time, median_time, reference_clock
 
 __all__ = [
     "Estimator", "CatalogueEstimator", "Contributions", "estimator",
     "UnbiasedResult", "check_unbiased", "check_technique", "judge_batches", "batch_points", "TailSample",
     "holm",
-    "Replicates", "replicate", "median_time", "ConvergenceResult", "convergence_rate", "fit_convergence",
+    "Replicates", "replicate", "median_time", "clock_time", "reference_clock", "CLOCK",
+    "ConvergenceResult", "convergence_rate", "fit_convergence",
     "Efficiency", "efficiency", "efficiency_ratio", "error_vs_time",
     "ConfidenceInterval", "Failure", "failure_counts", "failures_from_counts",
 ]

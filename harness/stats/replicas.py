@@ -20,7 +20,7 @@ import reference_estimators as rest
 from harness.stats.estimator import Contributions, Estimator, estimator
 from harness.stats.merge import chan_merge
 from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
-from harness.stats.timing import median_time, satterthwaite, time_blocks
+from harness.stats.timing import clock_time, median_time, reference_clock, satterthwaite, time_blocks
 from harness.stats.validate import count
 
 __all__ = ["Replicates", "replicate", "ConvergenceResult", "convergence_rate",
@@ -53,7 +53,9 @@ class Replicates:
     * ``iid``: the variance of an estimate is ``sample_variance`` / n (else: the replicas' spread);
     * ``evaluations``: integrand evaluations per contribution (informational; 1 if unknown);
     * ``finite_variance``: whether the contributions' variance is known to be finite (False:
-      infinite, so the efficiency is 0), None if unknown.
+      infinite, so the efficiency is 0), None if unknown;
+    * ``clock``: each replica's reference-clock time (s, harness.stats.timing.CLOCK), timed on
+      its thread just before it, shape (R,); None if not timed.
     """
 
     integrand: str
@@ -67,10 +69,13 @@ class Replicates:
     iid: bool
     evaluations: int          # f evaluations per contribution
     finite_variance: bool | None = None   # known analytically (the catalogue's); None: unknown
+    clock: np.ndarray | None = None       # (R,) reference-clock time beside each replica, or None
 
     @classmethod
-    def from_estimates(cls, est: Estimator, n: int, ests: Sequence[rest.Estimate]) -> Replicates:
-        """Replicates from independent estimates of one case (any :class:`Estimator`) at budget n."""
+    def from_estimates(cls, est: Estimator, n: int, ests: Sequence[rest.Estimate], *,
+                       clock: Sequence[float] | None = None) -> Replicates:
+        """Replicates from independent estimates of one case (any :class:`Estimator`) at budget n;
+        ``clock``: the reference clock's time beside each of them (s), if it was timed."""
         bad = {k: v for e in ests for k, v in e.issues.items()}
         if bad:
             first = next(e for e in ests if e.issues)
@@ -82,7 +87,8 @@ class Replicates:
         kurt = float(np.mean([e.kurtosis for e in ests]))
         return cls(est.integrand, est.technique, int(n), est.reference, np.array([e.mean for e in ests]),
                    np.array([e.seconds for e in ests]), var if est.iid else math.nan, kurt, est.iid,
-                   est.evaluations, est.finite_variance)
+                   est.evaluations, est.finite_variance,
+                   None if clock is None else np.asarray(clock, dtype=np.float64))
 
     @property
     def replicas(self) -> int:
@@ -147,12 +153,21 @@ class Replicates:
         """Wall time of one estimate (s) and its standard error: :func:`median_time`."""
         return median_time(self.seconds)
 
+    @property
+    def clock_time(self) -> tuple[float, float]:
+        """Time of one estimate in reference-clock units and its standard error
+        (:func:`~harness.stats.timing.clock_time`); NaN if the clock was not timed."""
+        if self.clock is None:
+            return math.nan, math.nan
+        return clock_time(self.seconds, self.clock)
+
 
 def replicate(integrand: Any, technique: Any = None, n: int | None = None, replicas: int | None = None, *,
               dim: int | None = None, reference: float | None = None, seed: int = 0, case_id: int = 0,
-              threads: int | None = None) -> Replicates:
+              threads: int | None = None, clock: bool = False) -> Replicates:
     """``replicas`` independent estimates with n contributions each (replica r uses the
-    streams of (seed, case_id, r, chunk): independent randomisations of any point set).
+    streams of (seed, case_id, r, chunk): independent randomisations of any point set);
+    ``clock``: time the reference clock before each replica, for ``efficiency(..., clock=True)``.
 
     The estimator is a catalogue integrand with its technique, or a contributions callable
     u (N, dim) -> Y (N,) with ``dim`` and the exact ``reference`` (harness.stats.estimator):
@@ -164,8 +179,12 @@ def replicate(integrand: Any, technique: Any = None, n: int | None = None, repli
     r = count(replicas, "replicas")
     if r < 2:
         raise ValueError(f"'replicas' must be >= 2 to measure a spread, got {replicas}")
-    ests = [est.estimate(n, seed=seed, case_id=case_id, replica=k, threads=threads) for k in range(r)]
-    return Replicates.from_estimates(est, n, ests)
+    ests, ticks = [], []
+    for k in range(r):
+        if clock:
+            ticks.append(reference_clock())
+        ests.append(est.estimate(n, seed=seed, case_id=case_id, replica=k, threads=threads))
+    return Replicates.from_estimates(est, n, ests, clock=ticks if clock else None)
 
 
 # --- convergence rate ------------------------------------------------------------------------
@@ -329,8 +348,20 @@ class Efficiency:
     """1 / (V[F] T[F]) (background eq. 5) of one estimate F at ``budget`` samples, with a
     confidence interval; a member of the result family (:mod:`harness.stats.results`).
 
-    V from :attr:`Replicates.log10_estimator_variance`, T the median wall time of one estimate;
-    their relative errors are combined on the log scale (independent, delta method), and the
+    V from :attr:`Replicates.log10_estimator_variance`, T the median wall time of one estimate,
+    in seconds (``time_unit`` "s") or in ticks of the reference clock (``time_unit`` "clock",
+    harness.stats.timing.CLOCK read beside each replica: the median time over the median
+    reading, :func:`~harness.stats.timing.clock_time`).  What the interval claims differs:
+
+    * in seconds, 1/(V·T) in 1/s is this run's figure, and its interval describes this run's
+      machine state only: a run in another process, or at another time, differs by more (the
+      median time moves by about ±8 % from one process to the next, idle machine, both
+      techniques together; benchmarks/efficiency_coverage.py);
+    * in clock units, the machine's state cancels, as it does in a ratio of two interleaved
+      techniques: the figure and its interval describe other runs too (on this machine type;
+      another CPU has another ratio of the technique's speed to the clock's).
+
+    Their relative errors are combined on the log scale (independent, delta method), and the
     interval takes Student's t with their Welch-Satterthwaite degrees of freedom (``df``: the
     time's error comes from a few blocks of consecutive replicas).  Kept
     as log10, since 1/(V T) of an integrand near 1e300 is about 1e-590.  For techniques
@@ -356,17 +387,18 @@ class Efficiency:
     failures: list[Failure] = field(default_factory=list)
     reason: str = ""          # why no interval: "infinite variance" or "unreliable (tail index ...)"
     df: float = math.inf      # degrees of freedom of log_se (Welch-Satterthwaite of variance and time)
+    time_unit: str = "s"      # of ``seconds`` (T), so of the value: "s", or "clock" (reference-clock ticks)
 
     @classmethod
     def from_errors(cls, technique: str, log10_value: float, errors: Sequence[tuple[float, float]],
                     budget: int, replicas: int, log10_variance: float, seconds: float, *,
-                    reason: str = "") -> Efficiency:
+                    reason: str = "", time_unit: str = "s") -> Efficiency:
         """A measured efficiency whose log's standard error combines independent relative
         ``errors``, each (relative standard error, its degrees of freedom), with their
         Welch-Satterthwaite ``df``; no interval (log_se NaN) where ``reason`` says why."""
         log_se = math.nan if reason else math.hypot(*(e for e, _ in errors))
         return cls(technique, log10_value, log_se, budget, replicas, log10_variance, seconds, reason=reason,
-                   df=satterthwaite(errors))
+                   df=satterthwaite(errors), time_unit=time_unit)
 
     @property
     def value(self) -> float:
@@ -416,34 +448,42 @@ class Efficiency:
     def __str__(self) -> str:
         lo, hi = self.confidence_interval()
         interval = f"95 % CI [{lo:.4g}, {hi:.4g}]" if math.isfinite(lo) else f"no interval: {self.reason}"
+        clock = self.time_unit == "clock"
+        unit, scope = ("clock ticks", "across runs") if clock else ("s", "this run's machine state")
         return (f"{self.verdict}: efficiency 1/(V T) of {self.technique} = 10^{self.log10_value:.4g} "
-                f"({interval}) at {self.budget} samples per estimate, "
-                f"{self.replicas} replicas, V = 10^{self.log10_variance:.4g}, T = {self.seconds:.3g} s")
+                f"({interval}, {scope}) at {self.budget} samples per estimate, "
+                f"{self.replicas} replicas, V = 10^{self.log10_variance:.4g}, T = {self.seconds:.4g} {unit}")
 
 
 def efficiency(r: Replicates, *, tail_index: float | None = None,
-               finite_variance: bool | None = None) -> Efficiency:
-    """The efficiency of one estimate at the replicates' budget (see :class:`Efficiency`).
+               finite_variance: bool | None = None, clock: bool = False) -> Efficiency:
+    """The efficiency of one estimate at the replicates' budget (see :class:`Efficiency`), with
+    T in seconds (this run's figure), or, ``clock`` True, in ticks of the reference clock timed
+    beside each replica (a figure other runs reproduce; the replicates need ``clock`` times).
     ``finite_variance`` (default: the replicates') False, known analytically, or a
     contributions' ``tail_index`` below 2
     (from the bias test's tail sample): the variance is infinite, so the efficiency is 0 with
     no interval, however finite the replicas' spread looks; a tail index in [2, 3): a value
     without an interval (the variance's own error needs a fourth moment)."""
     lv, v_rel = r.log10_estimator_variance
-    t, t_se = r.time
+    if clock and r.clock is None:
+        raise ValueError(f"{r.integrand}/{r.technique}: clock=True needs the reference clock's time beside "
+                         "each replica (replicate(..., clock=True), or Replicates(clock=...))")
+    t, t_se = r.clock_time if clock else r.time
+    unit = "clock" if clock else "s"
     finite_variance = r.finite_variance if finite_variance is None else finite_variance
     if finite_variance is False or (tail_index is not None and tail_index < 2):
         why = "analytic" if finite_variance is False else f"tail index {tail_index:.2f} < 2"
         return Efficiency(r.technique, -math.inf, math.nan, r.n, r.replicas, math.inf, t,
-                          reason=f"infinite variance ({why})")
+                          reason=f"infinite variance ({why})", time_unit=unit)
     if not (t > 0) or lv == -math.inf:
         return Efficiency(r.technique, math.inf if lv == -math.inf else math.nan, math.nan, r.n, r.replicas,
-                          lv, t)
+                          lv, t, time_unit=unit)
     unreliable = tail_index is not None and tail_index < 3
     reason = f"unreliable (tail index {tail_index:.2f} < 3)" if unreliable else ""
     errors = [(v_rel, r.replicas - 1), (t_se / t, time_blocks(r.replicas) - 1)]
     return Efficiency.from_errors(r.technique, -lv - math.log10(t), errors, r.n, r.replicas, lv, t,
-                                  reason=reason)
+                                  reason=reason, time_unit=unit)
 
 
 def efficiency_ratio(a: Efficiency, b: Efficiency,
@@ -451,8 +491,12 @@ def efficiency_ratio(a: Efficiency, b: Efficiency,
     """eff(a) / eff(b) with its interval (independent measurements, log-scale delta method,
     Student's t with the Welch-Satterthwaite degrees of freedom of both time errors):
     0 without an interval where a's variance is infinite and b's is not; no interval where
-    either is unreliable; NaN where b's is not finite and positive."""
+    either is unreliable; NaN where b's is not finite and positive.  Both in the same time unit
+    (seconds or clock ticks: ValueError otherwise)."""
     check_confidence_level(confidence_level)
+    if a.time_unit != b.time_unit:
+        raise ValueError(f"efficiencies in different time units: {a.technique} in {a.time_unit!r}, "
+                         f"{b.technique} in {b.time_unit!r}; compare seconds with seconds, ticks with ticks")
     none = ConfidenceInterval(math.nan, math.nan)
     if not math.isfinite(b.log10_value):
         return math.nan, none

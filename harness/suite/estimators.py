@@ -5,10 +5,13 @@ Per case, as its measurements ask: a bias verdict (check_technique's test on ind
 batches, Holm-corrected across the suite's estimator cases at its family-wise alpha) and the
 per-sample variance from the same batches; a convergence slope of the RMSE over geometric
 budgets with a bootstrap interval; the efficiency 1/(V T) as a ratio against the case named
-by ``baseline`` (default: uniform Monte Carlo on the same catalogue integrand); and RMSE
-against wall time.  A user's estimator runs serially in the runner's thread (Python code
-holds the GIL: a parallel run would time its contention, not the estimator).  A case with a precision target
-doubles its bias test's samples (a new "look") until its interval is narrow enough.
+by ``baseline`` (default: uniform Monte Carlo on the same catalogue integrand), and per case
+with T in seconds (this run's figure: its interval holds for this run's machine state only)
+and in ticks of the reference clock timed beside each replica (harness.stats.timing.CLOCK:
+the figure other runs reproduce within its interval); and RMSE against wall time.  A user's
+estimator runs serially in the runner's thread (Python code holds the GIL: a parallel run
+would time its contention, not the estimator).  A case with a precision target doubles its
+bias test's samples (a new "look") until its interval is narrow enough.
 """
 from __future__ import annotations
 
@@ -34,6 +37,7 @@ from harness.suite.plan import (
     case_key,
     convergence_budgets,
     core_case_id,
+    efficiency_stream,
     estimator_units,
 )
 from harness.suite.store import Store
@@ -57,7 +61,9 @@ def estimator_of(case: Case, base: Path) -> stats.Estimator:
 class EstimateJob:
     """A unit of an estimator case: the accumulator state of its chunk range ("state"), or the
     largest deviations above and below the median of the contributions of all the bias test's
-    batches ("tail", for the tail index and a tail's end; one batch in memory at a time)."""
+    batches ("tail", for the tail index and a tail's end; one batch in memory at a time).
+    ``clock``: a unit of a replica the efficiency is measured from reads the reference clock
+    on its thread just before it (its payload's "clock", s; not part of the unit's time)."""
 
     unit: Unit
     case: Case
@@ -65,6 +71,7 @@ class EstimateJob:
     seed: int
     core_case: int
     batches: int       # of the bias test: a tail unit reads the contributions of all of them
+    clock: bool = False
 
     @property
     def serial(self) -> bool:
@@ -73,10 +80,13 @@ class EstimateJob:
     def run(self) -> JobResult:
         u = self.unit
         est = estimator_of(self.case, Path(self.base))
+        clock = stats.reference_clock() if self.clock else None
         start = time.perf_counter()
         if u.kind == "state":
             payload = est.state(u.budget, u.chunk_begin, u.chunk_end, seed=self.seed, case_id=self.core_case,
                                 replica=u.replica)
+            if clock is not None:
+                payload = {**payload, "clock": clock}
         else:
             tails = stats.TailSample.for_count(u.budget * self.batches)
             for k in range(self.batches):
@@ -92,10 +102,11 @@ class CaseResult:
     key: str
     bias: stats.UnbiasedResult | None
     convergence: stats.ConvergenceResult | None  # None if not asked for or zero variance
-    efficiency: stats.Efficiency | None
+    efficiency: stats.Efficiency | None          # T in seconds: this run's figure
     variance: tuple[float, float, int] | None    # per-contribution variance, its std. error, n
     error_vs_time: pd.DataFrame | None
     look: int = 0                                # precision targets: the look the bias test stopped at
+    clock_efficiency: stats.Efficiency | None = None   # T in reference-clock ticks: across runs
 
     @property
     def target_half_width(self) -> float:
@@ -129,12 +140,15 @@ class EstimatorKind:
     def plan(self, store: Store) -> list[EstimateJob]:
         """The cases' units, interleaved: replica r of every case at one budget, then replica
         r + 1, ..., so a drift of the machine's speed during the run falls on every case alike
-        instead of on whichever ran last (the efficiency compares their wall times)."""
+        instead of on whichever ran last (the efficiency compares their wall times).  The units
+        of the replicas a case's efficiency is measured from read the reference clock."""
         jobs = []
         base = str(self.suite.path.parent)
         for i, (key, c) in enumerate(self.case_of.items()):
+            timed = efficiency_stream(self.suite, c)
             for u in estimator_units(self.suite, c, self.looks.get(key, 0)):
-                job = EstimateJob(u, c, base, self.suite.seed, core_case_id(c, u.stream), self.suite.batches)
+                job = EstimateJob(u, c, base, self.suite.seed, core_case_id(c, u.stream), self.suite.batches,
+                                  clock=u.kind == "state" and (u.stream, u.budget) == timed)
                 jobs.append((u.stream, u.replica, i, u.chunk_begin, job))
         return [job for *_, job in sorted(jobs, key=lambda j: j[:4])]
 
@@ -161,7 +175,10 @@ class EstimatorKind:
                 f"value (over all contributions; over {suite.batches} replicas for stratified and Sobol' "
                 "points), p corrected for the estimate's skewness; RMSE slope: log-log fit over budgets "
                 "(expected -0.5 for Monte Carlo); 1/(V·T): efficiency (background eq. 5) against uniform MC "
-                "on the same integrand."
+                "on the same integrand (replicas interleaved: the machine's state cancels); "
+                "log10 1/(V·T_clock): per case, T in ticks of the reference clock timed beside each "
+                "replica, an interval other runs fall in (1/(V·T) in 1/s, harness.load's log10_efficiency: "
+                "an interval of this run's machine state only)."
                 if results else "")
         return Outcome(self.name, "cases", tuple(self.names()), tuple(results), tuple(verdicts),
                        tuple(failures),
@@ -173,12 +190,25 @@ class EstimatorKind:
 
 # --- measuring -----------------------------------------------------------------------------------
 def _states_by_estimate(payloads: dict[Unit, dict]) -> dict[tuple[int, int, int], list[dict]]:
-    """State payloads grouped by (stream, budget, replica), in chunk order."""
+    """State payloads grouped by (stream, budget, replica), in chunk order (without the
+    reference clock's reading)."""
     groups: dict[tuple[int, int, int], list[tuple[int, dict]]] = {}
     for u, p in payloads.items():
         if u.kind == "state":
-            groups.setdefault((u.stream, u.budget, u.replica), []).append((u.chunk_begin, p))
+            state = {k: v for k, v in p.items() if k != "clock"}
+            groups.setdefault((u.stream, u.budget, u.replica), []).append((u.chunk_begin, state))
     return {g: [p for _, p in sorted(v, key=lambda x: x[0])] for g, v in groups.items()}
+
+
+def _clock_of(payloads: dict[Unit, dict], stream: int, budget: int, replicas: int) -> list[float] | None:
+    """Per replica of (stream, budget): the mean reference-clock reading of its units (each
+    read the clock just before it), or None if any unit has none."""
+    readings: dict[int, list[float]] = {}
+    for u, p in payloads.items():
+        if u.kind == "state" and u.stream == stream and u.budget == budget:
+            readings.setdefault(u.replica, []).append(p.get("clock", math.nan))
+    clock = [sum(readings.get(r, [math.nan])) / len(readings.get(r, [math.nan])) for r in range(replicas)]
+    return clock if all(c > 0 for c in clock) else None
 
 
 def _measure(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int = 0) -> CaseResult:
@@ -190,7 +220,7 @@ def _measure(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int = 0
     def estimate(stream: int, budget: int, replica: int) -> rest.Estimate:
         return est.from_states(states[(stream, budget, replica)])
 
-    bias = variance = conv = eff = evt = None
+    bias = variance = conv = eff = clock_eff = evt = None
     if wanted & {"bias", "variance"}:
         b, stream = bias_budget(suite, case, look), bias_stream(look)
         batches = [estimate(stream, b, k) for k in range(suite.batches)]
@@ -215,16 +245,21 @@ def _measure(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int = 0
             rel = math.sqrt(max(reps.sample_kurtosis - 1, 0.0) / (reps.replicas * b))
             variance = (reps.sample_variance, reps.sample_variance * rel, reps.replicas * b)
     budgets = convergence_budgets(suite, case)
+    timed = efficiency_stream(suite, case)
     reps_by_budget = {}
     for i, b in enumerate(budgets):
         if (1 + i, b, 0) in states:
+            clock = _clock_of(payloads, 1 + i, b, suite.replicas) if (1 + i, b) == timed else None
             reps_by_budget[b] = stats.Replicates.from_estimates(
-                est, b, [estimate(1 + i, b, r) for r in range(suite.replicas)])
+                est, b, [estimate(1 + i, b, r) for r in range(suite.replicas)], clock=clock)
     if reps_by_budget:
         top = reps_by_budget[max(reps_by_budget)]
         if top.rmse > 0 and "efficiency" in wanted:
             tail = bias.tail_index if bias is not None and bias.verdict != "invalid" else None
             eff = stats.efficiency(top, tail_index=tail, finite_variance=est.finite_variance)
+            if top.clock is not None:
+                clock_eff = stats.efficiency(top, tail_index=tail, finite_variance=est.finite_variance,
+                                             clock=True)
         if "convergence" in wanted and len(reps_by_budget) >= 3 and top.rmse > 0:
             conv = stats.fit_convergence(list(reps_by_budget.values()), seed=suite.seed)
         if "error_vs_time" in wanted:
@@ -232,7 +267,7 @@ def _measure(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int = 0
                                  "rmse_hi": r.rmse_interval()[1], "seconds": r.time[0],
                                  "seconds_se": r.time[1], "replicas": r.replicas}
                                 for r in reps_by_budget.values()])
-    return CaseResult(case, est, key, bias, conv, eff, variance, evt, look)
+    return CaseResult(case, est, key, bias, conv, eff, variance, evt, look, clock_eff)
 
 
 # --- verdicts --------------------------------------------------------------------------------------
@@ -346,7 +381,17 @@ def _rows(suite: Suite, results: list[CaseResult], table: pd.DataFrame) -> list[
             said = {"verdict": e.verdict} if e.reason else {}   # "infinite variance", "unreliable"
             rows.append({**base, "measurement": "log10_efficiency", "value": e.log10_value,
                          "lo": e.log10_value - z, "hi": e.log10_value + z, "n": e.n, **said,
-                         "detail": {"seconds": e.seconds, "reason": e.reason}})
+                         "detail": {"seconds": e.seconds, "reason": e.reason, "unit": "1/s",
+                                    "interval": "this run's machine state"}})
+            k = r.clock_efficiency
+            if k is not None:
+                zk = k.log10_half_width(0.95)
+                rows.append({**base, "measurement": "log10_efficiency_clock", "value": k.log10_value,
+                             "lo": k.log10_value - zk, "hi": k.log10_value + zk, "n": k.n, **said,
+                             "detail": {"clock_ticks": k.seconds, "seconds": e.seconds, "reason": k.reason,
+                                        "unit": "1/clock tick", "clock": dict(stats.CLOCK),
+                                        "clock_seconds": e.seconds / k.seconds if k.seconds > 0 else None,
+                                        "interval": "across runs (the machine's state cancels)"}})
             rows.append({**base, "measurement": "efficiency_ratio", "value": row["efficiency_ratio"],
                          "lo": row["ratio_lo"], "hi": row["ratio_hi"], "n": e.n, **said,
                          "detail": {"baseline": row["efficiency_baseline"], "reason": e.reason}})
@@ -372,7 +417,7 @@ def results_table(results: list[CaseResult], alpha: float) -> pd.DataFrame:
     rows = []
     nan = math.nan
     for r, verdict, cverdict in zip(results, _judge_bias(results, alpha), _judge_convergence(results, alpha)):
-        b, c, e = r.bias, r.convergence, r.efficiency
+        b, c, e, k = r.bias, r.convergence, r.efficiency, r.clock_efficiency
         ratio, (lo, hi) = (nan, (nan, nan))
         base = by_name[r.case.baseline] if r.case.baseline else (
             None if r.case.estimator else by_integrand.get(r.case.integrand))
@@ -397,6 +442,10 @@ def results_table(results: list[CaseResult], alpha: float) -> pd.DataFrame:
             "efficiency_baseline": base_name,
             "efficiency_ratio": ratio, "ratio_lo": lo, "ratio_hi": hi,
             "seconds_per_estimate": e.seconds if e else nan,
+            "log10_efficiency_clock": k.log10_value if k else nan,
+            "clock_lo": k.log10_value - k.log10_half_width() if k else nan,
+            "clock_hi": k.log10_value + k.log10_half_width() if k else nan,
+            "clock_ticks_per_estimate": k.seconds if k else nan,
             "notes": notes,
         })
     return pd.DataFrame(rows)
@@ -415,6 +464,8 @@ def _notes(r: CaseResult) -> str:
     if r.efficiency is not None and r.efficiency.reason:
         zero = "0, " if r.efficiency.value == 0 else ""
         notes.append(f"efficiency {zero}no interval: {r.efficiency.reason}")
+    if r.efficiency is not None and r.clock_efficiency is None:
+        notes.append("no reference-clock readings stored: efficiency in 1/s only (this run's machine state)")
     if r.case.target is not None:
         hw = r.target_half_width
         reached = hw <= r.case.target
@@ -446,6 +497,9 @@ def format_table(df: pd.DataFrame, alpha: float) -> str:
                                                           df["convergence"])], "<"),
         "1/(V·T) vs baseline [95% CI]": ([interval(v, lo, hi, ".3g") for v, lo, hi in
                                          zip(df["efficiency_ratio"], df["ratio_lo"], df["ratio_hi"])], "<"),
+        "log10 1/(V·T_clock) [95% CI]": ([interval(v, lo, hi, ".3f") for v, lo, hi in
+                                          zip(df["log10_efficiency_clock"], df["clock_lo"], df["clock_hi"])],
+                                         "<"),
         "notes": (df["notes"], "<"),
     }
     cells = {k: [str(v) for v in vals] for k, (vals, _) in columns.items()}

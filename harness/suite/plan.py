@@ -8,6 +8,11 @@ replicas also give the efficiency and the error against time.  No reference run 
 where an exact value exists (the catalogue's values are exact, some scenes have exact images),
 no renderer or sampler test unless a case asks for one.
 
+The units of the replicas an estimator case's efficiency is measured from (its largest
+convergence budget, :func:`efficiency_stream`) also time the reference clock beside them
+(harness.stats.timing.CLOCK): their payloads carry its reading, and the clock's description is
+part of the case key.
+
 Fingerprints (``case_key``, ``sampler_key``, ``render_key``, ``reference_key``) hash what fixes
 a case's numbers, the harness code that computes its units included (harness.fingerprint); a
 unit's random stream depends on its case's settings, stream and replica, never on that code.
@@ -22,13 +27,14 @@ from typing import Any
 import reference_estimators as rest
 
 from harness.fingerprint import code_fingerprint
+from harness.stats.timing import CLOCK
 from harness.suite.model import Case, RenderCase, SamplerCase, Suite
 
 __all__ = ["UNIT_CHUNKS", "BIAS_STREAM", "Unit", "case_key", "sampler_key", "sampler_spec", "render_key",
            "reference_key", "render_stream", "reference_stream", "render_seed", "core_case_id", "bias_budget",
-           "bias_stream", "convergence_budgets", "chosen_budgets", "estimator_units", "sampler_units",
-           "render_units", "reference_units", "plan", "unit_count", "render_unit_count", "MAX_UNITS",
-           "MAX_TAIL_BATCH"]
+           "bias_stream", "convergence_budgets", "chosen_budgets", "efficiency_stream", "estimator_units",
+           "sampler_units", "render_units", "reference_units", "plan", "unit_count", "render_unit_count",
+           "MAX_UNITS", "MAX_TAIL_BATCH"]
 
 UNIT_CHUNKS = 32                     # core chunks (of 65 536 samples) per stored unit
 MAX_UNITS = 1 << 20                  # units a suite may plan: each is held in memory, then a database row
@@ -71,7 +77,7 @@ def case_key(suite: Suite, case: Case) -> str:
             if case.estimator else {"integrand": case.integrand, "technique": case.technique})
     return _hash({**what, "seed": suite.seed, "case_id": case.case_id, "unit_chunks": UNIT_CHUNKS,
                   "format": _FORMAT, "core": rest.__version__, "build": rest.core_fingerprint(),
-                  "code": code_fingerprint(*_ESTIMATOR_CODE)})
+                  "code": code_fingerprint(*_ESTIMATOR_CODE), "clock": CLOCK})
 
 
 def sampler_key(suite: Suite, sc: SamplerCase) -> str:
@@ -163,6 +169,16 @@ def chosen_budgets(measurements: tuple[str, ...],
     if "efficiency" in wanted:
         return [(len(budgets) - 1, budgets[-1])]
     return []
+
+
+def efficiency_stream(suite: Suite, case: Case) -> tuple[int, int] | None:
+    """(stream, budget) of the replicas a case's efficiency is measured from: its largest
+    convergence budget.  Their units time the reference clock beside them.  None if the case
+    does not measure efficiency."""
+    if "efficiency" not in case.measurements:
+        return None
+    budgets = convergence_budgets(suite, case)
+    return len(budgets), budgets[-1]
 
 
 # --- units -------------------------------------------------------------------------------------

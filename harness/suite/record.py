@@ -11,7 +11,8 @@ Each result becomes the measurement rows a suite run writes for the same kind of
 the report draws it as it draws a suite's: an UnbiasedResult a "bias" row, a
 ConvergenceResult a "convergence_slope" row (with its RMSE table: the report's convergence
 figure; its integrand keeps the result's, the name becomes its technique, so results of one
-integrand share a figure), an Efficiency a "log10_efficiency" row, a SamplerCheck (check_sampler,
+integrand share a figure), an Efficiency a "log10_efficiency" row ("log10_efficiency_clock" with T
+in reference-clock ticks), a SamplerCheck (check_sampler,
 mcmc_crosscheck) a "chi_square" row with its residual grids and marginals.  A case is keyed
 by suite, name and kind of result: recording it again replaces its rows.  Recorded results
 of a suite accumulate in one run (file "harness.record"), which a suite run of the same name
@@ -27,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from harness.samplers.check import SamplerCheck
-from harness.stats import ConvergenceResult, Efficiency, UnbiasedResult, failure_counts
+from harness.stats import CLOCK, ConvergenceResult, Efficiency, UnbiasedResult, failure_counts
 from harness.suite.store import Store
 
 __all__ = ["record"]
@@ -81,9 +82,13 @@ def _rows(r: Any, name: str, domain: str | None) -> tuple[str, str, list[dict[st
                        "table": r.table.to_dict("list")}}]
     if isinstance(r, Efficiency):
         z = r.log10_half_width(0.95)
+        clock = r.time_unit == "clock"   # T in reference-clock ticks: an interval across runs
+        detail = ({"clock_ticks": r.seconds, "unit": "1/clock tick", "clock": dict(CLOCK),
+                   "interval": "across runs (the machine's state cancels)"} if clock else
+                  {"seconds": r.seconds, "unit": "1/s", "interval": "this run's machine state"})
         return name, r.technique, [{
-            "measurement": "log10_efficiency", "value": r.log10_value, "lo": r.log10_value - z,
-            "hi": r.log10_value + z, "n": r.n, "detail": {"seconds": r.seconds}}]
+            "measurement": "log10_efficiency_clock" if clock else "log10_efficiency", "value": r.log10_value,
+            "lo": r.log10_value - z, "hi": r.log10_value + z, "n": r.n, "detail": detail}]
     if isinstance(r, SamplerCheck):
         if domain is None:
             raise TypeError(f"{name!r}: recording a sampler check needs domain= (the report draws its cells)")

@@ -394,3 +394,23 @@ def test_report_cli_errors(tmp_path, capsys):
     assert "no results database" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["report", "--db", str(tmp_path / "none.sqlite"), "--format", "pdf"])
+
+
+def test_an_efficiency_in_clock_ticks_is_recorded_as_its_own_measurement(tmp_path):
+    """harness.record keeps the two efficiency figures apart: 1/(V·T) in 1/s (an interval of
+    that run's machine state) and in reference-clock ticks (an interval across runs)."""
+    import json
+
+    import harness
+    from harness import stats
+
+    r = stats.replicate("gaussian", "importance:linear", 65536, 8, seed=0, clock=True)
+    db = tmp_path / "eff.sqlite"
+    figures = {"is": stats.efficiency(r), "is (clock)": stats.efficiency(r, clock=True)}
+    harness.record(db, figures, suite="eff")
+    stored = load(db).set_index("measurement")
+    assert set(stored.index) == {"log10_efficiency", "log10_efficiency_clock"}
+    s, k = stored.loc["log10_efficiency"], stored.loc["log10_efficiency_clock"]
+    assert json.loads(s["detail"])["interval"] == "this run's machine state"
+    assert json.loads(k["detail"])["interval"].startswith("across runs")
+    assert k["lo"] < k["value"] < k["hi"] and s["lo"] < s["value"] < s["hi"]

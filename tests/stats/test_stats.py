@@ -362,6 +362,56 @@ def test_the_time_error_comes_from_the_spread_between_blocks_of_replicas():
     assert se > 1.2533 * 1.4826 * np.median(np.abs(t - med)) / math.sqrt(32)   # the within-replica rule
 
 
+def test_the_time_in_clock_ticks_is_the_median_time_over_the_median_reading():
+    """A machine that slows down for a block slows the clock read beside it alike: the time in
+    ticks and its error (from the blocks' median time over median reading) do not move.  A
+    replica and another replica's reading that each lost a time slice in one block are one
+    outlier of each series: the block's ratio stays put."""
+    clock = np.repeat(1.0 + 0.04 * np.arange(8), 4)       # the machine's speed, block by block
+    t = 3.0 * clock * (1 + np.tile([0, 1e-4, 2e-4, 3e-4], 8))
+    ticks, se = hs.clock_time(t, clock)
+    assert ticks == np.median(t) / np.median(clock) and ticks == pytest.approx(3.0, rel=1e-3)
+    assert se < 1e-3 * hs.median_time(t)[1]
+    t2, c2 = t.copy(), clock.copy()
+    t2[4], c2[5] = 5 * t2[4], 5 * c2[5]
+    ticks2, se2 = hs.clock_time(t2, c2)
+    assert ticks2 == pytest.approx(ticks, rel=1e-3) and se2 < 1e-4
+    with pytest.raises(ValueError, match=r"'clock' must have one time per replica: \(31,\) against \(32,\)"):
+        hs.clock_time(t, clock[1:])
+    with pytest.raises(ValueError, match="'clock' times must be positive, got min 0"):
+        hs.clock_time(t, np.where(np.arange(32) == 5, 0.0, clock))
+
+
+def test_the_reference_clock_reads_a_positive_finite_time():
+    ticks = [hs.reference_clock() for _ in range(3)]
+    assert all(math.isfinite(c) and c > 0 for c in ticks), ticks
+    assert hs.CLOCK["samples"] > 0
+
+
+def test_efficiency_in_clock_ticks_is_the_one_in_seconds_times_the_runs_clock():
+    """replicate(..., clock=True) reads the clock beside each replica; the efficiency in clock
+    ticks has its own interval, and equals the one in 1/s times the run's clock (its median
+    reading, s), to rounding.  Each says what its interval claims."""
+    r = hs.replicate("gaussian", "importance:linear", 65536, 8, seed=0, clock=True)
+    assert r.clock.shape == (8,) and np.all(np.isfinite(r.clock)) and np.all(r.clock > 0)
+    e, k = hs.efficiency(r), hs.efficiency(r, clock=True)
+    assert (e.time_unit, k.time_unit) == ("s", "clock") and k.verdict == "measured"
+    assert k.seconds == r.clock_time[0] and math.isfinite(k.log_se) and k.log_se > 0
+    run_clock = float(np.median(r.clock))                 # the run's clock: its median reading
+    assert k.log10_value == pytest.approx(e.log10_value + math.log10(run_clock), abs=1e-12)
+    lo, hi = k.confidence_interval()
+    assert 0 < lo < k.value < hi < math.inf
+    assert "this run's machine state" in str(e) and "across runs" in str(k) and "clock ticks" in str(k)
+    inf = hs.efficiency(hs.replicate("singularity", "uniform", 65536, 8, seed=0, clock=True), clock=True)
+    assert inf.verdict == "infinite variance" and inf.time_unit == "clock"
+    with pytest.raises(ValueError, match="efficiencies in different time units: importance:linear in 'clock"):
+        hs.efficiency_ratio(k, e)
+    ratio, (lo, hi) = hs.efficiency_ratio(k, k)
+    assert ratio == 1.0 and lo < 1 < hi
+    with pytest.raises(ValueError, match="clock=True needs the reference clock's time beside each replica"):
+        hs.efficiency(hs.replicate("gaussian", "uniform", 65536, 8, seed=0), clock=True)
+
+
 def test_efficiency_survives_huge_integrands():
     e = hs.efficiency(hs.replicate("huge", "uniform", 50_000, 8, seed=0))
     assert e.value == 0.0 and -600 < e.log10_value < -580  # 1/(V T) ~ 1e-590 is no double

@@ -13,6 +13,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from scipy import stats
 
@@ -70,7 +71,7 @@ def stored_count(db: Path) -> int:
 
 def without_timing(rows: list[tuple]) -> list[tuple]:
     """Unit rows with the payloads' wall times removed (each run measures its own)."""
-    return [(*r[:7], {k: v for k, v in json.loads(r[7]).items() if k not in ("seconds", "threads")})
+    return [(*r[:7], {k: v for k, v in json.loads(r[7]).items() if k not in ("seconds", "threads", "clock")})
             for r in rows]
 
 
@@ -143,7 +144,7 @@ def test_kill_minus_nine_at_random_points_then_resume(suite_file, reference_db, 
     a, b = measurements(db), measurements(reference_db)
     cols = ["case_key", "measurement", "value", "lo", "hi", "n", "pvalue", "verdict"]
     # timing-based: equal only by chance
-    stat = ~a["measurement"].isin(["log10_efficiency", "efficiency_ratio"])
+    stat = ~a["measurement"].isin(["log10_efficiency", "log10_efficiency_clock", "efficiency_ratio"])
     assert a.loc[stat, cols].equals(b.loc[stat, cols])
 
 
@@ -162,7 +163,7 @@ def test_load_gives_each_measurement_with_uncertainty_and_n(reference_db):
     assert {"integrand", "technique", "measurement", "value", "lo", "hi", "n", "pvalue", "alpha",
             "verdict"} <= set(df)
     assert set(df["measurement"]) == {"bias", "variance", "convergence_slope", "log10_efficiency",
-                                      "efficiency_ratio", "rmse"}
+                                      "log10_efficiency_clock", "efficiency_ratio", "rmse"}
     bias = df[df["measurement"] == "bias"]
     assert len(bias) == 4 and (bias["n"] == 33_554_432).all() and (bias["lo"] < bias["hi"]).all()
     assert set(bias["verdict"]) == {"unbiased"}
@@ -217,6 +218,105 @@ def test_an_infinite_variance_case_has_efficiency_zero_and_no_interval(tmp_path)
     assert row["verdict"] == "infinite variance" and row["value"] == -math.inf
     assert math.isnan(row["lo"]) and math.isnan(row["hi"])
     assert "efficiency 0, no interval: infinite variance (analytic)" in summary["estimator"].text
+
+
+EFFICIENCY_SUITE = """\
+[suite]
+name = "eff"
+samples = 65536
+batches = 16
+replicas = 8
+measurements = {measurements}
+
+[[case]]
+integrand = "gaussian"
+techniques = ["uniform", "importance:linear"]
+"""
+
+
+def _unit_payloads(db: Path) -> list[tuple[int, int, str, dict, str]]:
+    """(stream, budget, kind, payload, case key) of every stored unit."""
+    con = sqlite3.connect(db)
+    try:
+        return [(s, b, k, json.loads(p), c) for s, b, k, p, c in
+                con.execute("SELECT stream, budget, kind, payload, case_key FROM units").fetchall()]
+    finally:
+        con.close()
+
+
+def test_efficiency_has_a_figure_in_reference_clock_ticks_stored_and_resumed(tmp_path):
+    """A suite that measures efficiency reads the reference clock beside each replica of its
+    largest budget (and nowhere else); each case gets log10 1/(V·T_clock) with an interval,
+    equal to log10 1/(V·T) times the run's seconds per clock tick; a rerun computes nothing and
+    stores the same figures."""
+    p = tmp_path / "eff.toml"
+    p.write_text(EFFICIENCY_SUITE.format(measurements='["bias", "efficiency"]'))
+    db = tmp_path / "eff.sqlite"
+    summary = run_suite(load_suite(p), db, threads=2)
+    units = _unit_payloads(db)
+    timed = [u for u in units if "clock" in u[3]]
+    assert len(timed) == 2 * 8 and {u[:3] for u in timed} == {(5, 4096, "state")}
+    assert all(math.isfinite(u[3]["clock"]) and u[3]["clock"] > 0 for u in timed)
+    assert not any("clock" in u[3] for u in units if (u[0], u[1]) != (5, 4096))
+    df = harness.load(db).set_index(["technique", "measurement"])
+    for technique, result in zip(["uniform", "importance:linear"], summary["estimator"].results):
+        k, e = df.loc[(technique, "log10_efficiency_clock")], df.loc[(technique, "log10_efficiency")]
+        assert all(math.isfinite(k[c]) for c in ("value", "lo", "hi")) and k["lo"] < k["value"] < k["hi"]
+        dk, de = json.loads(k["detail"]), json.loads(e["detail"])
+        assert dk["interval"].startswith("across runs") and de["interval"] == "this run's machine state"
+        assert dk["clock"] == harness.stats.CLOCK and k["n"] == e["n"] == 8 * 4096
+        key = df.loc[(technique, "log10_efficiency"), "case_key"]
+        run_clock = float(np.median([u[3]["clock"] for u in timed if u[4] == key]))   # its median reading
+        assert k["value"] == pytest.approx(e["value"] + math.log10(run_clock), abs=1e-12)
+        assert dk["clock_seconds"] == pytest.approx(run_clock, rel=1e-12)
+        assert dk["clock_ticks"] == pytest.approx(de["seconds"] / run_clock, rel=1e-12)
+        assert result.clock_efficiency.log10_value == k["value"]
+    assert "log10 1/(V·T_clock) [95% CI]" in summary["estimator"].text
+    assert "this run's machine state only" in summary["estimator"].text
+    again = run_suite(load_suite(p), db, threads=2)
+    assert again.units_run == 0
+    df2 = harness.load(db).set_index(["technique", "measurement"])
+    assert df2.loc[:, ["value", "lo", "hi"]].equals(df.loc[:, ["value", "lo", "hi"]])
+
+
+def test_only_suites_that_measure_efficiency_read_the_clock(tmp_path):
+    p = tmp_path / "bias.toml"
+    p.write_text(EFFICIENCY_SUITE.format(measurements='["bias", "convergence"]'))
+    run_suite(load_suite(p), tmp_path / "b.sqlite", threads=2)
+    assert not any("clock" in u[3] for u in _unit_payloads(tmp_path / "b.sqlite"))
+    assert "log10_efficiency_clock" not in set(harness.load(tmp_path / "b.sqlite")["measurement"])
+
+
+def test_units_without_clock_readings_give_the_figure_in_seconds_only(tmp_path):
+    """Units stored without the clock's readings (written by a harness before the clock: such a
+    database's keys no longer match, so this is a hand-made one) are read, not crashed on: the
+    efficiency in 1/s, no figure in clock ticks, and a note that says so."""
+    p = tmp_path / "eff.toml"
+    p.write_text(EFFICIENCY_SUITE.format(measurements='["efficiency"]'))
+    db = tmp_path / "eff.sqlite"
+    run_suite(load_suite(p), db, threads=2)
+    con = sqlite3.connect(db)
+    con.execute("UPDATE units SET payload = json_remove(payload, '$.clock')")
+    con.commit()
+    con.close()
+    again = run_suite(load_suite(p), db, threads=2)
+    assert again.units_run == 0
+    r = again["estimator"].results[0]
+    assert r.efficiency is not None and r.clock_efficiency is None
+    assert "no reference-clock readings stored" in again["estimator"].text
+    assert set(harness.load(db)["measurement"]) == {"log10_efficiency", "efficiency_ratio"}
+
+
+def test_the_case_key_changes_with_the_reference_clock(tmp_path, monkeypatch):
+    """Stored times in clock ticks belong to one clock: another clock makes them stale."""
+    from harness.suite import plan
+
+    p = tmp_path / "eff.toml"
+    p.write_text(EFFICIENCY_SUITE.format(measurements='["efficiency"]'))
+    suite = load_suite(p)
+    before = plan.case_key(suite, suite.cases[0])
+    monkeypatch.setattr(plan, "CLOCK", {**plan.CLOCK, "samples": 2 * plan.CLOCK["samples"]})
+    assert plan.case_key(suite, suite.cases[0]) != before
 
 
 def test_sampler_checks_run_from_suites_and_resume(tmp_path):
