@@ -123,21 +123,23 @@ def _samples(c: dict[str, Any], samples: int, where: Locator, table: Any) -> int
     return n
 
 
-_ADAPTER_SAMPLER_KEYS = {"adapter": str, "plugin": dict, "wi": (int, float, list), "variant": str,
-                         "samples": int, "measurements": list, "xfail": str}
+_ADAPTER_SAMPLER_KEYS = {"adapter": str, "plugin": dict, "wi": (int, float, list), "ref": list,
+                         "variant": str, "samples": int, "measurements": list, "xfail": str}
 
 
 def _adapter_sampler(c: dict[str, Any], samples: int, case_id: int, where: Locator,
                      table: Any) -> SamplerCase:
-    """A renderer's sampler (a Mitsuba BSDF, microfacet distribution or environment map):
-    chi-square with failed samples accounted for, and the weight == eval/pdf check."""
+    """A renderer's sampler (a Mitsuba BSDF, phase function, microfacet distribution,
+    environment map, or an area light on a shape sampled from the point ``ref``): chi-square
+    with failed samples accounted for and the reported pdf checked, and the weight == eval/pdf
+    check."""
     check_keys(c, _ADAPTER_SAMPLER_KEYS, where, table)
     if c["adapter"] != "mitsuba":
         raise SuiteError(where.at(table, "adapter", f"expected \"mitsuba\" (samplers of other adapters are "
                                   f"not supported), got {c['adapter']!r}"))
     from harness.adapters.mitsuba.samplers import make_sampler
 
-    spec = {k: c[k] for k in ("plugin", "wi", "variant") if k in c}
+    spec = {k: c[k] for k in ("plugin", "wi", "ref", "variant") if k in c}
     try:
         s = make_sampler(spec)
     except (ValueError, TypeError, RuntimeError) as e:

@@ -5,6 +5,7 @@ Deterministic: no random numbers.  Only the two Mitsuba tests load Mitsuba (a [[
 adapter [[sampler]] table is validated by building its renderer or sampler)."""
 from __future__ import annotations
 
+import json
 import re
 import subprocess
 import sys
@@ -130,6 +131,18 @@ def test_a_mitsuba_sampler_table_is_labelled_and_keeps_its_spec(tmp_path):
                                                                     ("chi_square", "weight"))
     assert sc.spec == '{"plugin": {"type": "diffuse"}, "variant": "scalar_rgb"}'
     assert sc.label.startswith("mitsuba:diffuse") and sc.label.endswith("[scalar_rgb]")
+
+
+def test_an_area_light_table_keeps_its_reference_point(tmp_path):
+    text = ('[[sampler]]\nadapter = "mitsuba"\nref = [0.0, 0.0, 0.5]\nplugin = { type = "sphere", '
+            'center = [0, 0, 2], radius = 0.5, emitter = { type = "area", radiance = 1.0 } }\n')
+    (sc,) = load_suite(write(tmp_path, text)).samplers
+    assert (sc.domain, sc.measurements) == ("sphere", ("chi_square", "weight"))
+    assert sc.label == "mitsuba:area sphere constant from (0, 0, 0.5)"
+    assert json.loads(sc.spec)["ref"] == [0.0, 0.0, 0.5]
+    text = ('[[sampler]]\nadapter = "mitsuba"\nref = [0.0, 0.0, 0.5]\nplugin = { type = "diffuse" }\n')
+    with pytest.raises(SuiteError, match="'ref': only emitters on shapes"):
+        load_suite(write(tmp_path, text))
 
 
 # --- mistakes ----------------------------------------------------------------------------------

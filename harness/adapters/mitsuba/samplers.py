@@ -1,242 +1,110 @@
-"""Mitsuba 3 BSDFs, microfacet distributions and environment maps as batch sample / pdf
-(/ eval) pairs for the sampler checks (``harness.samplers.check`` and, for samplers that may
-fail to produce a sample, ``harness.adapters.mitsuba.checks``).
+"""Mitsuba 3 BSDFs and microfacet distributions as batch sample / pdf (/ eval) pairs for the
+sampler checks (``harness.adapters.mitsuba.checks``), and :func:`make_sampler`, which builds
+any adapter (these, phase functions from ``phase``, emitters from ``emitters``) from a suite
+table.
 
     s = bsdf_sampler({"type": "roughconductor", "distribution": "ggx", "alpha": 0.01}, wi=45)
-    x = s.sample(u)               # u (N, 3) -> directions (N, 3); NaN rows where Mitsuba fails
+    x = s.sample(u)               # u (N, 3) -> directions (N, 3); NaN rows where none is produced
     s.pdf(x)                      # (N,) solid-angle density of bsdf.pdf
     s.eval(x)                     # (N, channels): f cos theta_o, whose ratio to pdf the weight is
     s.sample_batch(u)             # a SampleBatch: directions, weights, sample pdfs, valid rows
 
 Conventions.  Directions are unit vectors in the local shading frame (the normal is +z, the
 frame is the identity); the incident direction ``wi`` points away from the surface, given as
-a polar angle theta_i in degrees (azimuth 0) or as a 3-vector.  u[:, 0] selects the lobe or
-component (BSDFs only), u[:, 1:3] is the 2-D sample.  Uniforms arrive as float64 in (0, 1)
-and are rounded to float32, clamped below 1 (a float64 just below 1 would round to 1.0, a
-value Mitsuba's warps never see).  Domains: the hemisphere z >= 0 for reflection-only BSDFs
-and microfacet normals, the sphere for BSDFs with transmission and for environment maps.
+a polar angle theta_i in degrees (azimuth 0) or as a 3-vector; it may come from below the
+surface (theta_i > 90) only for BSDFs with a back side (``twosided``, dielectrics,
+``principled``).  u[:, 0] selects the lobe or component, u[:, 1:3] is the 2-D sample.
+Domains: the hemisphere z >= 0 for BSDFs that only reflect and are lit from above (and for
+microfacet normals), the sphere otherwise.
 
-Failed samples.  Mitsuba signals a sample it could not produce with a zero weight (the path
-integrator ends the path there): a reflection below the horizon, a microfacet the wrong way
-round.  ``sample`` returns such rows as NaN, so the samples drawn form a defective
-distribution whose pdf integrates to P <= 1 over the domain; P < 1 is normal for microfacet
-models at grazing angles.
+Samples not produced.  Mitsuba signals a sample it could not produce with a zero weight (the
+path integrator ends the path there): a reflection below the horizon, a microfacet the wrong
+way round.  A BSDF with a Dirac delta lobe beside smooth ones (``mask``: the pass-through;
+``plastic``: the smooth coating) samples the delta lobe with the probability the pdf's mass
+leaves for it, at one direction with no density.  ``sample`` returns both kinds as NaN rows, so
+the samples drawn form a defective distribution whose pdf integrates to P <= 1 over the
+domain, and the failure-aware check tests the count of missing samples against N (1 - P): a
+mask's opacity 0.3 leaves P = 0.3.  BSDFs with only delta lobes (``conductor``,
+``dielectric``) are refused: they have no density.
 
-Variants.  Every call holds ``runtime.VARIANT_LOCK`` and sets the sampler's variant; Mitsuba
-objects are built once per sampler, for its variant.  JIT variants run each batch as one
-kernel; scalar variants loop over samples in Python (tens of microseconds per sample:
-cross-checks on small N only).  RGB and mono variants only.
+Variants.  JIT variants run each batch as one kernel; scalar variants loop over samples in
+Python (tens of microseconds per sample: cross-checks on small N only).  RGB and mono only.
 """
 from __future__ import annotations
 
-import math
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from collections.abc import Sequence
 from typing import Any
 
-import numpy as np
+from harness.adapters.mitsuba.batch import (
+    MitsubaSampler,
+    SampleBatch,
+    direction,
+    plugin_label,
+    polar_angle,
+    zeros,
+)
+from harness.adapters.mitsuba.emitters import (
+    AreaEmitterSampler,
+    EnvmapSampler,
+    area_emitter_sampler,
+    envmap_sampler,
+    refuse_delta_emitter,
+    sky_bitmap,
+)
+from harness.adapters.mitsuba.phase import PhaseSampler, phase_sampler
+from harness.adapters.mitsuba.runtime import using_variant
 
-from harness.adapters.mitsuba.runtime import check_variant, is_jit, using_variant
-
-__all__ = ["MitsubaSampler", "BSDFSampler", "MicrofacetSampler", "EnvmapSampler", "SampleBatch",
-           "bsdf_sampler", "microfacet_sampler", "envmap_sampler", "sky_bitmap", "make_sampler",
-           "plugin_label"]
-
-_BELOW_ONE = np.float32(1.0) - np.float32(2.0**-24)
-
-
-def _direction(wi: float | Sequence[float], name: str = "wi") -> tuple[float, float, float]:
-    """A polar angle in degrees (azimuth 0) or a 3-vector, as a unit vector in the upper hemisphere."""
-    if np.ndim(wi) == 0:
-        theta = float(wi)
-        if not 0 <= theta < 90:
-            raise ValueError(f"'{name}' as an angle must be a polar angle in degrees in [0, 90), got {wi!r}")
-        t = math.radians(theta)
-        return (math.sin(t), 0.0, math.cos(t))
-    v = np.asarray(wi, dtype=float)
-    norm = float(np.linalg.norm(v)) if v.shape == (3,) else 0.0
-    if v.shape != (3,) or not np.all(np.isfinite(v)) or norm == 0 or v[2] <= 0:
-        raise ValueError(f"'{name}' must be a polar angle in degrees or a 3-vector with z > 0, got {wi!r}")
-    return tuple(float(c) for c in v / norm)  # type: ignore[return-value]
-
-
-def _floats(a: np.ndarray) -> np.ndarray:
-    return np.ascontiguousarray(a, dtype=np.float32)
-
-
-def _uniforms(u: np.ndarray, udim: int) -> list[np.ndarray]:
-    u = np.asarray(u, dtype=float)
-    if u.ndim != 2 or u.shape[1] < udim:
-        raise ValueError(f"'u' must have shape (N, {udim}), got {u.shape}")
-    return [np.minimum(_floats(u[:, i]), _BELOW_ONE) for i in range(udim)]
-
-
-def _unit_columns(x: np.ndarray, normalize: bool = True) -> tuple[list[np.ndarray], np.ndarray]:
-    """Direction columns as float32 (normalised in float64 first unless ``normalize`` is
-    False) and the rows that are finite non-zero vectors (the others become +z)."""
-    x = np.asarray(x, dtype=float).reshape(-1, 3)
-    norm = np.sqrt(np.einsum("ij,ij->i", x, x))
-    ok = np.isfinite(norm) & (norm > 0)
-    unit = x / np.where(ok, norm, 1.0)[:, None] if normalize else x
-    y = np.where(ok[:, None], unit, np.array([0.0, 0.0, 1.0]))
-    return [_floats(y[:, i]) for i in range(3)], ok
-
-
-def _to_numpy(value: Any, n: int) -> np.ndarray:
-    a = np.array(value, dtype=np.float64)
-    if a.ndim == 2:          # a JIT vector or colour: (channels, N)
-        a = a.T
-    return np.broadcast_to(a, (n,) + a.shape[1:]).copy() if a.shape[:1] != (n,) else a
-
-
-def _batch(mi: Any, variant: str, kernel: Callable[..., tuple],
-           columns: list[np.ndarray]) -> list[np.ndarray]:
-    """Runs ``kernel(mi, width, *columns)`` once over drjit arrays (JIT variants) or once per
-    row with Python floats (scalar variants; width None); returns numpy arrays (N,) or (N, c)."""
-    import drjit as dr
-
-    n = len(columns[0])
-    if n == 0:  # drjit arrays of width 0 are not all supported: run one dummy row, keep none
-        return [o[:0] for o in _batch(mi, variant, kernel, [np.zeros(1, dtype=np.float32) for _ in columns])]
-    if is_jit(variant):
-        outs = kernel(mi, n, *(mi.Float(c) for c in columns))
-        dr.eval(*outs)
-        return [_to_numpy(o, n) for o in outs]
-    rows = [kernel(mi, None, *(float(c[i]) for c in columns)) for i in range(n)]
-    if not rows:
-        return []
-    return [np.array([np.asarray(r[k], dtype=np.float64) for r in rows]) for k in range(len(rows[0]))]
-
-
-# --- samplers --------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class SampleBatch:
-    """What a sampler returned for uniforms ``u``: directions ``x`` (N, 3) as Mitsuba gave them
-    (also where it failed), the weight (N, channels) (None for microfacet distributions), the
-    pdf the sample call reported (N,), and ``valid``: the rows Mitsuba produced (weight not all
-    zero, pdf > 0, finite direction)."""
-
-    u: np.ndarray
-    x: np.ndarray
-    weight: np.ndarray | None
-    sample_pdf: np.ndarray
-    valid: np.ndarray
-
-
-class MitsubaSampler:
-    """Base of the adapters: ``sample(u)`` (N, udim) -> directions (N, 3) with NaN rows for
-    failed samples, ``pdf(x)`` (N, 3) -> (N,) per solid angle (0 for non-finite rows),
-    ``sample_batch(u)`` -> SampleBatch, ``eval(x)`` -> (N, channels) or None, ``domain``,
-    ``udim``, ``name``, ``fingerprint()``."""
-
-    kind = "mitsuba"
-    udim = 2
-    domain = "sphere"
-
-    def __init__(self, variant: str, name: str):
-        check_variant(variant)
-        self.variant = variant
-        self.name = name
-        self._obj: Any = None
-
-    # subclasses: _build(mi) -> the Mitsuba object; _sample_kernel, _pdf_kernel, _eval_kernel
-    def _object(self, mi: Any) -> Any:
-        """The Mitsuba object, built once for this sampler's variant; call with the variant set
-        (inside ``using_variant(self.variant)``), as every method does."""
-        if self._obj is None:
-            self._obj = self._build(mi)
-        return self._obj
-
-    def _build(self, mi: Any) -> Any:
-        raise NotImplementedError
-
-    def sample_batch(self, u: np.ndarray) -> SampleBatch:
-        cols = _uniforms(u, self.udim)
-        with using_variant(self.variant) as mi:
-            obj = self._object(mi)
-            out = _batch(mi, self.variant, lambda m, w, *c: self._sample_kernel(m, obj, w, *c), cols)
-        x, weight, spdf = out if len(out) == 3 else (out[0], None, out[1])
-        x = x.reshape(-1, 3)
-        valid = np.all(np.isfinite(x), axis=1) & (spdf > 0)
-        if weight is not None:
-            weight = weight.reshape(len(x), -1)
-            valid &= np.any(weight != 0, axis=1)
-        return SampleBatch(np.asarray(u, dtype=float), x, weight, spdf, valid)
-
-    def sample(self, u: np.ndarray) -> np.ndarray:
-        b = self.sample_batch(u)
-        return np.where(b.valid[:, None], b.x, np.nan)
-
-    def pdf(self, x: np.ndarray, *, normalize: bool = True) -> np.ndarray:
-        """Density per solid angle at directions x (N, 3), normalised in float64 and rounded
-        to float32 (``normalize=False``: rounded as given, to re-evaluate a returned float32
-        direction exactly)."""
-        cols, ok = _unit_columns(x, normalize)
-        with using_variant(self.variant) as mi:
-            obj = self._object(mi)
-            (p,) = _batch(mi, self.variant, lambda m, w, *c: (self._pdf_kernel(m, obj, w, *c),), cols)
-        return np.where(ok, p.reshape(-1), 0.0)
-
-    def eval(self, x: np.ndarray, *, normalize: bool = True) -> np.ndarray | None:
-        """The value whose ratio to the pdf the sample weight must be (BSDF: f cos theta_o;
-        emitter: radiance), (N, channels); None where the sampler has no weight."""
-        cols, ok = _unit_columns(x, normalize)
-        with using_variant(self.variant) as mi:
-            obj = self._object(mi)
-            (v,) = _batch(mi, self.variant, lambda m, w, *c: (self._eval_kernel(m, obj, w, *c),), cols)
-        v = v.reshape(len(ok), -1)
-        return np.where(ok[:, None], v, 0.0)
-
-    def fingerprint(self) -> dict[str, Any]:
-        import mitsuba as mi
-
-        return {"adapter": "mitsuba", "mitsuba": mi.__version__, "kind": self.kind, "name": self.name,
-                "variant": self.variant, **self._spec()}
-
-    def _spec(self) -> dict[str, Any]:
-        return {}
-
-    def __repr__(self) -> str:
-        return f"{type(self).__name__}({self.name!r}, variant={self.variant!r}, domain={self.domain!r})"
+__all__ = ["AreaEmitterSampler", "BSDFSampler", "EnvmapSampler", "MicrofacetSampler", "MitsubaSampler",
+           "PhaseSampler", "SampleBatch", "area_emitter_sampler", "bsdf_sampler", "envmap_sampler",
+           "make_sampler", "microfacet_sampler", "phase_sampler", "plugin_label", "sky_bitmap"]
 
 
 class BSDFSampler(MitsubaSampler):
     """A Mitsuba BSDF at a fixed incident direction: ``bsdf.sample(ctx, si, u0, (u1, u2))``,
     ``bsdf.pdf(ctx, si, wo)``, ``bsdf.eval(ctx, si, wo)`` (f times cos theta_o) with a default
-    BSDFContext (radiance transport, all lobes) and an identity shading frame."""
+    BSDFContext (radiance transport, all lobes) and an identity shading frame.  Samples of a
+    Dirac delta lobe are rows of ``SampleBatch.delta``, not produced (see the module)."""
 
     kind = "bsdf"
     udim = 3
+    sample_outputs = ("x", "weight", "pdf", "delta", "sampled_type")
 
     def __init__(self, plugin: dict[str, Any], wi: float | Sequence[float] = 0.0,
                  variant: str = "llvm_ad_rgb", name: str | None = None):
         if not isinstance(plugin, dict) or not isinstance(plugin.get("type"), str):
             raise ValueError(f"'plugin' must be a Mitsuba plugin dict with a 'type' key, got {plugin!r}")
         self.plugin = dict(plugin)
-        self.wi = _direction(wi)
-        theta = math.degrees(math.acos(min(1.0, self.wi[2])))
-        label = name or plugin_label(self.plugin) + f" θi={theta:g}°"
-        super().__init__(variant, label)
+        super().__init__(variant, name or plugin_label(self.plugin))
+        bsdf = self._build_checked(repr(self.plugin))
         with using_variant(self.variant) as mi:
-            try:
-                bsdf = self._object(mi)
-            except Exception as e:  # Mitsuba raises RuntimeError / TypeError for a bad plugin dict
-                raise ValueError(f"'plugin': Mitsuba cannot build {self.plugin!r}: {e}") from None
-            self.transmits = mi.has_flag(bsdf.flags(), mi.BSDFFlags.Transmission)
-            self.delta = mi.has_flag(bsdf.flags(), mi.BSDFFlags.Delta)
-        if self.delta:
-            raise ValueError(f"'plugin': {self.plugin['type']!r} has a Dirac delta lobe; "
+            self.delta_lobes, smooth, self.transmits, back = self._flags(mi, bsdf)
+        if not smooth:
+            raise ValueError(f"'plugin': {self.plugin['type']!r} has only Dirac delta lobes; "
                              "a sampler test needs a density")
-        self.domain = "sphere" if self.transmits else "hemisphere"
+        try:
+            self.wi = direction(wi, below=back)
+        except ValueError as e:
+            if back:
+                raise
+            raise ValueError(f"{e} ({self.plugin['type']!r} is one-sided: lit from above only)") from None
+        theta = polar_angle(self.wi)
+        if name is None:
+            self.name = f"{self.name} θi={theta:g}°"
+        self.domain = "sphere" if self.transmits or self.wi[2] < 0 else "hemisphere"
+
+    @staticmethod
+    def _flags(mi: Any, bsdf: Any) -> tuple[bool, bool, bool, bool]:
+        """(has a Dirac lobe, has a smooth lobe, transmits smoothly, has a back side)."""
+        f, F = bsdf.flags(), mi.BSDFFlags
+        smooth_transmission = mi.has_flag(f, F.DiffuseTransmission) or mi.has_flag(f, F.GlossyTransmission)
+        return (bool(mi.has_flag(f, F.Delta)), bool(mi.has_flag(f, F.Smooth)), bool(smooth_transmission),
+                bool(mi.has_flag(f, F.BackSide)))
 
     def _build(self, mi: Any) -> Any:
         return mi.load_dict(self.plugin)
 
     def _si(self, mi: Any, width: int | None) -> Any:
-        import drjit as dr
-
-        si = (dr.zeros(mi.SurfaceInteraction3f, width) if width is not None
-              else dr.zeros(mi.SurfaceInteraction3f))
+        si = zeros(mi, "SurfaceInteraction3f", width)
         si.wi = mi.Vector3f(*self.wi)
         si.sh_frame = mi.Frame3f(mi.Vector3f(0.0, 0.0, 1.0))
         si.n = mi.Normal3f(0.0, 0.0, 1.0)
@@ -245,7 +113,8 @@ class BSDFSampler(MitsubaSampler):
 
     def _sample_kernel(self, mi, bsdf, width, u0, u1, u2):
         bs, weight = bsdf.sample(mi.BSDFContext(), self._si(mi, width), u0, mi.Point2f(u1, u2))
-        return bs.wo, weight, bs.pdf
+        delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+        return bs.wo, weight, bs.pdf, delta, bs.sampled_type
 
     def _pdf_kernel(self, mi, bsdf, width, x, y, z):
         return bsdf.pdf(mi.BSDFContext(), self._si(mi, width), mi.Vector3f(x, y, z))
@@ -265,6 +134,7 @@ class MicrofacetSampler(MitsubaSampler):
     kind = "microfacet"
     udim = 2
     domain = "hemisphere"
+    sample_outputs = ("x", "pdf")
 
     def __init__(self, distribution: str = "ggx", alpha: float = 0.1, *, visible: bool = True,
                  wi: float | Sequence[float] = 0.0, variant: str = "llvm_ad_rgb", name: str | None = None):
@@ -273,10 +143,9 @@ class MicrofacetSampler(MitsubaSampler):
         if not (isinstance(alpha, (int, float)) and 0 < alpha <= 10):
             raise ValueError(f"'alpha' must be a roughness in (0, 10], got {alpha!r}")
         self.distribution, self.alpha, self.visible = distribution, float(alpha), bool(visible)
-        self.wi = _direction(wi)
-        theta = math.degrees(math.acos(min(1.0, self.wi[2])))
+        self.wi = direction(wi)
         label = name or (f"microfacet {distribution} α={alpha:g} {'visible' if visible else 'all'} normals"
-                         + (f" θi={theta:g}°" if visible else ""))
+                         + (f" θi={polar_angle(self.wi):g}°" if visible else ""))
         super().__init__(variant, label)
 
     def _build(self, mi: Any) -> Any:
@@ -290,7 +159,8 @@ class MicrofacetSampler(MitsubaSampler):
     def _pdf_kernel(self, mi, distr, width, x, y, z):
         return distr.pdf(mi.Vector3f(*self.wi), mi.Vector3f(x, y, z))
 
-    def eval(self, x: np.ndarray, *, normalize: bool = True) -> None:
+    def eval(self, x: Any) -> None:
+        """None: a microfacet distribution returns no weight."""
         return None
 
     def _spec(self) -> dict[str, Any]:
@@ -298,142 +168,13 @@ class MicrofacetSampler(MitsubaSampler):
                 "wi": list(self.wi)}
 
 
-class EnvmapSampler(MitsubaSampler):
-    """An ``envmap`` emitter seen from the origin: ``sample_direction(it, u)`` -> (ds, radiance
-    / pdf), ``pdf_direction(it, ds)``, radiance ``emitter.eval(si)`` with si.wi = -d;
-    directions in world space on the sphere (Mitsuba's envmap puts v = 0 of the image at +y)."""
-
-    kind = "envmap"
-    udim = 2
-    domain = "sphere"
-
-    def __init__(self, bitmap: np.ndarray | None = None, *, plugin: dict[str, Any] | None = None,
-                 variant: str = "llvm_ad_rgb", name: str | None = None):
-        params = dict(plugin or {"type": "envmap"})
-        if params.get("type") != "envmap":
-            raise ValueError("'plugin' must be an envmap plugin dict ({'type': 'envmap', ...}), "
-                             f"got {plugin!r}")
-        if "bitmap" in params:
-            if bitmap is not None:
-                raise ValueError("'bitmap': given twice, as an argument and in 'plugin'")
-            bitmap = np.array(params.pop("bitmap"))
-        if bitmap is None and "filename" not in params:
-            bitmap = sky_bitmap()
-        self.image = None if bitmap is None else np.ascontiguousarray(bitmap, dtype=np.float32)
-        if self.image is not None and (self.image.ndim != 3 or self.image.shape[2] not in (1, 3)
-                                       or self.image.shape[1] < 2 or self.image.shape[0] < 2):
-            raise ValueError("'bitmap' must be a (height, width, 3) or (height, width, 1) array, "
-                             f"got {self.image.shape}")
-        self.plugin = params
-        label = name or ("envmap " + (f"{self.image.shape[1]}x{self.image.shape[0]}" if self.image is not None
-                                      else str(self.plugin.get("filename"))))
-        super().__init__(variant, label)
-        with using_variant(self.variant) as mi:
-            try:
-                self._object(mi)
-            except Exception as e:
-                raise ValueError(f"'plugin': Mitsuba cannot build an envmap from {self.plugin!r}: "
-                                 f"{e}") from None
-
-    def _build(self, mi: Any) -> Any:
-        d = dict(self.plugin)
-        if self.image is not None:
-            d["bitmap"] = mi.Bitmap(self.image)
-        return mi.load_dict(d)
-
-    @staticmethod
-    def _it(mi, width):
-        import drjit as dr
-
-        return dr.zeros(mi.Interaction3f, width) if width is not None else dr.zeros(mi.Interaction3f)
-
-    def _ds(self, mi, width, x, y, z):
-        import drjit as dr
-
-        ds = dr.zeros(mi.DirectionSample3f, width) if width is not None else dr.zeros(mi.DirectionSample3f)
-        ds.d = mi.Vector3f(x, y, z)
-        return ds
-
-    def _sample_kernel(self, mi, emitter, width, u0, u1):
-        ds, weight = emitter.sample_direction(self._it(mi, width), mi.Point2f(u0, u1))
-        return ds.d, weight, ds.pdf
-
-    def _pdf_kernel(self, mi, emitter, width, x, y, z):
-        return emitter.pdf_direction(self._it(mi, width), self._ds(mi, width, x, y, z))
-
-    def _eval_kernel(self, mi, emitter, width, x, y, z):
-        # emitter.eval at an escaped ray's interaction (wi = -d), as the path integrator calls
-        # it; eval_direction would read the sampled ds.uv rather than the direction
-        import drjit as dr
-
-        si = (dr.zeros(mi.SurfaceInteraction3f, width) if width is not None
-              else dr.zeros(mi.SurfaceInteraction3f))
-        si.wi = -mi.Vector3f(x, y, z)
-        return emitter.eval(si)
-
-    def _spec(self) -> dict[str, Any]:
-        import hashlib
-
-        if self.image is not None:
-            digest = hashlib.sha256(self.image.tobytes()).hexdigest()
-        else:  # the file's contents, so that an edited map is a different sampler
-            with open(str(self.plugin["filename"]), "rb") as f:
-                digest = hashlib.sha256(f.read()).hexdigest()
-        return {"plugin": {k: v for k, v in self.plugin.items()}, "image_sha256": digest,
-                "bitmap_shape": list(self.image.shape) if self.image is not None else None}
-
-
-def sky_bitmap(width: int = 256, height: int = 128, *, sun_theta: float = 40.0, sun_phi: float = 70.0,
-               sun_radius: float = 2.0, sun_radiance: float = 2000.0, sun_edge: float = 1.5) -> np.ndarray:
-    """A procedural HDR lat-long sky (height, width, 3) float32: a smooth blue sky brightening
-    towards the horizon, a dim smooth ground and a small bright sun: a disk of angular radius
-    ``sun_radius`` degrees at polar angle ``sun_theta`` from the image's top and azimuth
-    ``sun_phi``, radiance ``sun_radiance`` (with the defaults about 2/3 of the map's
-    luminance), its rim falling off smoothly over ``sun_edge`` degrees (about one texel; 0
-    gives a hard edge: a 5000:1 step between neighbouring texels).  Row 0 is the top of the
-    image (theta = 0), column 0 phi = 0."""
-    if width < 4 or height < 2:
-        raise ValueError(f"'width' and 'height' must be at least 4 and 2, got {width} x {height}")
-    theta = (np.arange(height) + 0.5) / height * math.pi
-    phi = (np.arange(width) + 0.5) / width * 2 * math.pi
-    th, ph = np.meshgrid(theta, phi, indexing="ij")
-    ct = np.cos(th)
-    sky = np.where(ct > 0, 0.4 + 0.6 * (1 - ct) ** 2, 0.05 + 0.03 * np.cos(2 * ph) * (-ct))
-    img = sky[:, :, None] * np.array([0.55, 0.7, 1.0])[None, None, :]
-    ts, ps = math.radians(sun_theta), math.radians(sun_phi)
-    sun_dir = np.array([math.sin(ts) * math.cos(ps), math.sin(ts) * math.sin(ps), math.cos(ts)])
-    d = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), ct], axis=-1)
-    angle = np.degrees(np.arccos(np.clip(d @ sun_dir, -1.0, 1.0)))
-    if sun_edge > 0:
-        t = np.clip((sun_radius + sun_edge / 2 - angle) / sun_edge, 0.0, 1.0)
-        disk = t * t * (3 - 2 * t)
-    else:
-        disk = (angle <= sun_radius).astype(float)
-    img += sun_radiance * disk[:, :, None] * np.array([1.0, 0.95, 0.85])[None, None, :]
-    return img.astype(np.float32)
-
-
-def plugin_label(plugin: dict[str, Any]) -> str:
-    """A short label of a plugin dict without its incident angle, e.g.
-    "roughconductor ggx α=0.1 visible=True"."""
-    p = plugin
-    parts = [p["type"]]
-    if "distribution" in p:
-        parts.append(str(p["distribution"]))
-    if "alpha" in p:
-        parts.append(f"α={p['alpha']:g}")
-    for key, short in (("sample_visible", "visible"), ("int_ior", "ior")):
-        if key in p:
-            parts.append(f"{short}={p[key]}")
-    return " ".join(parts)
-
-
 def bsdf_sampler(plugin: dict[str, Any], *, wi: float | Sequence[float] = 0.0, variant: str = "llvm_ad_rgb",
                  name: str | None = None) -> BSDFSampler:
     """A Mitsuba BSDF (a ``mi.load_dict`` plugin dict) as a sampler at incident direction
-    ``wi`` (polar angle in degrees, or a 3-vector with z > 0): udim 3 (u0 picks the lobe), the
-    hemisphere for reflection-only BSDFs, the sphere for BSDFs with transmission.  BSDFs with
-    a Dirac delta lobe (smooth conductors, dielectrics) are refused: they have no density."""
+    ``wi`` (polar angle in degrees, or a 3-vector; below the surface only for BSDFs with a
+    back side): udim 3 (u0 picks the lobe), the hemisphere for reflection-only BSDFs lit from
+    above, else the sphere.  Dirac lobes beside smooth ones are samples not produced; BSDFs
+    with only Dirac lobes (smooth conductors, dielectrics) are refused: they have no density."""
     return BSDFSampler(plugin, wi, variant, name)
 
 
@@ -445,37 +186,48 @@ def microfacet_sampler(distribution: str = "ggx", alpha: float = 0.1, *, visible
     return MicrofacetSampler(distribution, alpha, visible=visible, wi=wi, variant=variant, name=name)
 
 
-def envmap_sampler(bitmap: np.ndarray | None = None, *, plugin: dict[str, Any] | None = None,
-                   variant: str = "llvm_ad_rgb", name: str | None = None) -> EnvmapSampler:
-    """Directions from an ``envmap`` emitter built from ``bitmap`` (a lat-long float array;
-    default: ``sky_bitmap()``) or from ``plugin`` (e.g. {"type": "envmap", "filename": ...,
-    "scale": 2}), on the sphere."""
-    return EnvmapSampler(bitmap, plugin=plugin, variant=variant, name=name)
+_PHASES = ("hg", "rayleigh", "isotropic", "blendphase")
+_SHAPES = ("rectangle", "sphere", "disk", "cube", "cylinder", "obj", "ply", "serialized")
+_DELTA_EMITTERS = ("spot", "point", "directional", "projector", "directionalarea")
 
 
 def make_sampler(spec: dict[str, Any]) -> MitsubaSampler:
     """A sampler from a suite table's keys (``[[sampler]]`` with ``adapter = "mitsuba"``):
 
-        plugin   a Mitsuba plugin dict: any BSDF; {type = "envmap"} (procedural sky unless
-                 ``filename`` is given); or {type = "microfacet", distribution = "ggx",
-                 alpha = 0.1, sample_visible = true}
-        wi       polar angle of the incident direction in degrees, or a 3-vector (default 0)
+        plugin   a Mitsuba plugin dict: any BSDF; a phase function (hg, rayleigh, isotropic,
+                 blendphase); {type = "envmap"} (procedural sky unless ``filename`` is
+                 given); a shape with an area emitter ({type = "sphere", center = [0, 0, 2],
+                 radius = 0.5, emitter = {type = "area", radiance = ...}}); or {type =
+                 "microfacet", distribution = "ggx", alpha = 0.1, sample_visible = true}
+        wi       polar angle of the incident direction in degrees, or a 3-vector (default 0;
+                 BSDFs, microfacet distributions and phase functions)
+        ref      the reference point an emitter on a shape is sampled from (default origin)
         variant  default "llvm_ad_rgb"
 
-    Raises ValueError naming the key at fault."""
-    unknown = set(spec) - {"plugin", "wi", "variant", "name"}
+    Delta emitters (spot, point, directional) are refused.  Raises ValueError naming the key
+    at fault."""
+    unknown = set(spec) - {"plugin", "wi", "variant", "name", "ref"}
     if unknown:
         raise ValueError(f"'{sorted(unknown)[0]}': unknown key for a Mitsuba sampler; "
-                         "expected plugin, wi, variant, name")
+                         "expected plugin, wi, ref, variant, name")
     plugin = spec.get("plugin")
     if not isinstance(plugin, dict) or not isinstance(plugin.get("type"), str):
         raise ValueError(f"'plugin': expected a table with a 'type' key (a Mitsuba plugin), got {plugin!r}")
     variant = spec.get("variant", "llvm_ad_rgb")
     wi = spec.get("wi", 0.0)
     name = spec.get("name")
-    if plugin["type"] == "envmap":
+    kind = plugin["type"]
+    if "ref" in spec and kind not in _SHAPES:
+        raise ValueError(f"'ref': only emitters on shapes are sampled from a reference point, not {kind!r}")
+    if kind in _DELTA_EMITTERS:
+        refuse_delta_emitter(kind)
+    if kind == "envmap":
         return envmap_sampler(plugin=plugin, variant=variant, name=name)
-    if plugin["type"] == "microfacet":
+    if kind in _SHAPES:
+        return area_emitter_sampler(plugin, ref=spec.get("ref", (0.0, 0.0, 0.0)), variant=variant, name=name)
+    if kind in _PHASES:
+        return phase_sampler(plugin, wi=wi, variant=variant, name=name)
+    if kind == "microfacet":
         extra = set(plugin) - {"type", "distribution", "alpha", "sample_visible"}
         if extra:
             raise ValueError(f"'plugin': unknown key {sorted(extra)[0]!r} for a microfacet distribution; "
@@ -484,5 +236,3 @@ def make_sampler(spec: dict[str, Any]) -> MitsubaSampler:
                                   visible=plugin.get("sample_visible", True), wi=wi, variant=variant,
                                   name=name)
     return bsdf_sampler(plugin, wi=wi, variant=variant, name=name)
-
-

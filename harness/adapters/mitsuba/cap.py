@@ -1,0 +1,148 @@
+"""The equal-area map of a spherical cap onto the hemisphere, for checking a light that covers
+a small cone of directions.
+
+An area light seen from a reference point covers a small cap of the sphere of directions
+(a sphere of radius 0.5 at distance 2: 1.5 % of it).  Checked on the whole sphere, the light
+falls into a few hundred of the check's cells and its rim cuts them along curves that the
+cubature's nodes can straddle: at 1e6 samples the cubature then loses ~5e-5 of the mass at
+the rim, beyond its error bound, and the failure count and the fine chi-square reject a
+correct sampler.  A cap {d : <d, axis> >= cos_alpha} that contains the light is mapped onto
+the hemisphere by
+
+    z' = (<d, axis> - cos_alpha) / (1 - cos_alpha),   azimuth about the axis kept,
+
+which multiplies solid angle by 1 / (1 - cos_alpha) everywhere (Archimedes: area on the
+sphere is uniform in z), so a density per steradian p(d) becomes p(d) (1 - cos_alpha) on the
+hemisphere, and a weight eval / p becomes weight / (1 - cos_alpha).  It is a fixed bijection:
+the hypothesis tested is the same, the light fills the check's grid (more power), and for a
+sphere light the cap is its cone, whose rim becomes the hemisphere's horizon.  A direction
+outside the cap maps below the horizon (z' < 0): outside the domain, reported as such.
+
+:class:`CapView` shows a light's sampler through the map to the statistical check; the
+reported pdf and the weight are checked on the world directions themselves
+(``checks.check_mitsuba_sampler``), where float32 ulps have their renderer's meaning (in the
+map, a coordinate near the horizon has ulps far finer than the world direction's).
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+__all__ = ["Cap", "CapView", "bounding_cap", "box_cap"]
+
+#: directions this little outside the cap (in cos theta) are float32 rounding of its rim
+_RIM_SLACK = 2e-7
+
+
+class Cap:
+    """The cap {d : <d, axis> >= cos_alpha} and its equal-area map onto the hemisphere z >= 0."""
+
+    def __init__(self, axis: Sequence[float], cos_alpha: float):
+        a = np.asarray(axis, dtype=float)
+        if a.shape != (3,) or not np.all(np.isfinite(a)) or np.linalg.norm(a) == 0:
+            raise ValueError(f"'axis' must be a non-zero 3-vector, got {axis!r}")
+        if not -1 < cos_alpha < 1:
+            raise ValueError(f"'cos_alpha' must be in (-1, 1), got {cos_alpha!r}")
+        self.axis = a / np.linalg.norm(a)
+        self.cos_alpha = float(cos_alpha)
+        self.scale = 1.0 - self.cos_alpha     # solid angle of the cap / 2 pi
+        helper = np.array([1.0, 0.0, 0.0]) if abs(self.axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        t = np.cross(helper, self.axis)
+        self.t = t / np.linalg.norm(t)
+        self.b = np.cross(self.axis, self.t)
+
+    def to_hemisphere(self, d: np.ndarray) -> np.ndarray:
+        """World directions d (N, 3) -> points of the hemisphere (N, 3); NaN rows stay NaN.
+        Directions within float32 rounding of the rim land on the horizon."""
+        d = np.asarray(d, dtype=float)
+        norm = np.linalg.norm(d, axis=1, keepdims=True)
+        with np.errstate(all="ignore"):
+            u = d / norm
+        c = u @ self.axis
+        c = np.where((c < self.cos_alpha) & (c >= self.cos_alpha - _RIM_SLACK), self.cos_alpha, c)
+        z = (c - self.cos_alpha) / self.scale
+        phi = np.arctan2(u @ self.b, u @ self.t)
+        r = np.sqrt(np.maximum(0.0, 1 - z * z))
+        return np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
+
+    def to_world(self, x: np.ndarray) -> np.ndarray:
+        """Points of the hemisphere (N, 3) (normalised first) -> world directions (N, 3); a
+        point below the horizon maps outside the cap (at most to the cap's antipode)."""
+        x = np.asarray(x, dtype=float).reshape(-1, 3)
+        with np.errstate(all="ignore"):
+            x = x / np.linalg.norm(x, axis=1, keepdims=True)
+        c = np.clip(self.cos_alpha + x[:, 2] * self.scale, -1.0, 1.0)
+        s = np.sqrt(np.maximum(0.0, 1 - c * c))
+        phi = np.arctan2(x[:, 1], x[:, 0])
+        return ((s * np.cos(phi))[:, None] * self.t + (s * np.sin(phi))[:, None] * self.b
+                + c[:, None] * self.axis)
+
+    def spec(self) -> dict[str, object]:
+        return {"axis": self.axis.tolist(), "cos_alpha": self.cos_alpha}
+
+
+class CapView:
+    """``sampler`` (world directions, pdf per steradian) seen through ``cap``'s map: ``sample(u)``
+    gives points of the hemisphere (NaN rows kept), ``pdf(h)`` the density per unit area of
+    the hemisphere, the world pdf times 1 - cos alpha (0 below the horizon), ``domain``
+    "hemisphere".
+
+    The map's float64 round trip loses the float32 direction Mitsuba returned (its length is
+    1 only within float32 rounding), and at a light's rim one ulp decides whether the ray
+    traced back hits the light.  So ``pdf`` at a point of the last draw is evaluated at the
+    world direction returned for it, exactly; elsewhere (cubature nodes) at the float32
+    rounding of the mapped-back direction."""
+
+    domain = "hemisphere"
+
+    def __init__(self, sampler: Any, cap: Cap):
+        self.sampler, self.cap, self.udim = sampler, cap, sampler.udim
+        self._keys = np.empty(0)
+        self._points = np.empty((0, 3))
+        self._world = np.empty((0, 3))
+
+    def sample(self, u: np.ndarray) -> np.ndarray:
+        world = np.asarray(self.sampler.sample(u), dtype=float)
+        h = self.cap.to_hemisphere(world)
+        ok = np.all(np.isfinite(h), axis=1)
+        order = np.argsort(h[ok, 0], kind="stable")
+        self._points, self._world = h[ok][order], world[ok][order]
+        self._keys = self._points[:, 0]
+        return h
+
+    def pdf(self, h: np.ndarray) -> np.ndarray:
+        h = np.asarray(h, dtype=float).reshape(-1, 3)
+        world = self.cap.to_world(h)
+        if self._keys.size:
+            i = np.minimum(np.searchsorted(self._keys, h[:, 0]), self._keys.size - 1)
+            drawn = np.all(self._points[i] == h, axis=1)
+            world[drawn] = self._world[i[drawn]]
+        p = np.asarray(self.sampler.pdf(world), dtype=float) * self.cap.scale
+        return np.where(np.all(np.isfinite(h), axis=1) & (h[:, 2] >= 0), p, 0.0)
+
+
+def bounding_cap(ref: Sequence[float], center: Sequence[float], radius: float) -> Cap | None:
+    """The cap of directions from ``ref`` that holds the ball (``center``, ``radius``): the
+    ball's cone; None where ``ref`` is inside the ball (no cap smaller than the sphere)."""
+    d = np.asarray(center, dtype=float) - np.asarray(ref, dtype=float)
+    dist = float(np.linalg.norm(d))
+    if not dist > radius * (1 + 1e-6):
+        return None
+    return Cap(d / dist, math.sqrt(1 - (radius / dist) ** 2))
+
+
+def box_cap(ref: Sequence[float], lo: Sequence[float], hi: Sequence[float]) -> Cap | None:
+    """The cap of directions from ``ref`` about the box's centre that holds the box [lo, hi]
+    (its 8 corners: the directions to a convex set lie in the convex cone its corners span);
+    None where ``ref`` is in the box or the cap would exceed a hemisphere."""
+    r, lo, hi = (np.asarray(v, dtype=float) for v in (ref, lo, hi))
+    if np.all((r >= lo) & (r <= hi)):
+        return None
+    axis = (lo + hi) / 2 - r
+    axis /= np.linalg.norm(axis)
+    corners = np.array([[(lo, hi)[i >> k & 1][k] for k in range(3)] for i in range(8)]) - r
+    cos = float(np.min(corners @ axis / np.linalg.norm(corners, axis=1)))
+    return Cap(axis, cos - 1e-6) if cos > 1e-3 else None
