@@ -13,7 +13,7 @@ import reference_estimators as rest
 
 from harness.samplers import DOMAINS, Domain, mcmc_crosscheck
 from harness.samplers.check import _checked_pdf
-from harness.samplers.mcmc import _log_target
+from harness.samplers.mcmc import _Chain, _FrozenProposal, _log_target
 from harness.usercode import UserCodeError
 
 EXPO = rest.sampler("exponential", rate=1.0)
@@ -75,6 +75,35 @@ def test_wrong_samplers_are_caught():
     r = mcmc_crosscheck(lambda u: COS.sample(u)[0], lambda w: np.full(len(w), 0.5 / math.pi), "hemisphere",
                         sample_count=5000, seed=0)
     assert not r.passed and r.verdict == "failed" and r.pvalue < 1e-6, str(r)
+
+
+def test_a_walker_that_never_moved_is_not_read_as_independent():
+    """emcee's integrated time is NaN for a constant series; read as 'no correlation' (tau 1)
+    it passed chains whose walkers were stuck, and a correct GGX sampler failed with p = 6e-24.
+    A walker whose log q alone is constant (inside a step of a piecewise-constant pdf) moves."""
+    import emcee
+
+    rng = np.random.default_rng(0)
+    chain, logp = rng.random((400, 16, 2)), rng.random((400, 16))
+    c = _Chain(emcee, lambda s: np.zeros(len(s)), 2, 16, rng, [emcee.moves.StretchMove()])
+    assert 0.5 < c._tau(chain, logp, tol=0) < 2
+    logp[:, 5] = 0.0
+    assert 0.5 < c._tau(chain, logp, tol=0) < 2
+    chain[:, 3, :] = chain[0, 3, :]
+    assert c._tau(chain, logp, tol=0) == math.inf
+
+
+def test_the_frozen_proposal_is_a_normalised_density_of_what_it_proposes():
+    """g integrates to 1 over R^k (checked on [0, 1]^2 plus the mass its kernels put outside,
+    by Monte Carlo from its own proposals), and its proposals follow g: the mean of 1 / g over
+    proposals inside [0, 1]^2 is the area 1 times the share inside (importance identity)."""
+    rng = np.random.default_rng(1)
+    centres = np.column_stack([0.5 + 0.01 * rng.standard_normal(400), rng.random(400)]) % 1.0
+    g = _FrozenProposal(centres)
+    y, _ = g.propose(np.full((200_000, 2), 0.5), np.random.RandomState(2))
+    inside = np.all((y >= 0) & (y <= 1), axis=1)
+    estimate = np.sum(np.exp(-g.log_density(y[inside]))) / y.shape[0]
+    assert estimate == pytest.approx(1.0, rel=0.03)
 
 
 def test_a_chain_too_short_is_inconclusive_with_its_reason():
