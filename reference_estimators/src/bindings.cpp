@@ -80,6 +80,21 @@ size_t check_params(const InArray &s, size_t k) {
     return s.shape(0);
 }
 
+// The shape a piecewise-linear table's arrays must have (one lo, hi, start and mass per leaf;
+// offsets from 0 to the leaves, not decreasing), or a ValueError saying what is wrong.
+template <class Offsets>
+static void check_table(const InArray &lo, const InArray &hi, const InArray &start, const InArray &mass,
+                        const Offsets &offsets) {
+    const size_t leaves = lo.size();
+    if (hi.size() != leaves || start.size() != leaves || mass.size() != leaves)
+        throw nb::value_error("'lo', 'hi', 'start' and 'mass' must have one value per leaf");
+    if (leaves >= (size_t(1) << 31)) throw nb::value_error("a table must have fewer than 2^31 leaves");
+    if (offsets.size() < 1 || offsets.data()[0] != 0 || size_t(offsets.data()[offsets.size() - 1]) != leaves)
+        throw nb::value_error("'offsets' must run from 0 to the number of leaves");
+    for (size_t g = 1; g < offsets.size(); ++g)
+        if (offsets.data()[g] < offsets.data()[g - 1]) throw nb::value_error("'offsets' must not decrease");
+}
+
 // A piecewise-linear table given as (lo, hi, start, mass, offsets), validated, with its
 // bucket index; the arrays are kept alive (and unchanged) by the caller's tuple.
 struct BoundTable {
@@ -95,14 +110,7 @@ struct BoundTable {
         start = nb::cast<InArray>(parts[2]);
         mass = nb::cast<InArray>(parts[3]);
         offsets = nb::cast<I64Array>(parts[4]);
-        const size_t leaves = lo.size();
-        if (hi.size() != leaves || start.size() != leaves || mass.size() != leaves)
-            throw nb::value_error("'lo', 'hi', 'start' and 'mass' must have one value per leaf");
-        if (leaves >= (size_t(1) << 31)) throw nb::value_error("a table must have fewer than 2^31 leaves");
-        if (offsets.size() < 1 || offsets.data()[0] != 0 || size_t(offsets.data()[offsets.size() - 1]) != leaves)
-            throw nb::value_error("'offsets' must run from 0 to the number of leaves");
-        for (size_t g = 1; g < offsets.size(); ++g)
-            if (offsets.data()[g] < offsets.data()[g - 1]) throw nb::value_error("'offsets' must not decrease");
+        check_table(lo, hi, start, mass, offsets);
         table = std::make_unique<PiecewiseLinearTable>(lo.data(), hi.data(), start.data(), mass.data(),
                                                        offsets.data(), int64_t(offsets.size()) - 1);
     }
@@ -605,14 +613,7 @@ NB_MODULE(_core, m) {
                                         nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu> offsets,
                                         nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu> strip,
                                         InArray x) {
-        const size_t leaves = lo.size();
-        if (hi.size() != leaves || start.size() != leaves || mass.size() != leaves)
-            throw nb::value_error("'lo', 'hi', 'start' and 'mass' must have one value per leaf");
-        if (leaves >= (size_t(1) << 31)) throw nb::value_error("a table must have fewer than 2^31 leaves");
-        if (offsets.size() < 1 || offsets.data()[0] != 0 || size_t(offsets.data()[offsets.size() - 1]) != leaves)
-            throw nb::value_error("'offsets' must run from 0 to the number of leaves");
-        for (size_t g = 1; g < offsets.size(); ++g)
-            if (offsets.data()[g] < offsets.data()[g - 1]) throw nb::value_error("'offsets' must not decrease");
+        check_table(lo, hi, start, mass, offsets);
         if (strip.size() != x.size()) throw nb::value_error("'strip' and 'x' must have one value per point");
         double *out;
         OutArray u = new_array(x.size(), 0, &out);
