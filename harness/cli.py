@@ -258,7 +258,8 @@ def _show(args) -> int:
     if df["measurement"].isin(["log10_efficiency", "log10_efficiency_clock"]).any():
         print("log10_efficiency: 1/(V·T), T in seconds, its 95 % interval of that run's machine state only "
               "(other runs differ by more); log10_efficiency_clock: T in ticks of the reference clock timed "
-              "beside each replica, its interval holds across runs (harness.stats.timing.CLOCK)")
+              "beside each replica, its interval meant to hold across runs (harness.stats.timing.CLOCK; "
+              "measured to on a loaded machine, not on an idle one: README)")
     return 0
 
 
