@@ -15,6 +15,8 @@ _core.set_sobol_directions(sobol.direction_numbers())
 from . import kernels, sampling  # noqa: E402  (sampling's functions are built from the registry)
 from .api import *  # noqa: E402,F403
 from .api import __all__ as _api_all  # noqa: E402
+from .checks import *  # noqa: E402,F403
+from .checks import __all__ as _checks_all  # noqa: E402
 from .estimate import ERROR_ISSUES, Estimate  # noqa: E402
 
 CHUNK_SIZE: int = _core.CHUNK_SIZE
@@ -35,4 +37,5 @@ def core_fingerprint() -> str:
 
 
 _FINGERPRINT: str | None = None
-__all__ = [*_api_all, "Estimate", "ERROR_ISSUES", "CHUNK_SIZE", "core_fingerprint", "kernels", "sampling"]
+__all__ = [*_api_all, *_checks_all, "Estimate", "ERROR_ISSUES", "CHUNK_SIZE", "core_fingerprint", "kernels",
+           "sampling"]

@@ -23,10 +23,7 @@ __all__ = [
     "points",
     "integrate", "integrate_chunks", "estimate_from_states", "estimate_of_states", "merge_states",
     "contributions", "accumulate", "accumulate_chunk",
-    "estimate_from_samples", "hardware_threads", "side_extremes", "piecewise_linear_lookup", "build_info",
-    "CHECK_DOMAINS", "domain_params", "domain_points", "cubature_nodes", "grid_histogram", "rosenblatt",
-    "strip_bin_counts", "cramer_von_mises_root",
-    "pdf_summary",
+    "estimate_from_samples", "hardware_threads", "side_extremes", "build_info",
     "profile_stages",
 ]
 
@@ -361,137 +358,6 @@ def side_extremes(values: Any, center: float, *, upper: bool, keep: int) -> tupl
         raise ValueError(f"'values' must be one-dimensional, got shape {y.shape}")
     peak, ties, below = _core.side_extremes(y, float(center), bool(upper), _count(keep, "keep"))
     return peak, ties, below
-
-
-def piecewise_linear_lookup(lo: Any, hi: Any, start: Any, mass: Any, offsets: Any, strip: Any,
-                            x: Any) -> np.ndarray:
-    """A piecewise-linear table looked up at points x (N,) of strips ``strip`` (N,): for the leaf
-    i of the point's strip (leaves offsets[g] .. offsets[g + 1] - 1, sorted by ``lo``) with the
-    largest lo[i] <= x (the strip's first leaf if none), start[i] + mass[i] * t with t the
-    point's place in [lo[i], hi[i]] clamped to [0, 1]; the result clamped to [0, 1], NaN for a
-    strip outside the table.  One pass in C++ with the GIL released."""
-    as64 = [np.ascontiguousarray(a, dtype=np.float64).reshape(-1) for a in (lo, hi, start, mass, x)]
-    off = np.ascontiguousarray(offsets, dtype=np.int64).reshape(-1)
-    g = np.ascontiguousarray(strip, dtype=np.int64).reshape(-1)
-    return _core.piecewise_linear_lookup(*as64[:4], off, g, as64[4])
-
-
-# --- the sampler check's batch kernels (src/checks.h) ------------------------------------------
-#: The sampling domains of the sampler check, in the order the core numbers them.
-CHECK_DOMAINS = ("interval", "half_line", "square", "disk", "hemisphere", "sphere")
-
-
-def _check_domain(kind: str) -> int:
-    if kind not in CHECK_DOMAINS:
-        raise ValueError(f"'kind' must be one of {CHECK_DOMAINS}, got {kind!r}")
-    return CHECK_DOMAINS.index(kind)
-
-
-def domain_params(kind: str, x: Any, lo: float = 0.0, hi: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """(s, inside): the equal-measure parameters s (N, k) in [0, 1]^k of points x on the sampler
-    check's domain ``kind`` (harness.samplers.domains states the maps; [lo, hi] the interval's
-    ends) and whether each point lies inside it (finite; unit vectors within 1e-5 of unit
-    squared norm, z >= -1e-12 on the hemisphere; r^2 <= 1 + 1e-12 on the disk).  x: (N,) or
-    (N, 1) on the interval and half line, (N, 2) on the square and disk, (N, 3) unit vectors
-    on the hemisphere and sphere.  One pass in C++ with the GIL released."""
-    code = _check_domain(kind)
-    a = np.ascontiguousarray(x, dtype=np.float64)
-    if CHECK_DOMAINS[code] in ("interval", "half_line"):
-        a = a.reshape(-1)
-    return _core.domain_params(code, float(lo), float(hi), a)
-
-
-def domain_points(kind: str, s: Any, lo: float = 0.0, hi: float = 1.0) -> np.ndarray:
-    """Points x(s) of parameters s (N, k) on the sampler check's domain ``kind``, the inverse
-    of :func:`domain_params`: (N,) on the interval ([lo, hi]) and half line, (N, 2) on the
-    square and disk, unit vectors (N, 3) on the hemisphere and sphere.  The azimuth's cosine
-    and sine are those of 2 pi s1 with an exact argument reduction (numpy's cos(2 pi s1) first
-    rounds 2 pi s1): the same points to rounding.  In C++ with the GIL released."""
-    a = np.ascontiguousarray(s, dtype=np.float64)
-    return _core.domain_points(_check_domain(kind), float(lo), float(hi), a)
-
-
-def cubature_nodes(lo: Any, hi: Any, nodes: Any) -> np.ndarray:
-    """The nodes (M g^k, k) of the tensor rule with the g points ``nodes`` (in [0, 1]) per axis
-    on the boxes [lo, hi] (M, k), k = 1 or 2: box by box, node (i, j) of a box at row i g + j
-    (numpy's meshgrid "ij" order), each coordinate lo + (hi - lo) * node.  One pass in C++."""
-    a, b = (np.ascontiguousarray(v, dtype=np.float64) for v in (lo, hi))
-    return _core.cubature_nodes(a, b, np.ascontiguousarray(nodes, dtype=np.float64).reshape(-1))
-
-
-def grid_histogram(s: Any, inside: Any, shape: tuple[int, ...]) -> np.ndarray:
-    """Counts (float64, of ``shape``) of the parameter points s (N, k) marked ``inside`` (N,)
-    on the regular grid ``shape`` (k = 1 or 2 cell counts) over [0, 1]^k, C order: each
-    coordinate clamped to [0, 1 - 2^-53], then cell min(floor(s m), m - 1).  Points with a
-    NaN coordinate count nowhere.  One pass in C++."""
-    a = np.ascontiguousarray(s, dtype=np.float64)
-    m = np.ascontiguousarray(inside, dtype=bool).reshape(-1)
-    return _core.grid_histogram(a, m, [int(v) for v in shape])
-
-
-def _table(t: tuple) -> tuple:
-    lo, hi, start, mass, offsets = t
-    return (*(np.ascontiguousarray(a, dtype=np.float64).reshape(-1) for a in (lo, hi, start, mass)),
-            np.ascontiguousarray(offsets, dtype=np.int64).reshape(-1))
-
-
-def rosenblatt(marginal: tuple, conditional: tuple | None, edges: Any,
-               s: Any) -> tuple[np.ndarray, np.ndarray]:
-    """(u (N, k), strip (N,) int64): the Rosenblatt transform of parameter points s (N, k)
-    through piecewise-linear tables, each (lo, hi, start, mass, offsets) as
-    :func:`piecewise_linear_lookup` takes them: u0 = marginal(strip 0, s0); with a
-    ``conditional`` (the square, k = 2) also the strip g of s0 (the last of ``edges`` at or
-    below s0, clamped to 0 .. len(edges) - 2, as numpy's searchsorted(side="right") - 1
-    clipped) and u1 = conditional(g, s1); without one, strip 0.  One pass in C++."""
-    a = np.ascontiguousarray(s, dtype=np.float64)
-    cond = None if conditional is None else _table(conditional)
-    e = np.ascontiguousarray(edges, dtype=np.float64).reshape(-1)
-    return _core.rosenblatt(_table(marginal), cond, e, a)
-
-
-def _strided(a: Any) -> np.ndarray:
-    """a as float64, strided views kept (the core reads them in place) unless a stride is
-    negative (the core's strides are unsigned)."""
-    v = np.asarray(a, dtype=np.float64)
-    return np.ascontiguousarray(v) if any(s < 0 for s in v.strides) else v
-
-
-def strip_bin_counts(strip: Any, u: Any, strips: int, bins: int) -> np.ndarray:
-    """Counts (strips * bins,) float64 of points in cells strip * bins + min(floor(u bins),
-    bins - 1): ``strip`` (N,) in 0 .. strips - 1, u (N,) in [0, 1] (a strided column is read
-    in place); a NaN u or a strip out of range counts nowhere.  One pass in C++."""
-    g = np.ascontiguousarray(strip, dtype=np.int64).reshape(-1)
-    return _core.strip_bin_counts(g, _strided(u), int(strips), int(bins))
-
-
-def cramer_von_mises_root(u: Any) -> np.ndarray:
-    """For each column of u (N, k) (or the one of u (N,)): sqrt(sum_i ((2 i - 1) / (2 N) -
-    u_(i))^2) over the sorted values u_(1) <= ... <= u_(N), meant in [0, 1]; the column's
-    Cramer-von Mises statistic is its square plus 1 / (12 N).  NaN for a column holding a NaN.
-    Array (k,).  In C++ (one thread: on a shared machine a helper thread that is not scheduled
-    costs more than it saves), each column by a radix sort on floor(u 2^20) (O(N) for
-    values spread over [0, 1]) and a compensated sum of blocks (numpy's pairwise sum of the
-    same terms differs by rounding only); strided columns are read in place."""
-    v = _strided(u)
-    if v.ndim not in (1, 2):
-        raise ValueError(f"'u' must have shape (N,) or (N, k), got {v.shape}")
-    return _core.cramer_von_mises_root(v.reshape(v.shape[0], -1))
-
-
-def pdf_summary(kind: str, measure: float, s: Any, inside: Any, p: Any,
-                c: float) -> tuple[int, int, int, float]:
-    """(bad, zero, used, h_sum) over pdf values p (N,) at points with parameters s (N, k) and
-    ``inside`` flags: ``bad`` counts p NaN, infinite or negative (every point), ``zero`` p == 0
-    at inside points; over the ``used`` inside points with a good p, h_sum is the sum of
-    h = q / (q + c) with q = p J the density in parameter space (J = ``measure``, the domain's
-    measure per unit of s, or 1 / (1 - s)^2 on the half line); 0 unless c > 0.  One pass in
-    C++ with a compensated sum."""
-    code = _check_domain(kind)
-    a = np.ascontiguousarray(s, dtype=np.float64)
-    m = np.ascontiguousarray(inside, dtype=bool).reshape(-1)
-    v = np.ascontiguousarray(p, dtype=np.float64).reshape(-1)
-    bad, zero, used, h_sum = _core.pdf_summary(code, float(measure), a, m, v, float(c))
-    return int(bad), int(zero), int(used), float(h_sum)
 
 
 def estimate_from_samples(f: str | Integrand, points: Any, pdf: Any, *, sampler: Sampler | None = None,

@@ -4,7 +4,8 @@
 ``tails``     the tail index of the contributions and how a tail ends: clamp, truncation (TailSample);
 ``multiple``  multiple testing (holm);
 ``estimator`` what estimates come from: a catalogue pair or a user's contributions callable;
-``replicas``  replicas, convergence rates, efficiency, error against time;
+``replicas``  replicas, convergence rates, error against time;
+``efficiency`` the efficiency 1/(V T) of replicates and the ratio of two;
 ``timing``    an estimate's wall time and its error from blocks of replicas (median_time), in
               seconds or in ticks of the reference clock (clock_time, reference_clock);
 ``results``   the result family every check returns (ConfidenceInterval, Failure);
@@ -17,15 +18,13 @@ Every figure here carries its uncertainty and its sample count; every test state
 false-alarm rate and what it detects.
 """
 from harness.stats.bias import UnbiasedResult, batch_points, check_technique, check_unbiased, judge_batches
+from harness.stats.efficiency import Efficiency, efficiency, efficiency_ratio
 from harness.stats.estimator import CatalogueEstimator, Contributions, Estimator, estimator
 from harness.stats.multiple import holm
 from harness.stats.replicas import (
     ConvergenceResult,
-    Efficiency,
     Replicates,
     convergence_rate,
-    efficiency,
-    efficiency_ratio,
     error_vs_time,
     fit_convergence,
     replicate,
