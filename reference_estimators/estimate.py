@@ -6,7 +6,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from scipy import stats
+from scipy import special
 
 __all__ = ["Estimate", "ERROR_ISSUES"]
 
@@ -97,7 +97,7 @@ class Estimate:
         """
         if not 0 < confidence_level < 1:
             raise ValueError(f"confidence_level must be in (0, 1), got {confidence_level}")
-        half = stats.norm.ppf(0.5 + confidence_level / 2) * self.total_error
+        half = special.ndtri(0.5 + confidence_level / 2) * self.total_error
         return (self.mean - half, self.mean + half)
 
     def z_score(self, reference: float | None = None) -> float:

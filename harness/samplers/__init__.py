@@ -3,8 +3,13 @@
 Domains and their equal-measure maps (``domains``), adaptive cubature of the claimed pdf over
 many cells at once (``cubature``), the chi-square check with its deterministic pre-checks and
 marginal and moment tests (``check``), the emcee cross-check (``mcmc``), and the zoo of
-correct and wrong samplers (``zoo``).
+correct and wrong samplers (``zoo``).  ``mcmc_crosscheck`` loads on first use (it imports
+emcee and scipy.stats).
 """
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
 from harness.samplers.check import (
     SAMPLE_CASE,
     SamplerCheck,
@@ -16,7 +21,17 @@ from harness.samplers.check import (
 )
 from harness.samplers.cubature import cell_integrals
 from harness.samplers.domains import DOMAINS, Domain, as_domain
-from harness.samplers.mcmc import mcmc_crosscheck
+
+if TYPE_CHECKING:
+    from harness.samplers.mcmc import mcmc_crosscheck
 
 __all__ = ["DOMAINS", "SAMPLE_CASE", "Domain", "SamplerCheck", "SamplerTest", "as_domain", "cell_integrals",
            "check_sampler", "check_with_missing", "failure_pvalue", "histogram", "mcmc_crosscheck"]
+
+
+def __getattr__(name: str) -> Any:
+    if name == "mcmc_crosscheck":
+        from harness.samplers.mcmc import mcmc_crosscheck
+
+        return mcmc_crosscheck
+    raise AttributeError(f"module 'harness.samplers' has no attribute {name!r}")

@@ -31,7 +31,6 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from scipy import stats
 
 import reference_estimators as rest
 
@@ -39,7 +38,7 @@ from harness.samplers.cubature import cell_integrals
 from harness.samplers.domains import Domain, as_domain
 from harness.samplers.reported import reported_pdf_failure
 from harness.samplers.transform import STRIPS, Transform, cramer_von_mises_columns, equiprobable_counts
-from harness.stats import holm
+from harness.stats import distributions, holm
 from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
 from harness.usercode import UserCodeError, array_result, call, callable_name
 
@@ -252,7 +251,7 @@ class SamplerTest:
             residuals[name] = np.where(n * e >= 5, resid.reshape(shape), np.nan)  # pooled cells: NaN
             detects = "large-scale misfit" if name == "coarse" else "narrow features: lobes, bands, steps"
             tests.append((f"chi-square {'x'.join(map(str, shape))}", stat, df,
-                          stats.chi2.sf(stat, df) if df > 0 else 1.0, detects))
+                          distributions.chi2_sf(stat, df) if df > 0 else 1.0, detects))
         marginals = {}
         for axis in range(dom.k):  # for the report's plots: observed and expected counts per axis
             shape = tuple(base[a] if a == axis else 1 for a in range(dom.k))
@@ -268,7 +267,7 @@ class SamplerTest:
         h_mean = h_sum / used if self.c > 0 and used else 0.0
         denom = math.sqrt(max(e2 - e1 * e1, 0.0) / max(used if self.c > 0 else 1, 1) + e1_err**2 + 1e-24)
         z = (h_mean - e1) / denom
-        tests.append(("pdf moment", z * z, 1, float(stats.chi2.sf(z * z, 1)),
+        tests.append(("pdf moment", z * z, 1, float(distributions.chi2_sf(z * z, 1)),
                       "density wrong where it is high or low"))
 
         table = pd.DataFrame(tests, columns=["test", "statistic", "df", "pvalue", "detects"])
@@ -299,7 +298,7 @@ class SamplerTest:
         observed, prob = equiprobable_counts(t, strip, u, bins)
         stat, df, _ = _chi_square(observed, m * prob, 2 * m * t.error * prob * bins)
         cells = "x".join(map(str, (bins,) if t.conditional is None else (STRIPS, bins)))
-        p = stats.chi2.sf(stat, df) if df > 0 else 1.0
+        p = distributions.chi2_sf(stat, df) if df > 0 else 1.0
         tests.append((f"chi-square equiprobable {cells}", stat, df, p,
                       "narrow lobes: as many cells where the density is high as elsewhere"))
         return tests
@@ -361,6 +360,8 @@ def failure_pvalue(failed: int, n: int, total: float, total_err: float) -> float
         return 0.0 if failed > 0 else 1.0
     if q >= 1:
         return 0.0 if failed < n else 1.0
+    from scipy import stats  # here, not at the top: scipy.stats costs 0.8 s of import (distributions)
+
     return float(stats.binomtest(failed, n, q).pvalue)
 
 

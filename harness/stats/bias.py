@@ -14,10 +14,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
 import reference_estimators as rest
 
+from harness.stats import distributions
 from harness.stats.merge import merge_moments
 from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level, failures_from_counts
 from harness.stats.tails import Side, TailEnd, TailSample
@@ -120,7 +120,7 @@ class UnbiasedResult:
         """Student-t interval for E[Y] with ``df`` degrees of freedom
         (NaN ends for an "invalid" result; too narrow where ``no_level``)."""
         check_confidence_level(confidence_level)
-        half = stats.t.ppf(0.5 + confidence_level / 2, self.df) * self.stderr
+        half = distributions.t_ppf(0.5 + confidence_level / 2, self.df) * self.stderr
         return ConfidenceInterval(float(self.estimate - half), float(self.estimate + half))
 
     def __iter__(self):
@@ -239,6 +239,17 @@ def batch_points(n: int, dim: int, *, seed: int, batches: int) -> Iterator[tuple
         first += int(size)
 
 
+def _sample_skewness(x: np.ndarray) -> float:
+    """The biased sample skewness m3 / m2^1.5 of ``x``, computed as scipy.stats.skew computes it
+    (same bits; NaN where the spread is at the rounding level of the mean), without importing
+    scipy.stats (harness.stats.distributions says why)."""
+    mean = np.mean(x)
+    d = x - mean
+    m2, m3 = np.mean(d**2), np.mean(d**2 * d)
+    with np.errstate(all="ignore"):
+        return float(np.nan if m2 <= (np.finfo(np.float64).eps * mean) ** 2 else m3 / m2**1.5)
+
+
 def _decide(parts: list[list[tuple[int, float, float, float]]], tails: TailSample, max_abs: float,
             reference: float, alpha: float, *, iid: bool = True) -> UnbiasedResult:
     """The verdict from batches, each a list of (n, mean, stderr, skewness) pieces, and the
@@ -269,7 +280,7 @@ def _decide(parts: list[list[tuple[int, float, float, float]]], tails: TailSampl
     elif iid and m2_all > 0:
         skew = float(m3_all / total / (m2_all / total) ** 1.5 / math.sqrt(total))
     else:
-        skew = float(stats.skew(means_a)) / math.sqrt(batches)
+        skew = _sample_skewness(means_a) / math.sqrt(batches)
     flags: list[str] = []
     sides = {"upper": tails.up, "lower": tails.down}
     seen = {name: s.end(alpha * _END_LEVEL) for name, s in sides.items()}
@@ -344,7 +355,7 @@ def _skew_corrected_p(t: float, skew: float, df: int, weight_low: float) -> floa
     x = g * t / 3
     with np.errstate(over="ignore"):          # |t| beyond 1e150: T is +-inf, p 0
         hall = t * (1 + x + x * x / 3) + g / 6   # = t + g t^2 / 3 + g^2 t^3 / 27 + g / 6, no inf - inf
-    low, high = float(stats.t.cdf(hall, df)), float(stats.t.sf(hall, df))
+    low, high = float(distributions.t_cdf(hall, df)), float(distributions.t_sf(hall, df))
     return min(1.0, low / weight_low, high / (1 - weight_low))
 
 

@@ -16,8 +16,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import stats as sps
 
+from harness.stats import distributions
 from harness.stats.images import (
     PixelVerdict,
     faulty_values,
@@ -65,7 +65,7 @@ class ImageComparison(PixelVerdict):
     def confidence_interval(self, confidence_level: float = 0.95) -> ConfidenceInterval:
         """Student-t interval (``difference_df`` degrees of freedom) of mean(A) - mean(B)."""
         check_confidence_level(confidence_level)
-        half = float(sps.t.ppf(0.5 + confidence_level / 2, self.difference_df)) * self.difference_se
+        half = float(distributions.t_ppf(0.5 + confidence_level / 2, self.difference_df)) * self.difference_se
         return ConfidenceInterval(self.difference - half, self.difference + half)
 
     def __str__(self) -> str:

@@ -8,8 +8,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from scipy import stats
-
+from harness.stats import distributions
 from harness.stats.replicas import Replicates
 from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
 from harness.stats.timing import satterthwaite, time_blocks
@@ -111,7 +110,7 @@ class Efficiency:
         """Half-width of the interval of log10 of the value: Student's t quantile with ``df``
         degrees of freedom (the time's error comes from a few blocks of replicas) x log_se."""
         check_confidence_level(confidence_level)
-        return float(stats.t.ppf(0.5 + confidence_level / 2, self.df) * self.log_se / math.log(10))
+        return float(distributions.t_ppf(0.5 + confidence_level / 2, self.df) * self.log_se / math.log(10))
 
     def confidence_interval(self, confidence_level: float = 0.95) -> ConfidenceInterval:
         """Student-t interval of the log of the value, mapped back: value x 10^(+-half-width)."""
@@ -181,5 +180,5 @@ def efficiency_ratio(a: Efficiency, b: Efficiency,
     se = math.hypot(a.log_se, b.log_se)
     if not math.isfinite(se):
         return ratio, none
-    z = stats.t.ppf(0.5 + confidence_level / 2, satterthwaite([(a.log_se, a.df), (b.log_se, b.df)]))
+    z = distributions.t_ppf(0.5 + confidence_level / 2, satterthwaite([(a.log_se, a.df), (b.log_se, b.df)]))
     return ratio, ConfidenceInterval(float(ratio * math.exp(-z * se)), float(ratio * math.exp(z * se)))

@@ -14,9 +14,9 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import stats as sps
 
 from harness import stats
+from harness.stats import distributions
 from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
 from harness.stats.scales import ROUNDING, Scale, combined, multiscale
 from harness.stats.timing import median_time, satterthwaite, time_blocks
@@ -249,7 +249,7 @@ class ImageBias(PixelVerdict):
     def confidence_interval(self, confidence_level: float = 0.95) -> ConfidenceInterval:
         """Student-t interval (``bias_mean_df`` degrees of freedom) of the image-average bias."""
         check_confidence_level(confidence_level)
-        half = float(sps.t.ppf(0.5 + confidence_level / 2, self.bias_mean_df)) * self.bias_mean_se
+        half = float(distributions.t_ppf(0.5 + confidence_level / 2, self.bias_mean_df)) * self.bias_mean_se
         return ConfidenceInterval(self.bias_mean - half, self.bias_mean + half)
 
     def __str__(self) -> str:

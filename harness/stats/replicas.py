@@ -13,10 +13,10 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from scipy import stats
 
 import reference_estimators as rest
 
+from harness.stats import distributions
 from harness.stats.estimator import Contributions, Estimator, estimator
 from harness.stats.merge import chan_merge
 from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
@@ -129,8 +129,8 @@ class Replicates:
         a = 1 - confidence_level
         ss = float(np.sum(self.scaled_errors ** 2))
         sc = self._scale
-        return ConfidenceInterval(math.sqrt(ss / stats.chi2.ppf(1 - a / 2, r)) / sc,
-                                  math.sqrt(ss / stats.chi2.ppf(a / 2, r)) / sc)
+        return ConfidenceInterval(math.sqrt(ss / distributions.chi2_ppf(1 - a / 2, r)) / sc,
+                                  math.sqrt(ss / distributions.chi2_ppf(a / 2, r)) / sc)
 
     @property
     def log10_estimator_variance(self) -> tuple[float, float]:
@@ -256,7 +256,7 @@ class ConvergenceResult:
             return 1.0
         if not self.slope_se > 0:
             return 1.0 if self.slope <= self.expected + self.tolerance else 0.0
-        return float(stats.norm.sf((self.slope - self.expected - self.tolerance) / self.slope_se))
+        return float(distributions.norm_sf((self.slope - self.expected - self.tolerance) / self.slope_se))
 
     def confidence_interval(self, confidence_level: float = 0.95) -> ConfidenceInterval:
         """Percentile-bootstrap interval of the slope (resampling replicas within each budget)."""

@@ -58,7 +58,6 @@ from functools import lru_cache
 
 import numpy as np
 from scipy import special
-from scipy import stats as sps
 
 __all__ = ["SIZES", "FINE_REPLICAS", "MIN_SAMPLES", "ROUNDING", "Scale", "sizes", "multiscale", "combined"]
 
@@ -188,6 +187,8 @@ def _skewed_blocks(skew: np.ndarray, constant: np.ndarray, ti: np.ndarray, tj: n
     if sizes_.min() < GATE_MINIMUM:
         block = np.zeros_like(block)
         sizes_ = sizes_.sum(keepdims=True)
+    from scipy import stats as sps  # here: scipy.stats costs 0.8 s of import (harness.stats.distributions)
+
     right, left = np.zeros(skew.shape, bool), np.zeros(skew.shape, bool)
     for flags, out in (((skew > cut) & live, right), ((skew < -cut) & live, left)):
         k = np.bincount(block, weights=flags.sum(axis=1), minlength=sizes_.size)

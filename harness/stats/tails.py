@@ -17,9 +17,10 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
 import reference_estimators as rest
+
+from harness.stats import distributions
 
 __all__ = ["TailSample", "Side", "TailEnd", "tail_index_of"]
 
@@ -133,7 +134,7 @@ class Side:
         rest = float(np.mean(spacings[j:]))
         if rest <= 0:
             return None
-        p = float(stats.f.cdf(float(np.mean(spacings[:j])) / rest, 2 * j, 2 * (k - j)))
+        p = float(distributions.f_cdf(float(np.mean(spacings[:j])) / rest, 2 * j, 2 * (k - j)))
         return TailEnd("truncation", float(desc[0]), 1, p) if p < level else None
 
 

@@ -22,11 +22,11 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
-from scipy import stats as sps
 
 import reference_estimators as rest
 
 from harness import stats
+from harness.stats import distributions
 from harness.suite.execute import JobResult
 from harness.suite.kind import Outcome
 from harness.suite.parse import Case, Suite
@@ -114,7 +114,7 @@ class CaseResult:
         b = self.bias
         if b is None or not math.isfinite(b.stderr):
             return math.nan
-        return float(sps.t.ppf(1 - b.alpha / (2 * self.case.looks), b.df) * b.stderr)
+        return float(distributions.t_ppf(1 - b.alpha / (2 * self.case.looks), b.df) * b.stderr)
 
 
 class EstimatorKind:
