@@ -1,25 +1,23 @@
 """Runner overhead: a 1e8-sample suite through `harness run` (plan, threads, SQLite, analysis)
-against the same core calls made directly, side by side in one run; and the time to resume
-a finished suite (in process, and as a fresh `harness run` command).
+against the same core calls made directly (each batch's state with its contributions' tails,
+the tails merged: what the bias measurement needs), side by side in one run; and the time to
+resume a finished suite (in process, and as a fresh `harness run` command).
 
     .venv/bin/python benchmarks/runner_overhead.py [--repeat 3]
 """
 from __future__ import annotations
 
 import argparse
-import math
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
 import reference_estimators as rest
 
 from harness.suite.parse import load_suite
-from harness.suite.plan import BIAS_STREAM, bias_budget, core_case_id
+from harness.suite.plan import BIAS_STREAM, bias_budget, core_case_id, tail_keeps
 from harness.suite.run import run_suite
 
 SUITE = """
@@ -36,19 +34,21 @@ techniques = ["uniform", "importance:linear", "roulette:uniform(q=0.5)", "mis_ba
 
 
 def direct(suite, threads: int) -> float:
-    """The work the suite's bias measurements need, as plain core calls."""
+    """The work the suite's bias measurements need, as plain core calls: each batch's state with
+    its contributions' tails (one pass), the tails merged, the estimate of each batch."""
     start = time.perf_counter()
     for case in suite.cases:
         b = bias_budget(suite, case)
+        keep, part_keep = tail_keeps(suite, case)
         core_case = core_case_id(case, BIAS_STREAM)
-        ests = [rest.integrate(case.integrand, case.technique, b, seed=suite.seed, case_id=core_case,
-                               replica=k, threads=threads) for k in range(suite.batches)]
-        y = rest.contributions(case.integrand, case.technique, b, seed=suite.seed, case_id=core_case,
-                               threads=threads)
-        keep = int(math.sqrt(b))
-        c = np.median(y)
-        np.partition(y - c, y.size - keep - 1), np.partition(c - y, y.size - keep - 1)
-        assert all(e.ok for e in ests)
+        f = rest.integrand(case.integrand)
+        t = rest.technique(f, case.technique)
+        chunks = -(-b // rest.CHUNK_SIZE)
+        states = [rest.integrate_chunks(f, t, b, 0, chunks, seed=suite.seed, case_id=core_case, replica=k,
+                                        threads=threads, tail_keep=part_keep, tail_median=k == 0)
+                  for k in range(suite.batches)]
+        rest.merge_tails([s.pop("tails") for s in states], keep)
+        assert all(rest.estimate_from_states(f, t, [s]).ok for s in states)
     return time.perf_counter() - start
 
 

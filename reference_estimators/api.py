@@ -23,7 +23,7 @@ __all__ = [
     "points",
     "integrate", "integrate_chunks", "estimate_from_states", "estimate_of_states", "merge_states",
     "contributions", "accumulate", "accumulate_chunk",
-    "estimate_from_samples", "hardware_threads", "side_extremes", "build_info",
+    "estimate_from_samples", "hardware_threads", "side_extremes", "value_tails", "merge_tails", "build_info",
     "profile_stages",
 ]
 
@@ -253,8 +253,8 @@ def integrate(f: str | Integrand, t: str | Technique, n: int, *, seed: int = 0, 
 
 
 def integrate_chunks(f: str | Integrand, t: str | Technique, n: int, chunk_begin: int, chunk_end: int, *,
-                     seed: int = 0, case_id: int = 0, replica: int = 0,
-                     threads: int | None = None) -> dict[str, Any]:
+                     seed: int = 0, case_id: int = 0, replica: int = 0, threads: int | None = None,
+                     tail_keep: int = 0, tail_median: bool = False) -> dict[str, Any]:
     """The accumulator state of chunks [chunk_begin, chunk_end) of the estimate ``integrate``
     makes from n samples with the same seed, case_id and replica (chunks of ``CHUNK_SIZE``
     samples, the last one partial).
@@ -263,13 +263,42 @@ def integrate_chunks(f: str | Integrand, t: str | Technique, n: int, chunk_begin
     count, Welford moments M2..M4, compensated sum, min, max, issue counts with examples,
     drawn and candidate counts, wall time (s), chunks and threads.  ``estimate_from_states``
     merges the states of all chunk ranges, in chunk order, into the estimate.
+
+    With ``tail_keep`` > 0 the state also holds, under "tails", what :func:`value_tails`
+    returns for the finite contributions accumulated (``tail_median``: with the upper median
+    of the range's first chunk), drawn in the same pass: the bias test's tail sample without a
+    second pass over the contributions.
     """
     fi = integrand(f)
     ti = technique(fi, t)
     n = _count(n, "n")
     begin, end = _chunk_range(n, chunk_begin, chunk_end)
     return _core.integrate_chunks(fi, ti, n, _seed(seed), _seed(case_id, "case_id"),
-                                  _seed(replica, "replica"), begin, end, _threads(threads))
+                                  _seed(replica, "replica"), begin, end, _threads(threads),
+                                  _count(tail_keep, "tail_keep", zero=True), bool(tail_median))
+
+
+def value_tails(values: Any, keep: int, *, median: bool = False) -> dict[str, Any]:
+    """The tails of ``values`` (NaN and infinities ignored), JSON-serialisable: "upper" for the
+    largest values and "lower" for the largest of -values, each {"peak": the largest (None if
+    no value), "ties": how many equal it, "below": the ``keep`` largest strictly below it,
+    descending}, and "median": the upper median (``median`` True; else None).  One pass in
+    C++: candidates are screened against a rising threshold, so an atom (zeros, a clamp) is
+    counted, not sorted.  :func:`merge_tails` merges the tails of several sets exactly."""
+    y = np.ascontiguousarray(values, dtype=np.float64)
+    if y.ndim != 1:
+        raise ValueError(f"'values' must be one-dimensional, got shape {y.shape}")
+    return _core.value_tails(y, _count(keep, "keep", zero=True), bool(median))
+
+
+def merge_tails(parts: list[dict[str, Any]], keep: int) -> dict[str, Any]:
+    """The tails (as :func:`value_tails` gives them) of the union of the parts' values, from the
+    parts, merged in the order given; exact when each part kept at least ``keep`` per side.
+    The median is the first part's."""
+    parts = list(parts)
+    if not parts:
+        raise ValueError("'parts' must hold at least one tails dict (from value_tails or integrate_chunks)")
+    return _core.merge_tails(parts, _count(keep, "keep", zero=True))
 
 
 _STATE_KEYS = frozenset(("n", "mean", "m2", "m3", "m4", "sum", "comp", "min", "max", "scale_exp", "scale_set",
@@ -426,13 +455,14 @@ def _points(a: Any, dim: int, name: str) -> np.ndarray:
 _MAX_COUNT = 2**63 - 1   # the core counts samples in 64-bit signed integers
 
 
-def _count(n: Any, name: str) -> int:
+def _count(n: Any, name: str, *, zero: bool = False) -> int:
     if isinstance(n, numbers.Real) and not isinstance(n, bool) and not math.isfinite(n):
         raise ValueError(f"'{name}' must be a finite number of samples, got {n!r}")
     if isinstance(n, bool) or not isinstance(n, numbers.Real) or n != int(n):
         raise TypeError(f"'{name}' must be a whole number of samples, got {n!r}")
-    if n <= 0:
-        raise ValueError(f"'{name}' must be a positive number of samples, got {n!r}")
+    if n < 0 or (n == 0 and not zero):
+        raise ValueError(f"'{name}' must be a {'non-negative' if zero else 'positive'} number of samples, "
+                         f"got {n!r}")
     if n > _MAX_COUNT:
         raise ValueError(f"'{name}' must be at most 2**63 - 1 samples, got {n!r}")
     return int(n)

@@ -41,8 +41,10 @@ class Estimator(Protocol):
     evaluations: int               # integrand evaluations per contribution (1 for callables)
 
     def state(self, n: int, chunk_begin: int, chunk_end: int, *, seed: int, case_id: int,
-              replica: int) -> dict[str, Any]:
-        """The accumulator state of chunks [chunk_begin, chunk_end) of an estimate of n samples."""
+              replica: int, tail_keep: int = 0, tail_median: bool = False) -> dict[str, Any]:
+        """The accumulator state of chunks [chunk_begin, chunk_end) of an estimate of n samples;
+        with ``tail_keep`` > 0 also the tails of its finite contributions under "tails"
+        (rest.value_tails; ``tail_median``: with the upper median of the first chunk's)."""
         ...
 
     def values(self, n: int, *, seed: int, case_id: int, replica: int) -> np.ndarray:
@@ -74,9 +76,9 @@ class CatalogueEstimator:
     evaluations = property(lambda self: self.t.evaluations)
 
     def state(self, n: int, chunk_begin: int, chunk_end: int, *, seed: int, case_id: int,
-              replica: int) -> dict[str, Any]:
+              replica: int, tail_keep: int = 0, tail_median: bool = False) -> dict[str, Any]:
         return rest.integrate_chunks(self.f, self.t, n, chunk_begin, chunk_end, seed=seed, case_id=case_id,
-                                     replica=replica, threads=1)
+                                     replica=replica, threads=1, tail_keep=tail_keep, tail_median=tail_median)
 
     def values(self, n: int, *, seed: int, case_id: int, replica: int) -> np.ndarray:
         return rest.contributions(self.f, self.t, n, seed=seed, case_id=case_id, replica=replica, threads=1)
@@ -147,14 +149,19 @@ class Contributions:
                            chunk_begin=chunk, chunk_end=chunk + 1)
 
     def state(self, n: int, chunk_begin: int, chunk_end: int, *, seed: int, case_id: int,
-              replica: int) -> dict[str, Any]:
+              replica: int, tail_keep: int = 0, tail_median: bool = False) -> dict[str, Any]:
         start = time.perf_counter()
-        states = []
+        states, tails = [], []
         for c in range(chunk_begin, chunk_end):
             u = self._points(n, c, seed, case_id, replica)
-            states.append(rest.accumulate_chunk(self(u), first=c * rest.CHUNK_SIZE, points=u))
+            y = self(u)
+            states.append(rest.accumulate_chunk(y, first=c * rest.CHUNK_SIZE, points=u))
+            if tail_keep > 0:
+                tails.append(rest.value_tails(y, tail_keep, median=tail_median and c == chunk_begin))
         merged = rest.merge_states(states)
         merged["seconds"] = time.perf_counter() - start
+        if tails:
+            merged["tails"] = rest.merge_tails(tails, tail_keep)
         return merged
 
     def values(self, n: int, *, seed: int, case_id: int, replica: int) -> np.ndarray:

@@ -12,7 +12,7 @@ variance whatever its index below the end, so a deficit of the mean can be prove
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -89,6 +89,19 @@ class Side:
             return np.empty(0)
         atom = np.full(min(self.ties, self.keep + 1), self.peak)
         return np.concatenate([atom, self.below])[: self.keep + 1]
+
+    @classmethod
+    def of_values(cls, keep: int, side: Mapping[str, Any], shift: float) -> Side:
+        """The side of deviations d = v + ``shift`` > 0 from one side of rest.value_tails (v: the
+        values, or -values for the lower side; shift -center or +center), in float64 as
+        numpy computes them; values whose deviations round to the peak's count as its ties."""
+        if side["peak"] is None:
+            return cls(keep)
+        peak = side["peak"] + shift
+        if not peak > 0:
+            return cls(keep)
+        d = np.asarray(side["below"], dtype=float) + shift
+        return cls(keep, peak, int(side["ties"]) + int(np.sum(d == peak)), d[(d < peak) & (d > 0)][:keep])
 
     def state(self) -> dict[str, Any]:
         """JSON-serialisable: what :meth:`from_state` restores."""
@@ -171,6 +184,30 @@ class TailSample:
         t.center = state["center"]
         t.up, t.down = Side.from_state(t.keep, state["upper"]), Side.from_state(t.keep, state["lower"])
         return t
+
+    @classmethod
+    def from_parts(cls, parts: Sequence[Mapping[str, Any]], keep: int, part_keep: int) -> TailSample | None:
+        """The tail sample of the union of several sets of values from each set's tails
+        (rest.value_tails with ``part_keep`` per side, e.g. the bias test's units), about the
+        first part's median; ``keep`` deviations per side, as :meth:`add` over all the values
+        would keep them.  None where the parts cannot give that exactly: a part that kept only
+        ``part_keep`` values below its peak may have had more above the ``keep``-th largest of
+        the union (then the caller reads the values again: harness.suite.estimators)."""
+        if not parts:
+            raise ValueError("'parts' must hold the tails of at least one set of values")
+        merged = rest.merge_tails(list(parts), keep)
+        out = cls(keep)
+        out.center = parts[0]["median"]
+        for name in ("upper", "lower"):
+            below = merged[name]["below"]
+            bound = below[keep - 1] if len(below) >= keep else -math.inf  # the union's keep-th below the peak
+            if any(len(p[name]["below"]) >= part_keep and p[name]["below"][-1] > bound for p in parts):
+                return None
+        if out.center is None:  # no finite value at all: no deviations
+            return out
+        out.up = Side.of_values(keep, merged["upper"], -out.center)
+        out.down = Side.of_values(keep, merged["lower"], out.center)
+        return out
 
     @property
     def upper(self) -> np.ndarray:

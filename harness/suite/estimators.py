@@ -39,6 +39,8 @@ from harness.suite.plan import (
     core_case_id,
     efficiency_stream,
     estimator_units,
+    tail_keeps,
+    units_per_estimate,
 )
 from harness.suite.store import Store
 from harness.suite.verdicts import family_rejections, mark_xfail
@@ -59,11 +61,13 @@ def estimator_of(case: Case, base: Path) -> stats.Estimator:
 
 @dataclass(frozen=True)
 class EstimateJob:
-    """A unit of an estimator case: the accumulator state of its chunk range ("state"), or the
-    largest deviations above and below the median of the contributions of all the bias test's
-    batches ("tail", for the tail index and a tail's end; one batch in memory at a time).
-    ``clock``: a unit of a replica the efficiency is measured from reads the reference clock
-    on its thread just before it (its payload's "clock", s; not part of the unit's time)."""
+    """A unit of an estimator case: the accumulator state of its chunk range ("state"; a unit of
+    the bias test's batches with ``tail_keep`` > 0 also keeps its contributions' tails, from
+    which the tail sample is merged: plan.tail_keeps), or, where those cannot give it exactly,
+    the largest deviations above and below the median of the contributions of all the bias
+    test's batches read again ("tail", one batch in memory at a time).  ``clock``: a unit of a
+    replica the efficiency is measured from reads the reference clock on its thread just
+    before it (its payload's "clock", s; not part of the unit's time)."""
 
     unit: Unit
     case: Case
@@ -72,6 +76,7 @@ class EstimateJob:
     core_case: int
     batches: int       # of the bias test: a tail unit reads the contributions of all of them
     clock: bool = False
+    tail_keep: int = 0  # order statistics per side a state unit keeps of its contributions' tails
 
     @property
     def serial(self) -> bool:
@@ -84,13 +89,17 @@ class EstimateJob:
         start = time.perf_counter()
         if u.kind == "state":
             payload = est.state(u.budget, u.chunk_begin, u.chunk_end, seed=self.seed, case_id=self.core_case,
-                                replica=u.replica)
+                                replica=u.replica, tail_keep=self.tail_keep,
+                                tail_median=u.replica == 0 and u.chunk_begin == 0)
             if clock is not None:
                 payload = {**payload, "clock": clock}
         else:
             tails = stats.TailSample.for_count(u.budget * self.batches)
             for k in range(self.batches):
-                tails.add(est.values(u.budget, seed=self.seed, case_id=self.core_case, replica=k))
+                y = est.values(u.budget, seed=self.seed, case_id=self.core_case, replica=k)
+                if k == 0:  # the centre the state units' tails use: replica 0's first chunk's upper median
+                    tails.center = rest.value_tails(y[:rest.CHUNK_SIZE], 0, median=True)["median"]
+                tails.add(y)
             payload = tails.state()
         return JobResult(u, payload, time.perf_counter() - start)
 
@@ -126,6 +135,8 @@ class EstimatorKind:
         self.suite = suite
         self.case_of = {case_key(suite, c): c for c in suite.cases}
         self.looks = {k: 0 for k, c in self.case_of.items() if c.target is not None}
+        self.full_tails: set[str] = set()   # cases whose tail sample the state units cannot give
+        self.tail_samples: dict[tuple[str, int], stats.TailSample] = {}   # (case key, look): complete
 
     def names(self) -> list[str]:
         return [f"{c.name}#{c.case_id}" for c in self.suite.cases]
@@ -146,27 +157,54 @@ class EstimatorKind:
         base = str(self.suite.path.parent)
         for i, (key, c) in enumerate(self.case_of.items()):
             timed = efficiency_stream(self.suite, c)
-            for u in estimator_units(self.suite, c, self.looks.get(key, 0)):
+            look = self.looks.get(key, 0)
+            tailed = bias_stream(look) if "bias" in c.measurements else None
+            part_keep = tail_keeps(self.suite, c, look)[1]
+            for u in estimator_units(self.suite, c, look, full_tail=key in self.full_tails):
+                state = u.kind == "state"
                 job = EstimateJob(u, c, base, self.suite.seed, core_case_id(c, u.stream), self.suite.batches,
-                                  clock=u.kind == "state" and (u.stream, u.budget) == timed)
+                                  clock=state and (u.stream, u.budget) == timed,
+                                  tail_keep=part_keep if state and u.stream == tailed else 0)
                 jobs.append((u.stream, u.replica, i, u.chunk_begin, job))
         return [job for *_, job in sorted(jobs, key=lambda j: j[:4])]
 
     def advance(self, store: Store) -> bool:
-        """Moves each case with an unreached precision target to its next look."""
+        """Plans a tail unit for each case whose state units' tails cannot give its tail sample
+        exactly; moves each case with an unreached precision target to its next look."""
         grown = False
+        payloads = {key: store.payloads(key) for key in self.case_of}
+        for key, c in self.case_of.items():
+            missing = self._tails(key, payloads[key]) is None
+            if "bias" in c.measurements and missing and key not in self.full_tails:
+                self.full_tails.add(key)
+                grown = True
         for key, look in self.looks.items():
             c = self.case_of[key]
-            r = _measure(self.suite, c, store.payloads(key), look)
+            if "bias" in c.measurements and self._tails(key, payloads[key]) is None:
+                continue   # its tail unit runs first
+            r = _measure(self.suite, c, payloads[key], look, self._tails(key, payloads[key]))
             if look + 1 < c.looks and (r.bias is None or not r.target_half_width <= c.target):
                 self.looks[key] = look + 1
                 grown = True
         return grown
 
+    def _tails(self, key: str, payloads: dict[Unit, dict]) -> stats.TailSample | None:
+        """The case's tail sample at its current look (kept once complete: its units do not
+        change), or None where it is not yet stored or the state units cannot give it."""
+        look = self.looks.get(key, 0)
+        if (key, look) not in self.tail_samples:
+            t = _tail_sample(self.suite, self.case_of[key], payloads, look)
+            if t is None:
+                return None
+            self.tail_samples[(key, look)] = t
+        return self.tail_samples[(key, look)]
+
     def outcome(self, store: Store) -> Outcome:
         suite = self.suite
-        results = [_measure(suite, c, store.payloads(k), self.looks.get(k, 0))
-                   for k, c in self.case_of.items()]
+        results = []
+        for k, c in self.case_of.items():
+            payloads = store.payloads(k)
+            results.append(_measure(suite, c, payloads, self.looks.get(k, 0), self._tails(k, payloads)))
         table = results_table(results, suite.family_alpha)
         verdicts = [{"bias": v, "convergence": cv} for v, cv in zip(table.get("verdict", ()),
                                                                    table.get("convergence", ()))]
@@ -196,7 +234,7 @@ def _states_by_estimate(payloads: dict[Unit, dict]) -> dict[tuple[int, int, int]
     groups: dict[tuple[int, int, int], list[tuple[int, dict]]] = {}
     for u, p in payloads.items():
         if u.kind == "state":
-            state = {k: v for k, v in p.items() if k != "clock"}
+            state = {k: v for k, v in p.items() if k not in ("clock", "tails")}
             groups.setdefault((u.stream, u.budget, u.replica), []).append((u.chunk_begin, state))
     return {g: [p for _, p in sorted(v, key=lambda x: x[0])] for g, v in groups.items()}
 
@@ -212,7 +250,28 @@ def _clock_of(payloads: dict[Unit, dict], stream: int, budget: int, replicas: in
     return clock if all(c > 0 for c in clock) else None
 
 
-def _measure(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int = 0) -> CaseResult:
+def _tail_sample(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int) -> stats.TailSample | None:
+    """The bias test's tail sample at look ``look``: from its tail unit where one is stored,
+    else merged from its state units' tails (replica 0's first unit first: its median is the
+    centre); None where those cannot give it exactly (or are not all stored)."""
+    b, stream = bias_budget(suite, case, look), bias_stream(look)
+    parts = []
+    for u, p in payloads.items():
+        if u.stream == stream and u.budget == b:  # not a tail stored for an earlier sample count
+            if u.kind == "tail":
+                return stats.TailSample.from_state(p)
+            if u.kind == "state" and "tails" in p:
+                parts.append(((u.replica, u.chunk_begin), p["tails"]))
+    if len(parts) != suite.batches * units_per_estimate(b):
+        return None
+    keep, part_keep = tail_keeps(suite, case, look)
+    return stats.TailSample.from_parts([t for _, t in sorted(parts, key=lambda x: x[0])], keep, part_keep)
+
+
+def _measure(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int = 0,
+             tails: stats.TailSample | None = None) -> CaseResult:
+    """The case's measurements from its stored units; ``tails``: the bias test's tail sample
+    (:func:`_tail_sample`), needed where the case measures bias."""
     est = estimator_of(case, suite.path.parent)
     key = case_key(suite, case)
     wanted = set(case.measurements)
@@ -227,9 +286,9 @@ def _measure(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int = 0
         batches = [estimate(stream, b, k) for k in range(suite.batches)]
         faults = {k: v for e in batches for k, v in e.issues.items()}
         if "bias" in wanted:
-            tail = next(p for u, p in payloads.items() if u.kind == "tail" and u.stream == stream
-                        and u.budget == b)  # not a tail stored for an earlier sample count
-            tails = stats.TailSample.from_state(tail)
+            if tails is None:
+                raise RuntimeError(f"{case.name}: the bias test's tail sample is missing at look {look} "
+                                   "(advance() plans its tail unit first)")
             if faults:
                 first = next(e for e in batches if e.issues)
                 bias = stats.UnbiasedResult.invalid(faults, first.examples, reference=est.reference,

@@ -27,6 +27,7 @@ from typing import Any
 import reference_estimators as rest
 
 from harness.fingerprint import code_fingerprint
+from harness.stats.tails import TailSample
 from harness.stats.timing import CLOCK
 from harness.suite.model import Case, RenderCase, SamplerCase, Suite
 
@@ -34,14 +35,15 @@ __all__ = ["UNIT_CHUNKS", "BIAS_STREAM", "Unit", "case_key", "sampler_key", "sam
            "reference_key", "render_stream", "reference_stream", "render_seed", "core_case_id", "bias_budget",
            "bias_stream", "convergence_budgets", "chosen_budgets", "efficiency_stream", "estimator_units",
            "sampler_units", "render_units", "reference_units", "plan", "unit_count", "render_unit_count",
-           "MAX_UNITS", "MAX_TAIL_BATCH"]
+           "MAX_UNITS", "MAX_TAIL_BATCH", "tail_keeps", "units_per_estimate"]
 
 UNIT_CHUNKS = 32                     # core chunks (of 65 536 samples) per stored unit
 MAX_UNITS = 1 << 20                  # units a suite may plan: each is held in memory, then a database row
 MAX_TAIL_BATCH = 1 << 28             # contributions of the batch a tail unit holds in memory (2 GiB)
 BIAS_STREAM = 0                      # stream 0: the bias test's batches; 1 + i: convergence budget i;
 TARGET_STREAM = 200                  # 200 + s: the bias test's batches at look s >= 1 of a target
-_FORMAT = 1                          # bump when a unit's meaning changes: old rows stop matching
+_FORMAT = 2                          # bump when a unit's meaning changes: old rows stop matching
+#                                      (2: the bias test's state units carry their contributions' tails)
 _SAMPLER_PAYLOAD = 2                 # sampler-check payloads: 2 adds residual grids and marginals (report)
 _RENDER_FORMAT = 1                   # bump when a render unit's meaning changes
 RENDER = "render"                    # the kind of a render unit
@@ -182,21 +184,22 @@ def efficiency_stream(suite: Suite, case: Case) -> tuple[int, int] | None:
 
 
 # --- units -------------------------------------------------------------------------------------
-def _units_of(budget: int) -> int:
+def units_per_estimate(budget: int) -> int:
     """How many units one estimate of ``budget`` contributions is stored in."""
     return -(-(-(-budget // rest.CHUNK_SIZE)) // UNIT_CHUNKS)
 
 
 def unit_count(suite: Suite, case: Case) -> int:
-    """How many units :func:`estimator_units` plans for a case over all its looks, counted
-    without making them (a suite asking for 1e15 samples is refused before any is made)."""
+    """How many units :func:`estimator_units` plans at most for a case over all its looks
+    (with the fallback tail unit), counted without making them (a suite asking for 1e15
+    samples is refused before any is made)."""
     wanted = set(case.measurements)
     n = 0
     if wanted & {"bias", "variance"}:
         for look in range(case.looks):
-            n += suite.batches * _units_of(bias_budget(suite, case, look)) + ("bias" in wanted)
+            n += suite.batches * units_per_estimate(bias_budget(suite, case, look)) + ("bias" in wanted)
     for _, b in chosen_budgets(case.measurements, convergence_budgets(suite, case)):
-        n += suite.replicas * _units_of(b)
+        n += suite.replicas * units_per_estimate(b)
     return n
 
 
@@ -212,8 +215,24 @@ def _estimate_units(key: str, stream: int, budget: int, replica: int) -> list[Un
             for c in range(0, chunks, UNIT_CHUNKS)]
 
 
-def estimator_units(suite: Suite, case: Case, look: int = 0) -> list[Unit]:
-    """An estimator case's units at look ``look`` of its precision target (0 without one)."""
+def tail_keeps(suite: Suite, case: Case, look: int = 0) -> tuple[int, int]:
+    """(keep, part_keep): the order statistics per side the bias test's tail sample keeps over
+    all contributions of its batches at look ``look`` (TailSample.for_count), and how many each
+    of its state units keeps: twice its share, plus 32, at most ``keep``.  The union of the
+    units' tails is then exact unless one unit holds far more than its share of the top
+    ``keep`` (over 12 standard deviations above it for i.i.d. batches); TailSample.from_parts
+    says so, and a tail unit reads the contributions again."""
+    b = bias_budget(suite, case, look)
+    keep = TailSample.for_count(b * suite.batches).keep
+    units = suite.batches * units_per_estimate(b)
+    return keep, min(keep, -(-2 * keep // units) + 32)
+
+
+def estimator_units(suite: Suite, case: Case, look: int = 0, *, full_tail: bool = False) -> list[Unit]:
+    """An estimator case's units at look ``look`` of its precision target (0 without one).
+    The bias test's state units carry their contributions' tails (:func:`tail_keeps`);
+    ``full_tail``: also a "tail" unit that reads every batch's contributions again, one batch
+    in memory at a time, for when the units' tails cannot give the tail sample exactly."""
     key = case_key(suite, case)
     wanted = set(case.measurements)
     units: list[Unit] = []
@@ -221,7 +240,7 @@ def estimator_units(suite: Suite, case: Case, look: int = 0) -> list[Unit]:
         b, stream = bias_budget(suite, case, look), bias_stream(look)
         for k in range(suite.batches):
             units += _estimate_units(key, stream, b, k)
-        if "bias" in wanted:  # the tails of every batch's contributions, one batch in memory at a time
+        if "bias" in wanted and full_tail:
             units.append(Unit(key, stream, b, 0, 0, 0, "tail"))
     for i, b in chosen_budgets(case.measurements, convergence_budgets(suite, case)):
         for r in range(suite.replicas):

@@ -162,6 +162,7 @@ class Store:
         self.timeout = timeout
         self._open = False
         self.run: int | None = None   # the run in progress (start_run), if any
+        self._decoded: dict[str, dict[Unit, dict[str, Any]]] = {}   # payloads() per case key, until a put
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as e:  # a parent that is a file, a read-only folder
@@ -258,7 +259,9 @@ class Store:
             self.db.execute("INSERT OR IGNORE INTO run_keys VALUES (?, ?)", (self.run, case_key))
 
     def stored_keys(self, case_keys: Iterable[str]) -> set[Unit]:
-        """The stored units of these cases."""
+        """The stored units of these cases (another process may have stored some since
+        payloads() last decoded them: those are read afresh)."""
+        self._decoded.clear()
         keys: set[Unit] = set()
         for ck in set(case_keys):
             rows = self.db.execute(f"SELECT {_UNIT_COLUMNS} FROM units WHERE case_key = ?", (ck,))
@@ -270,6 +273,7 @@ class Store:
         if not self._open:
             self.db.execute("BEGIN")
             self._open = True
+        self._decoded.pop(unit.case_key, None)
         self.db.execute("INSERT OR IGNORE INTO units VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                         (unit.case_key, unit.stream, unit.budget, unit.replica, unit.chunk_begin,
                          unit.chunk_end, unit.kind, json.dumps(payload), seconds, time.time()))
@@ -281,9 +285,13 @@ class Store:
                 self.db.execute("COMMIT")
 
     def payloads(self, case_key: str) -> dict[Unit, dict[str, Any]]:
-        """The payload of each of the case's stored units."""
-        rows = self.db.execute(f"SELECT {_UNIT_COLUMNS}, payload FROM units WHERE case_key = ?", (case_key,))
-        return {Unit(*r[:7]): json.loads(r[7]) for r in rows}
+        """The payload of each of the case's stored units.  Decoded once until a unit of the case
+        is put (a run's analysis reads them more than once): the same dicts, to read, not change."""
+        if case_key not in self._decoded:
+            rows = self.db.execute(f"SELECT {_UNIT_COLUMNS}, payload FROM units WHERE case_key = ?",
+                                   (case_key,))
+            self._decoded[case_key] = {Unit(*r[:7]): json.loads(r[7]) for r in rows}
+        return self._decoded[case_key]
 
     def seconds(self, case_key: str) -> dict[Unit, float]:
         """Wall time (s) of each of the case's stored units."""

@@ -182,6 +182,43 @@ nb::dict state_dict(const Estimate &e) {
     return d;
 }
 
+nb::dict side_dict(const SideExtremes &e) {
+    nb::dict d;
+    d["peak"] = e.peak;
+    d["ties"] = e.ties;
+    d["below"] = nb::cast(e.below);
+    return d;
+}
+
+SideExtremes side_from(const nb::handle &h) {
+    nb::dict d = nb::cast<nb::dict>(h);
+    SideExtremes e;
+    e.peak = d["peak"].is_none() ? std::nan("") : nb::cast<double>(d["peak"]);
+    e.ties = nb::cast<uint64_t>(d["ties"]);
+    e.below = nb::cast<std::vector<double>>(d["below"]);
+    return e;
+}
+
+// A contributions' tails (value_tails) as plain numbers and lists: JSON-serialisable (a NaN
+// peak or median as None).
+nb::dict tails_dict(const ValueTails &t) {
+    nb::dict d;
+    d["upper"] = side_dict(t.upper);
+    d["lower"] = side_dict(t.lower);
+    for (nb::dict s : {nb::dict(d["upper"]), nb::dict(d["lower"])})
+        if (std::isnan(nb::cast<double>(s["peak"]))) s["peak"] = nb::none();
+    d["median"] = std::isnan(t.median) ? nb::none() : nb::cast(t.median);
+    return d;
+}
+
+ValueTails tails_from(const nb::dict &d) {
+    ValueTails t;
+    t.upper = side_from(d["upper"]);
+    t.lower = side_from(d["lower"]);
+    t.median = d["median"].is_none() ? std::nan("") : nb::cast<double>(d["median"]);
+    return t;
+}
+
 Estimate state_from(const nb::dict &d) {
     Estimate e;
     Moments &m = e.moments;
@@ -644,20 +681,50 @@ NB_MODULE(_core, m) {
        "Seconds of the pipeline's prefixes (points; contributions; the whole estimate) on the same chunks.");
     m.def("integrate_chunks", [check_pair](const Integrand &f, const Technique &t, int64_t n, uint64_t seed,
                                            uint64_t case_id, uint64_t replica, uint64_t chunk_begin, uint64_t chunk_end,
-                                           int threads) {
+                                           int threads, int64_t tail_keep, bool tail_median) {
         check_n(n);
         check_pair(f, t);
+        if (tail_keep < 0) throw nb::value_error("'tail_keep' must be >= 0");
         RunOptions o = options(seed, case_id, replica, threads);
         o.chunk_begin = chunk_begin;
         o.chunk_end = chunk_end;
+        o.tail_keep = size_t(tail_keep);
+        o.tail_median = tail_median;
         Estimate e;
         {
             nb::gil_scoped_release g;
             e = integrate(f, t, uint64_t(n), o);
         }
-        return state_dict(e);
+        nb::dict d = state_dict(e);
+        if (tail_keep > 0) d["tails"] = tails_dict(e.tails);
+        return d;
     }, "integrand"_a, "technique"_a, "n"_a, "seed"_a, "case_id"_a, "replica"_a, "chunk_begin"_a, "chunk_end"_a,
-       "threads"_a = 0, "The accumulator state of chunks [chunk_begin, chunk_end) of an estimate of n samples.");
+       "threads"_a = 0, "tail_keep"_a = 0, "tail_median"_a = false,
+       "The accumulator state of chunks [chunk_begin, chunk_end) of an estimate of n samples (with tail_keep > 0 "
+       "also the contributions' tails, key 'tails').");
+    m.def("value_tails", [](InArray y, int64_t keep, bool median) {
+        if (y.ndim() != 1) throw nb::value_error("'values' must be one-dimensional");
+        if (keep < 0) throw nb::value_error("'keep' must be >= 0");
+        ValueTails t;
+        {
+            nb::gil_scoped_release g;
+            t = value_tails(y.data(), y.size(), size_t(keep), median);
+        }
+        return tails_dict(t);
+    }, "values"_a, "keep"_a, "median"_a = false,
+       "The tails of values (NaN ignored): {'upper', 'lower': {'peak', 'ties', 'below'}, 'median'}.");
+    m.def("merge_tails", [](const std::vector<nb::dict> &parts, int64_t keep) {
+        if (keep < 0) throw nb::value_error("'keep' must be >= 0");
+        std::vector<ValueTails> ts;
+        ts.reserve(parts.size());
+        for (auto &d : parts) ts.push_back(tails_from(d));
+        ValueTails t;
+        {
+            nb::gil_scoped_release g;
+            t = merge_tails(ts, size_t(keep));
+        }
+        return tails_dict(t);
+    }, "parts"_a, "keep"_a, "The tails of the union of the parts' values, merged in the order given.");
     m.def("merge_states", [](const std::vector<nb::dict> &states) {
         std::vector<Estimate> parts;
         for (auto &d : states) parts.push_back(state_from(d));

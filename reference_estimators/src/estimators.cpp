@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "thread_pool.h"
@@ -356,16 +357,35 @@ void finish_block(double *y, double *x, int xd, size_t m, size_t dropped, const 
 Estimate integrate(const Integrand &f, const Technique &t, uint64_t n, const RunOptions &opt) {
     check_technique(f, t);
     const Kernel k(f, t, n, opt.key);
-    PerWorker<Scratch> scratch(resolve_threads(opt.threads));
-    return run_chunks(n, opt, [&](uint64_t c, uint64_t first, uint64_t count, Moments &acc, Diagnostics &diag, int w) {
+    const int threads = resolve_threads(opt.threads);
+    PerWorker<Scratch> scratch(threads);
+    // The tails: each chunk's finite contributions fed to its own collector, merged in chunk
+    // order afterwards (the same bits on any thread count); the first chunk's values kept for
+    // its median when asked for.
+    const bool tails = opt.tail_keep > 0;
+    const uint64_t c0 = std::min(opt.chunk_begin, chunk_count(n)), c1 = std::min(opt.chunk_end, chunk_count(n));
+    std::vector<ValueTails> chunk_tails(tails && c1 > c0 ? c1 - c0 : 0);
+    std::vector<double> first_chunk;
+    Estimate e = run_chunks(n, opt, [&](uint64_t c, uint64_t first, uint64_t count, Moments &acc, Diagnostics &diag,
+                                        int w) {
         UniformStream stream(chunk_key(opt.key, c));
         Scratch &s = scratch.get(w, [&] { return k.scratch(); });
+        std::optional<TailCollector> collector;
+        if (tails) collector.emplace(opt.tail_keep);
+        const bool median = tails && opt.tail_median && c == c0;
         for_each_block(count, [&](uint64_t b, size_t m) {
             size_t dropped = block_contributions(k, stream, m, first + b, s, diag);
             diag.drawn += m;
+            if (collector) collector->feed(s.y.data(), m, dropped ? s.drop.data() : nullptr);
+            if (median)
+                for (size_t i = 0; i < m; ++i) first_chunk.push_back(dropped && s.drop[i] ? std::nan("") : s.y[i]);
             finish_block(s.y.data(), s.points, k.xd, m, dropped, s.drop.data(), first + b, acc, diag, opt.higher_moments);
         });
+        if (collector) chunk_tails[c - c0] = collector->finish();
     });
+    if (!chunk_tails.empty() && opt.tail_median) chunk_tails[0].median = upper_median(first_chunk.data(), first_chunk.size());
+    if (tails) e.tails = merge_tails(chunk_tails, opt.tail_keep);
+    return e;
 }
 
 // fn(stream, scratch, diag, first, m) for every block of every chunk of an n-sample estimate

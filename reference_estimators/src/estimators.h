@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "accumulator.h"
+#include "extremes.h"
 #include "integrands.h"
 #include "pcg32.h"
 
@@ -20,6 +21,7 @@ struct Estimate {
     std::vector<double> busy; // seconds each thread spent in chunks (the caller's first)
     uint64_t chunks = 0;
     int threads = 1;
+    ValueTails tails;         // with RunOptions::tail_keep > 0: the finite contributions' tails
 };
 
 struct RunOptions {
@@ -30,6 +32,12 @@ struct RunOptions {
     // storage unit of the suite runner.  Merging the ranges' states in order rebuilds the
     // estimate (bitwise, for the same ranges).
     uint64_t chunk_begin = 0, chunk_end = UINT64_MAX;
+    // With tail_keep > 0, integrate() also keeps the tails of the finite contributions it
+    // accumulates (value_tails: `tail_keep` per side, merged over the range's chunks in chunk
+    // order) and, with tail_median, the upper median of the range's first chunk: the bias
+    // test's tail sample, drawn in the same pass as the estimate (no second pass over them).
+    size_t tail_keep = 0;
+    bool tail_median = false;
 };
 
 // Wall seconds of each prefix of integrate()'s pipeline, each run over the same chunks on the

@@ -8,6 +8,8 @@ import math
 import numpy as np
 import pytest
 
+import reference_estimators as rest
+
 from harness.stats import TailSample
 from harness.stats.tails import Side
 
@@ -89,3 +91,35 @@ def test_a_side_without_values_has_no_end_and_an_infinite_index():
     s.add(np.array([-1.0, 0.0]), center=0.0, upper=True)  # no deviation above the centre
     assert s.peak is None and s.end(0.01) is None and s.tail_index() == math.inf
     assert s.descending().size == 0
+
+
+@pytest.mark.parametrize("kind", ["pareto", "clamped", "rare event", "lognormal"])
+def test_the_units_tails_merge_to_what_one_pass_over_all_values_keeps(kind):
+    """TailSample.from_parts (the bias test's state units' tails) equals TailSample.add over
+    every value about the same centre, the first part's median."""
+    rng = np.random.default_rng(11)
+    y = {"pareto": rng.pareto(1.5, 400_000), "clamped": np.minimum(rng.pareto(1.5, 400_000), 50.0),
+         "rare event": np.where(rng.random(400_000) < 1e-4, 1e4, 0.0),
+         "lognormal": rng.lognormal(0.0, 3.0, 400_000)}[kind]
+    blocks = np.array_split(y, 64)
+    whole = TailSample.for_count(y.size)
+    whole.center = rest.value_tails(blocks[0], 0, median=True)["median"]
+    for b in blocks:
+        whole.add(b)
+    part_keep = -(-2 * whole.keep // 64) + 32
+    parts = [rest.value_tails(b, part_keep, median=i == 0) for i, b in enumerate(blocks)]
+    merged = TailSample.from_parts(parts, whole.keep, part_keep)
+    assert merged is not None and merged.center == whole.center
+    for ours, theirs in ((merged.up, whole.up), (merged.down, whole.down)):
+        assert ours.peak == theirs.peak and ours.ties == theirs.ties
+        np.testing.assert_array_equal(ours.below, theirs.below)
+
+
+def test_parts_that_kept_too_few_are_not_merged_as_if_exact():
+    """A part holding more than it kept above the union's keep-th value: None, not a wrong sample."""
+    rng = np.random.default_rng(12)
+    y = np.concatenate([rng.standard_normal(10_000) + 100.0, rng.standard_normal(10_000)])
+    parts = [rest.value_tails(b, 40, median=i == 0) for i, b in enumerate(np.array_split(y, 2))]
+    assert TailSample.from_parts(parts, 100, 40) is None   # the top 100 all lie in the first part
+    parts = [rest.value_tails(b, 100, median=i == 0) for i, b in enumerate(np.array_split(y, 2))]
+    assert TailSample.from_parts(parts, 100, 100) is not None

@@ -10,6 +10,7 @@ import pytest
 
 import reference_estimators as rest
 
+from harness.suite.estimators import EstimatorKind
 from harness.suite.parse import Suite, load_suite
 from harness.suite.plan import (
     UNIT_CHUNKS,
@@ -18,7 +19,10 @@ from harness.suite.plan import (
     bias_stream,
     case_key,
     convergence_budgets,
+    estimator_units,
     plan,
+    tail_keeps,
+    units_per_estimate,
 )
 
 CHUNK = rest.CHUNK_SIZE   # 65 536 contributions per core chunk
@@ -44,19 +48,27 @@ def chunk_ranges(units: list[Unit]) -> list[tuple[int, int]]:
 
 
 # --- what each measurement needs ---------------------------------------------------------------
-def test_bias_plans_every_batch_in_unit_sized_chunk_ranges_and_one_tail_unit(tmp_path):
+def test_bias_plans_every_batch_in_unit_sized_chunk_ranges_whose_units_carry_the_tails(tmp_path):
     per_batch = 70 * CHUNK   # 70 chunks: units of 32, 32 and 6 chunks
     suite = suite_of(tmp_path, f'samples = {8 * per_batch}\nbatches = 8\nmeasurements = ["bias"]',
                      case("gaussian", "uniform"))
     units = only(suite)
     key = case_key(suite, suite.cases[0])
-    states = [u for u in units if u.kind == "state"]
-    assert units[-1] == Unit(key, 0, per_batch, 0, 0, 0, "tail") and len(units) == len(states) + 1
+    assert {u.kind for u in units} == {"state"}   # no second pass over the contributions
     assert bias_budget(suite, suite.cases[0]) == per_batch
-    assert {(u.case_key, u.stream, u.budget) for u in states} == {(key, 0, per_batch)}
+    assert {(u.case_key, u.stream, u.budget) for u in units} == {(key, 0, per_batch)}
     for k in range(8):
-        assert chunk_ranges([u for u in states if u.replica == k]) == [(0, 32), (32, 64), (64, 70)], k
-    assert len(states) == 8 * 3
+        assert chunk_ranges([u for u in units if u.replica == k]) == [(0, 32), (32, 64), (64, 70)], k
+    assert len(units) == 8 * 3 == 8 * units_per_estimate(per_batch)
+    # each unit keeps twice its share of the tail sample's order statistics, plus 32
+    keep, part_keep = tail_keeps(suite, suite.cases[0])
+    assert keep == int((8 * per_batch) ** 0.5) and part_keep == -(-2 * keep // 24) + 32
+    jobs = EstimatorKind(suite).plan(None)
+    assert [j.unit for j in jobs] == sorted(units, key=lambda u: (u.stream, u.replica, u.chunk_begin))
+    assert {j.tail_keep for j in jobs} == {part_keep}
+    # where the units' tails cannot give the sample exactly, one unit reads the batches again
+    again = estimator_units(suite, suite.cases[0], full_tail=True)
+    assert again[-1] == Unit(key, 0, per_batch, 0, 0, 0, "tail") and again[:-1] == units
 
 
 def test_variance_without_bias_plans_the_batches_but_no_tail(tmp_path):
@@ -160,4 +172,4 @@ def test_a_look_moves_only_the_bias_batches_to_their_own_stream_and_budget(tmp_p
     budget = bias_budget(suite, target, 2)
     assert budget == (4096 << 2) // 8 and bias_stream(2) not in (0, 1, 2, 3)
     assert {(u.stream, u.budget) for u in moved} == {(bias_stream(2), budget)}
-    assert [u.kind for u in moved].count("tail") == 1 and len(moved) == 8 + 1
+    assert {u.kind for u in moved} == {"state"} and len(moved) == 8

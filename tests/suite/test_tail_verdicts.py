@@ -65,3 +65,27 @@ def test_the_stored_bias_row_keeps_the_tail_end(outcome):
             "SELECT detail FROM measurements WHERE measurement = 'bias' ORDER BY case_key")]
     ends = sorted(d["tail_end"] for d in details)
     assert ends[0] == "" and ends[1].startswith("clamped at 164.6 (")
+
+
+def _tails_and_bias(summary):
+    return [(r.bias.statistic, r.bias.pvalue, r.bias.verdict, r.bias.tail_index, r.bias.tail_end)
+            for r in summary["estimator"].results]
+
+
+def test_the_tails_come_from_the_state_units_and_equal_a_second_pass_over_every_batch(outcome, monkeypatch):
+    """The bias test's state units carry their contributions' tails (no unit reads them again);
+    where the units' tails cannot give the tail sample exactly (here: forced, one value kept per
+    unit), a tail unit reads every batch again, and the verdicts are the same bits."""
+    repo, summary = outcome
+    with sqlite3.connect(repo / "r.sqlite") as con:
+        kinds = dict(con.execute("SELECT kind, COUNT(*) FROM units GROUP BY kind").fetchall())
+    assert set(kinds) == {"state"}
+    import harness.suite.estimators as estimators
+
+    keeps = estimators.tail_keeps
+    monkeypatch.setattr(estimators, "tail_keeps", lambda *a: (keeps(*a)[0], 1))
+    again = run_suite(load_suite(repo / "suite.toml"), repo / "again.sqlite", threads=2)
+    with sqlite3.connect(repo / "again.sqlite") as con:
+        kinds = dict(con.execute("SELECT kind, COUNT(*) FROM units GROUP BY kind").fetchall())
+    assert kinds.get("tail") == 2   # one per case
+    assert _tails_and_bias(again) == _tails_and_bias(summary)
