@@ -15,12 +15,14 @@ bias test's samples (a new "look") until its interval is narrow enough.
 """
 from __future__ import annotations
 
+import base64
 import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
 import reference_estimators as rest
@@ -93,6 +95,8 @@ class EstimateJob:
                                 tail_median=u.replica == 0 and u.chunk_begin == 0)
             if clock is not None:
                 payload = {**payload, "clock": clock}
+            if "tails" in payload:
+                payload["tails"] = _packed(payload["tails"])
         else:
             tails = stats.TailSample.for_count(u.budget * self.batches)
             for k in range(self.batches):
@@ -250,6 +254,25 @@ def _clock_of(payloads: dict[Unit, dict], stream: int, budget: int, replicas: in
     return clock if all(c > 0 for c in clock) else None
 
 
+# A unit's tails are stored with each side's values below its peak as base64 of little-endian
+# float64 (exact, and about 20x faster to write and read than JSON's decimal floats: with
+# hundreds of values per unit they were a tenth of a run's time).
+def _packed(tails: dict[str, Any]) -> dict[str, Any]:
+    out = dict(tails)
+    for side in ("upper", "lower"):
+        below = np.asarray(tails[side]["below"], dtype="<f8")
+        out[side] = {**tails[side], "below": base64.b64encode(below.tobytes()).decode("ascii")}
+    return out
+
+
+def _unpacked(tails: dict[str, Any]) -> dict[str, Any]:
+    out = dict(tails)
+    for side in ("upper", "lower"):
+        below = np.frombuffer(base64.b64decode(tails[side]["below"]), dtype="<f8")
+        out[side] = {**tails[side], "below": below.tolist()}
+    return out
+
+
 def _tail_sample(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int) -> stats.TailSample | None:
     """The bias test's tail sample at look ``look``: from its tail unit where one is stored,
     else merged from its state units' tails (replica 0's first unit first: its median is the
@@ -261,7 +284,7 @@ def _tail_sample(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int
             if u.kind == "tail":
                 return stats.TailSample.from_state(p)
             if u.kind == "state" and "tails" in p:
-                parts.append(((u.replica, u.chunk_begin), p["tails"]))
+                parts.append(((u.replica, u.chunk_begin), _unpacked(p["tails"])))
     if len(parts) != suite.batches * units_per_estimate(b):
         return None
     keep, part_keep = tail_keeps(suite, case, look)
