@@ -41,7 +41,7 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from scipy import stats
+from scipy import special, stats
 
 import reference_estimators as rest
 
@@ -335,9 +335,7 @@ class _FrozenProposal:
     def log_density(self, p: np.ndarray) -> np.ndarray:
         """log g(p) at points p (N, k) of [0, 1]^k (g integrates to 1 over R^k)."""
         d2 = _squared_distances(p / self.scale, self.centres)
-        e = self.log_weight[None, :] - 0.5 * d2 / (self.h * self.h)[None, :]
-        top = e.max(axis=1)
-        kde = top + np.log(np.exp(e - top[:, None]).sum(axis=1))
+        kde = special.logsumexp(self.log_weight[None, :] - 0.5 * d2 / (self.h * self.h)[None, :], axis=1)
         return np.logaddexp(math.log1p(-DEFENSIVE) + kde, math.log(DEFENSIVE))
 
     def propose(self, coords: np.ndarray, random: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -367,8 +365,7 @@ def _log_kernel_sum(p: np.ndarray, c: np.ndarray, h: np.ndarray) -> np.ndarray:
     """log sum_j exp(-|(p_i - c_j) / h|^2 / 2) for points p (N, k), centres c (M, k)."""
     ph, ch = p / h, c / h
     e = (ph @ ch.T) - 0.5 * (ch * ch).sum(axis=1)[None, :] - 0.5 * (ph * ph).sum(axis=1)[:, None]
-    m = e.max(axis=1)
-    return m + np.log(np.exp(e - m[:, None]).sum(axis=1))
+    return special.logsumexp(e, axis=1)
 
 
 class _Chain:
