@@ -20,31 +20,44 @@ import reference_estimators as rest
 __all__ = ["CLOCK", "reference_clock", "clock_time", "median_time", "time_blocks", "satterthwaite"]
 
 # The reference clock: uniform Monte Carlo of the catalogue's gaussian over one core chunk
-# (65 536 samples) on one thread, always the same seed, so always the same work, timed once
-# just before the replica on the replica's thread.  Why this kernel: it runs the path every
-# catalogue replica runs (the core's points, integrand and accumulator, called from Python),
-# so it slows down with what slows a replica down (clock speed, the other thread of the
-# suite or other jobs on the core and its caches, the process's state).  Why one chunk, timed
-# once: a clock shorter than a replica, or the fastest of several ticks, is disturbed less
+# (65 536 samples) on one thread, always the same seed, so always the same work, run twice
+# just before the replica on the replica's thread and timed the second time.  Why this kernel:
+# it runs the path every catalogue replica runs (the core's points, integrand and accumulator,
+# called from Python), so it slows down with what slows a replica down (clock speed, the other
+# thread of the suite or other jobs on the core and its caches, the process's state).  Why one
+# chunk: a clock shorter than a replica, or the fastest of several ticks, is disturbed less
 # than the replica by a busy neighbour, and the time in clock units then moves with the load
 # (measured, 96 replicas of gaussian at 62 500 samples, with and without a busy process on
 # the other core: time in clock units changed by -4 % (uniform) and -9 % (importance:linear)
 # for one tick of 16 384 samples, -2 % and -4 % for the fastest of 3 such ticks, -0.1 % and
-# -0.5 % for one tick of a whole chunk).  Its cost, about 0.2 ms per unit of a replica (at
-# most 1/32 of the unit's work once a replica holds 32 chunks), is paid only by the cases that
-# measure efficiency, for the replicas of their largest budget.  The clock's description is
-# part of every estimator case's key: changing it makes every stored clock reading stale.
+# -0.5 % for one tick of a whole chunk).  Why the second tick: the first one after the worker
+# thread picks up a unit runs with cold caches and predictors, a cost that differs from one
+# process to the next, while the replica after it runs warm; timed cold, the clock made the
+# figure in ticks vary more between fresh processes than the figure in seconds (SD of log10
+# 0.042 against 0.0065, uniform MC, idle machine), timed warm 0.003-0.006, and its interval
+# then covers the median of 20 fresh runs as often as it claims (benchmarks/
+# efficiency_coverage.py: 58/60 and 57/60 at 95 %, against 12/20 and 18/20 timed cold).  Its
+# cost, about 0.4 ms per unit of a replica (at most 1/16 of the unit's work once a replica
+# holds 32 chunks), is paid only by the cases that measure efficiency, for the replicas of
+# their largest budget.  The clock's description is part of every estimator case's key:
+# changing it makes every stored clock reading stale.
 CLOCK = {"integrand": "gaussian", "technique": "uniform", "samples": 65536, "seed": 0, "case_id": 0xC10C,
-         "replica": 0, "version": 2}
+         "replica": 0, "version": 3, "ticks": "the second of two"}
 
 
 def reference_clock() -> float:
-    """Wall time (s) of one reading of the reference clock (:data:`CLOCK`) on this thread, now."""
+    """Wall time (s) of one reading of the reference clock (:data:`CLOCK`) on this thread, now:
+    the second of two runs of its work, back to back (the first warms the caches)."""
     f = rest.integrand(CLOCK["integrand"])
     t = rest.technique(f, CLOCK["technique"])
+
+    def tick() -> None:
+        rest.integrate_chunks(f, t, CLOCK["samples"], 0, 1, seed=CLOCK["seed"], case_id=CLOCK["case_id"],
+                              replica=CLOCK["replica"], threads=1)
+
+    tick()
     start = time.perf_counter()
-    rest.integrate_chunks(f, t, CLOCK["samples"], 0, 1, seed=CLOCK["seed"], case_id=CLOCK["case_id"],
-                          replica=CLOCK["replica"], threads=1)
+    tick()
     return time.perf_counter() - start
 
 

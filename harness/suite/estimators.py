@@ -219,7 +219,7 @@ class EstimatorKind:
                 "(expected -0.5 for Monte Carlo); 1/(V·T): efficiency (background eq. 5) against uniform MC "
                 "on the same integrand (replicas interleaved: the machine's state cancels); "
                 "log10 1/(V·T_clock): per case, T in ticks of the reference clock timed beside each "
-                "replica, an interval meant for other runs too (not held on an idle machine: README; "
+                "replica, an interval that holds across runs (on this kind of CPU; README); "
                 "1/(V·T) in 1/s, harness.load's log10_efficiency: "
                 "an interval of this run's machine state only)."
                 if results else "")
