@@ -176,17 +176,18 @@ class EstimatorKind:
         """Plans a tail unit for each case whose state units' tails cannot give its tail sample
         exactly; moves each case with an unreached precision target to its next look."""
         grown = False
-        payloads = {key: store.payloads(key) for key in self.case_of}
         for key, c in self.case_of.items():
-            missing = self._tails(key, payloads[key]) is None
-            if "bias" in c.measurements and missing and key not in self.full_tails:
+            if "bias" in c.measurements and key not in self.full_tails and \
+                    self._tails(key, store.payloads(key)) is None:
                 self.full_tails.add(key)
                 grown = True
         for key, look in self.looks.items():
             c = self.case_of[key]
-            if "bias" in c.measurements and self._tails(key, payloads[key]) is None:
+            payloads = store.payloads(key)
+            tails = self._tails(key, payloads) if "bias" in c.measurements else None
+            if "bias" in c.measurements and tails is None:
                 continue   # its tail unit runs first
-            r = _measure(self.suite, c, payloads[key], look, self._tails(key, payloads[key]))
+            r = _measure(self.suite, c, payloads, look, tails)
             if look + 1 < c.looks and (r.bias is None or not r.target_half_width <= c.target):
                 self.looks[key] = look + 1
                 grown = True

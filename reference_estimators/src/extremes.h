@@ -21,12 +21,12 @@ struct SideExtremes {
 
 namespace detail {
 
-// The deviations of y that are >= floor, compacted into out (room for n); returns their count
-// and sets peak to their maximum (`least` if none).  Branch-free.
+// The positive deviations of y that are >= floor (floor > 0), compacted into out (room for n);
+// returns their count and sets peak to their maximum (0 if none).  Branch-free.
 inline size_t deviations_at_least(const double *y, size_t n, double center, bool upper, double floor, double *out,
-                                  double &peak, double least) {
+                                  double &peak) {
     size_t k = 0;
-    double top = least;
+    double top = 0;
     for (size_t i = 0; i < n; ++i) {
         double v = upper ? y[i] - center : center - y[i];
         out[k] = v;
@@ -40,25 +40,22 @@ inline size_t deviations_at_least(const double *y, size_t n, double center, bool
 }  // namespace detail
 
 // Over the positive deviations d = y - center (upper) or center - y (lower) of y[0..n), as
-// numpy computes them (NaN values have none); with `positive` false, over every deviation but
-// NaN (center 0: the largest values, or the largest of -y).  A subsample of every 16th deviation gives a
+// numpy computes them (NaN values have none).  A subsample of every 16th deviation gives a
 // floor that about 1.5 keep + 1000 deviations clear; only those are kept and selected from.
 // Where too few clear it (a heavy atom, or unlucky), the selection is redone over every
 // positive deviation, so the result is exact either way.
-inline SideExtremes side_extremes(const double *y, size_t n, double center, bool upper, size_t keep,
-                                  bool positive = true) {
+inline SideExtremes side_extremes(const double *y, size_t n, double center, bool upper, size_t keep) {
     constexpr size_t kStride = 16;
     std::unique_ptr<double[]> buf(new double[n > 0 ? n : 1]);
-    // v >= least: v > 0 (positive), or v is not NaN
-    const double least = positive ? std::numeric_limits<double>::denorm_min() : -HUGE_VAL;
-    double peak = least, floor = least;
+    const double positive = std::numeric_limits<double>::denorm_min();  // v >= it: v > 0
+    double peak = 0, floor = positive;
     const size_t want = keep + keep / 2 + 1000;
     if (n / kStride > 4 * (want / kStride + 1)) {
         std::vector<double> sub;
         sub.reserve(n / kStride + 1);
         for (size_t i = 0; i < n; i += kStride) {
             double v = upper ? y[i] - center : center - y[i];
-            if (v >= least) sub.push_back(v);
+            if (v > 0) sub.push_back(v);
         }
         const size_t q = want / kStride + 1;
         if (sub.size() > q) {
@@ -66,9 +63,9 @@ inline SideExtremes side_extremes(const double *y, size_t n, double center, bool
             floor = sub[q - 1];
         }
     }
-    size_t m = detail::deviations_at_least(y, n, center, upper, floor, buf.get(), peak, least);
+    size_t m = detail::deviations_at_least(y, n, center, upper, floor, buf.get(), peak);
     SideExtremes s;
-    if (m == 0) return s;
+    if (!(peak > 0)) return s;
     auto below_peak = [&] {
         size_t kept = 0;
         s.ties = 0;
@@ -80,9 +77,9 @@ inline SideExtremes side_extremes(const double *y, size_t n, double center, bool
         return kept;
     };
     size_t kept = below_peak();
-    if (kept < keep && floor > least) {  // too few cleared the floor: all of them
-        floor = least;
-        m = detail::deviations_at_least(y, n, center, upper, floor, buf.get(), peak, least);
+    if (kept < keep && floor > positive) {  // too few cleared the floor: all of them
+        floor = positive;
+        m = detail::deviations_at_least(y, n, center, upper, floor, buf.get(), peak);
         kept = below_peak();
     }
     s.peak = peak;
@@ -190,8 +187,8 @@ class SideCollector {
 };
 
 // The tails of a set of values for the bias test's tail sample: the largest values (upper) and
-// the largest of -y (lower), each side's peak, ties and `keep` below it (as side_extremes with
-// `positive` false); NaN and infinite values ignored.
+// the largest of -y (lower), each side's peak, ties and `keep` below it; NaN and infinite
+// values ignored.
 struct ValueTails {
     SideExtremes upper, lower;
     double median = std::nan("");  // the upper median of the finite values, when asked for
