@@ -13,7 +13,7 @@ from . import _core
 
 __all__ = [
     "CHECK_DOMAINS", "domain_params", "domain_points", "cubature_nodes", "grid_histogram", "rosenblatt",
-    "piecewise_linear_lookup", "strip_bin_counts", "cramer_von_mises_root", "pdf_summary",
+    "piecewise_linear_lookup", "strip_bin_counts", "cramer_von_mises_root", "pdf_summary", "float32_unit_rows",
 ]
 
 #: The sampling domains of the sampler check, in the order the core numbers them.
@@ -48,6 +48,16 @@ def domain_points(kind: str, s: Any, lo: float = 0.0, hi: float = 1.0) -> np.nda
     rounds 2 pi s1): the same points to rounding.  In C++ with the GIL released."""
     a = np.ascontiguousarray(s, dtype=np.float64)
     return _core.domain_points(_check_domain(kind), float(lo), float(hi), a)
+
+
+def float32_unit_rows(x: Any, slack: float) -> tuple[np.ndarray, np.ndarray]:
+    """(columns, ok): the rows of x (N, 3) as float32 unit vectors, columns (3, N) float32 (row
+    j of it C-contiguous): a row whose length is within ``slack`` of 1 rounded as given,
+    another finite non-zero one normalised in float64 first; ``ok`` (N,) False for a row that
+    is not a finite non-zero vector (its column entries are then +z).  What a float32
+    renderer's pdf is called with, in one pass in C++ (numpy took 34 ns a row)."""
+    a = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3)
+    return _core.float32_unit_rows(a, float(slack))
 
 
 def cubature_nodes(lo: Any, hi: Any, nodes: Any) -> np.ndarray:

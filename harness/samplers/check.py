@@ -34,7 +34,7 @@ import pandas as pd
 
 import reference_estimators as rest
 
-from harness.samplers.cubature import cell_integrals
+from harness.samplers.cubature import cell_integrals, rounding_floor
 from harness.samplers.domains import Domain, as_domain
 from harness.samplers.reported import reported_pdf_failure
 from harness.samplers.transform import STRIPS, Transform, cramer_von_mises_columns, equiprobable_counts
@@ -153,8 +153,17 @@ class SamplerTest:
         self.alpha = alpha
         self.base = base = (4096,) if dom.k == 1 else (128, 256)
         pre_shape = (64,) if dom.k == 1 else (32, 64)
-        pre, _ = cell_integrals(lambda sp: np.column_stack([self.q(sp), self.q(sp) ** 2]), pre_shape, 1e-8,
-                                max_depth=12)
+        # the pdf's rounding, judged at the pre-grid's cell centres: a float32 pdf's own noise
+        # is where the cubature stops refining
+        centres = (np.stack(np.meshgrid(*[np.arange(m) for m in pre_shape], indexing="ij"), axis=-1)
+                   .reshape(-1, dom.k) + 0.5) / np.array(pre_shape)
+        self.floor = floor = rounding_floor(self.pdf(dom.to_points(centres)))
+
+        def squares(sp: np.ndarray) -> np.ndarray:
+            v = self.q(sp)
+            return np.column_stack([v, v * v])
+
+        pre, _ = cell_integrals(squares, pre_shape, 1e-8, max_depth=12, floor=floor)
         self.c = c = float(pre[:, 1].sum() / max(pre[:, 0].sum(), 1e-300))  # E_q[q], in units of q
 
         def moments(sp: np.ndarray) -> np.ndarray:
@@ -169,13 +178,13 @@ class SamplerTest:
             expect = np.repeat(expect, r, axis=axis)
         expect = n * expect / int(np.prod(per))
         tol = 0.01 * np.sqrt(np.maximum(expect.reshape(-1), 1.0)) / n / (4 if dom.k == 2 else 2)
-        mass3, err3 = cell_integrals(moments, base, tol)
+        mass3, err3 = cell_integrals(moments, base, tol, floor=floor)
         self.quadrature_faults = int((~np.all(np.isfinite(mass3), axis=1)).sum())
         mass3, err3 = np.nan_to_num(mass3), np.nan_to_num(err3)
         self.mass, self.err = mass3[:, 0].reshape(base), err3[:, 0].reshape(base)
         self.h_moments = (float(mass3[:, 1].sum()), float(mass3[:, 2].sum()), float(err3[:, 1].sum()))
         self.normalization = (float(self.mass.sum()), float(self.err.sum()))
-        self.transform = Transform.build(self.q, dom.k, n)
+        self.transform = Transform.build(self.q, dom.k, n, floor=floor)
 
     def q(self, sp: np.ndarray) -> np.ndarray:
         """The claimed density in parameter space: |D| pdf(x(s))."""

@@ -81,15 +81,16 @@ class AxisCdf:
 
 
 def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: np.ndarray, leaves: int,
-              eps: float, max_share: float = 1.0) -> AxisCdf:
+              eps: float, max_share: float = 1.0, floor: float = 0.0) -> AxisCdf:
     """The CDF of q along ``axis`` within each strip: strip g spans all of [0, 1] along
     ``axis`` (cut into ``leaves`` leaves to start) and, on the square, the pieces
     pieces[g, j] = (lo, hi) across it (arrays (S, P, 2); each leaf quarter is integrated as one
     box per piece, so the cubature starts where the mass is).  Leaves are halved while the
     CDF deviates from linearity by more than eps (times the strip's mass) at a quarter point
     or a quarter holds more than ``max_share`` of it, or until _MAX_DEPTH, _MIN_WIDTH or
-    _MAX_BOXES.  A box whose integral is not finite counts as mass 0 with error 1 (the bound
-    then covers the whole strip: its tests lose their power, never their level)."""
+    _MAX_BOXES; the cubature stops at q's rounding ``floor`` (relative).  A box whose
+    integral is not finite counts as mass 0 with error 1 (the bound then covers the whole
+    strip: its tests lose their power, never their level)."""
     nstrip, npiece = pieces.shape[:2]
     strip = np.repeat(np.arange(nstrip), leaves)
     a = np.tile(np.arange(leaves) / leaves, nstrip)
@@ -108,7 +109,8 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
         lo[:, axis], hi[:, axis] = np.repeat(qa, npiece), np.repeat(qb, npiece)
         if k == 2:
             lo[:, 1 - axis], hi[:, 1 - axis] = pieces[g, :, 0].reshape(-1), pieces[g, :, 1].reshape(-1)
-        val, err = box_integrals(q, lo, hi, tol, max_depth=16 if k == 1 else 8, max_evals=_MAX_EVALS)
+        val, err = box_integrals(q, lo, hi, tol, max_depth=16 if k == 1 else 8, max_evals=_MAX_EVALS,
+                                 floor=floor)
         bad = ~(np.isfinite(val[:, 0]) & np.isfinite(err[:, 0]))   # a pdf infinite at a node
         val = np.where(bad, 0.0, val[:, 0])
         err = np.where(bad, 1.0, err[:, 0])     # unknown mass: the bound becomes the whole strip
@@ -201,25 +203,26 @@ class Transform:
     error: float
 
     @classmethod
-    def build(cls, q: Callable[[np.ndarray], np.ndarray], k: int, n: int) -> Transform:
+    def build(cls, q: Callable[[np.ndarray], np.ndarray], k: int, n: int, floor: float = 0.0) -> Transform:
         """Tabulates q's CDFs for a test of ``n`` points: to eps = 0.02 / sqrt(n) on the
         square, so that the carried error moves sqrt(n W^2) by at most about 0.02, and ten
         times finer on an interval (cheap there), where the equiprobable chi-square's up to
         1024 bins would otherwise feel the error.  On the square the strips'
         edges are the marginal's quantiles g / STRIPS, each strip integrated across as
         SUBSTRIPS pieces of equal claimed mass; a strip whose integral disagrees with the
-        marginal's 1 / STRIPS (mass the cubature missed) adds the disagreement to the bound."""
+        marginal's 1 / STRIPS (mass the cubature missed) adds the disagreement to the bound.
+        ``floor``: q's rounding (:func:`harness.samplers.cubature.rounding_floor`)."""
         eps = 0.02 / math.sqrt(n)
         if k == 1:
             eps /= 10
-            marginal = _tabulate(q, 1, 0, np.zeros((1, 1, 2)), 1024, eps)
+            marginal = _tabulate(q, 1, 0, np.zeros((1, 1, 2)), 1024, eps, floor=floor)
             return cls(marginal, None, np.array([0.0, 1.0]), np.ones(1), marginal.error)
         cuts = np.arange(_MARGINAL_PIECES + 1) / _MARGINAL_PIECES
         marginal = _tabulate(q, 2, 0, np.stack([cuts[:-1], cuts[1:]], axis=1)[None], 128, eps / 8,
-                             max_share=1 / (4 * STRIPS * SUBSTRIPS))
+                             max_share=1 / (4 * STRIPS * SUBSTRIPS), floor=floor)
         levels, cdf = _snapped_levels(marginal, STRIPS * SUBSTRIPS)
         pieces = np.stack([levels[:-1], levels[1:]], axis=1).reshape(STRIPS, SUBSTRIPS, 2)
-        conditional = _tabulate(q, 2, 1, pieces, 64, eps)
+        conditional = _tabulate(q, 2, 1, pieces, 64, eps, floor=floor)
         probability = np.diff(cdf[::SUBSTRIPS])
         share = marginal.strip_mass[0] * probability
         missed = np.abs(conditional.strip_mass - share) / np.maximum(share, 1e-300)

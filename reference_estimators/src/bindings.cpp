@@ -553,6 +553,21 @@ NB_MODULE(_core, m) {
         }
         return xa;
     }, "kind"_a, "lo"_a, "hi"_a, "s"_a, "Points x(s) (N,) or (N, point_dim) of parameters s (N, k) on domain `kind`.");
+    m.def("float32_unit_rows", [](InArray x, double slack) {
+        const size_t n = check_points(x, 3, "x");
+        float *cols = new float[n > 0 ? 3 * n : 1];
+        nb::capsule owner(cols, [](void *q) noexcept { delete[] static_cast<float *>(q); });
+        nb::ndarray<nb::numpy, float> ca(cols, {size_t(3), n}, owner);
+        bool *ok;
+        auto oa = new_bool_array(n, &ok);
+        {
+            nb::gil_scoped_release g;
+            float32_unit_rows(x.data(), n, slack, cols, ok);
+        }
+        return nb::make_tuple(ca, oa);
+    }, "x"_a, "slack"_a,
+       "(columns (3, N) float32, ok (N,)): rows x (N, 3) as float32 unit vectors (normalised first where their "
+       "length is off 1 by more than `slack`); rows that are not finite non-zero vectors become +z, ok False.");
     m.def("cubature_nodes", [](InArray lo, InArray hi, InArray nodes) {
         if (lo.ndim() != 2 || hi.ndim() != 2 || lo.shape(0) != hi.shape(0) || lo.shape(1) != hi.shape(1) ||
             (lo.shape(1) != 1 && lo.shape(1) != 2))

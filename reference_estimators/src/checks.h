@@ -112,6 +112,49 @@ inline void domain_params(CheckDomain d, double lo, double hi, const double *x, 
 // the inverse maps of domain_params, in numpy's order of operations except the azimuth's
 // cosine and sine, which are fastmath's sincos_2pi of s1 (exact argument reduction; numpy's
 // cos(2 pi s1) rounds 2 pi s1 first): the same points to rounding.
+// One point on the disk (k = 2 coordinates out) or the (hemi)sphere (3 out) from its
+// parameters, for double or simd::f64v lanes.
+template <class D>
+RE_INLINE void disk_point(D s0, D s1, D *x) {
+    const D r = simd::sqrt(s0);
+    D sn, cs;
+    fm::sincos_2pi(s1, sn, cs);
+    x[0] = r * cs;
+    x[1] = r * sn;
+}
+template <class D>
+RE_INLINE void sphere_point(bool hemi, D s0, D s1, D *x) {
+    const D z = hemi ? s0 : 1 - 2 * s0;
+    const D w = 1 - z * z;
+    const D r = simd::sqrt(w > 0 ? w : D{});
+    D sn, cs;
+    fm::sincos_2pi(s1, sn, cs);
+    x[0] = r * cs;
+    x[1] = r * sn;
+    x[2] = z;
+}
+
+// point(s0, s1, out) for every parameter pair of s (n, 2) into x (n, m): kWidth points at a
+// time through the vector lanes (the azimuth's sincos is most of the work), the tail in
+// scalars; the same bits either way.
+template <int M, class Point>
+RE_INLINE void map_pairs(const double *s, size_t n, double *x, Point point) {
+    using simd::f64v;
+    constexpr size_t W = simd::kWidth;
+    size_t i = 0;
+    for (; i + W <= n; i += W) {
+        f64v s0, s1, out[M];
+        for (size_t w = 0; w < W; ++w) {
+            s0[w] = s[2 * (i + w)];
+            s1[w] = s[2 * (i + w) + 1];
+        }
+        point(s0, s1, out);
+        for (size_t w = 0; w < W; ++w)
+            for (int j = 0; j < M; ++j) x[M * (i + w) + j] = out[j][w];
+    }
+    for (; i < n; ++i) point(s[2 * i], s[2 * i + 1], x + M * i);
+}
+
 inline void domain_points(CheckDomain d, double lo, double hi, const double *s, size_t n, double *x) {
     switch (d) {
         case CheckDomain::interval:
@@ -124,29 +167,34 @@ inline void domain_points(CheckDomain d, double lo, double hi, const double *s, 
             std::copy(s, s + 2 * n, x);
             return;
         case CheckDomain::disk:
-            for (size_t i = 0; i < n; ++i) {
-                const double r = std::sqrt(s[2 * i]);
-                double sn, cs;
-                fm::sincos_2pi(s[2 * i + 1], sn, cs);
-                x[2 * i] = r * cs;
-                x[2 * i + 1] = r * sn;
-            }
+            map_pairs<2>(s, n, x, [](auto s0, auto s1, auto *out) { disk_point(s0, s1, out); });
             return;
         case CheckDomain::hemisphere:
         case CheckDomain::sphere: {
             const bool hemi = d == CheckDomain::hemisphere;
-            for (size_t i = 0; i < n; ++i) {
-                const double z = hemi ? s[2 * i] : 1 - 2 * s[2 * i];
-                const double w = 1 - z * z;
-                const double r = std::sqrt(w > 0 ? w : 0.0);
-                double sn, cs;
-                fm::sincos_2pi(s[2 * i + 1], sn, cs);
-                x[3 * i] = r * cs;
-                x[3 * i + 1] = r * sn;
-                x[3 * i + 2] = z;
-            }
+            map_pairs<3>(s, n, x, [hemi](auto s0, auto s1, auto *out) { sphere_point(hemi, s0, s1, out); });
             return;
         }
+    }
+}
+
+// Rows x (n, 3) as float32 unit vectors, column by column into out (3 rows of n): a row of
+// length within `slack` of 1 is rounded as given, another finite non-zero one is normalised
+// in double first; a row that is not a finite non-zero vector becomes +z with ok false.  What
+// a float32 renderer's pdf is called with (Mitsuba's adapter), in one pass.
+inline void float32_unit_rows(const double *x, size_t n, double slack, float *out, bool *ok) {
+    for (size_t i = 0; i < n; ++i) {
+        double a = x[3 * i], b = x[3 * i + 1], c = x[3 * i + 2];
+        const double norm = std::sqrt(a * a + b * b + c * c);
+        const bool good = std::isfinite(norm) && norm > 0;
+        const double scale = good && std::fabs(norm - 1) > slack ? norm : 1.0;
+        a = good ? a / scale : 0.0;
+        b = good ? b / scale : 0.0;
+        c = good ? c / scale : 1.0;
+        out[i] = float(a);
+        out[n + i] = float(b);
+        out[2 * n + i] = float(c);
+        ok[i] = good;
     }
 }
 

@@ -96,36 +96,40 @@ inline double log(double x) {
     return x != x ? x : y;
 }
 
-// sin and cos of 2*pi*u for any finite u: the reduction u - q/4 is exact, so the result
-// is accurate for the canonical uniforms the samplers feed in.
-inline void sincos_2pi(double u, double &s, double &c) {
-    double q = u * 4.0;
-    const double kShift = 0x1.8p52;
-    double qn = (q + kShift) - kShift;  // nearest integer
-    double r = (u - qn * 0.25) * 6.283185307179586;  // |r| <= pi/4
-    double r2 = r * r;
-    double ps = -1.0 / 1307674368000.0;
-    ps = std::fma(ps, r2, 1.0 / 6227020800.0);
-    ps = std::fma(ps, r2, -1.0 / 39916800.0);
-    ps = std::fma(ps, r2, 1.0 / 362880.0);
-    ps = std::fma(ps, r2, -1.0 / 5040.0);
-    ps = std::fma(ps, r2, 1.0 / 120.0);
-    ps = std::fma(ps, r2, -1.0 / 6.0);
-    double sr = r + r * r2 * ps;
-    double pc = 1.0 / 20922789888000.0;
-    pc = std::fma(pc, r2, -1.0 / 87178291200.0);
-    pc = std::fma(pc, r2, 1.0 / 479001600.0);
-    pc = std::fma(pc, r2, -1.0 / 3628800.0);
-    pc = std::fma(pc, r2, 1.0 / 40320.0);
-    pc = std::fma(pc, r2, -1.0 / 720.0);
-    pc = std::fma(pc, r2, 1.0 / 24.0);
-    pc = std::fma(pc, r2, -0.5);
-    double cr = 1.0 + r2 * pc;
-    int64_t quadrant = int64_t(qn) & 3;
-    double ss = quadrant == 0 ? sr : (quadrant == 1 ? cr : (quadrant == 2 ? -sr : -cr));
-    double cc = quadrant == 0 ? cr : (quadrant == 1 ? -sr : (quadrant == 2 ? -cr : sr));
-    s = ss;
-    c = cc;
+// sin and cos of 2 pi u for double or simd::f64v (the same bits lane by lane), |u| < 2^48:
+// the reduction u - q/4 is exact, so the result is accurate for the canonical uniforms the
+// samplers feed in; the quadrant is read from the low bits of u 4 + 1.5 2^52 (which hold
+// round(4 u) in two's complement) and applied by selects, so a vector of random azimuths
+// costs no mispredicted branch.
+template <class D>
+RE_INLINE void sincos_2pi(D u, D &s, D &c) {
+    using simd::fma;
+    const D shift = D{} + 0x1.8p52;
+    const D t = u * 4.0 + shift;
+    const D qn = t - shift;  // nearest integer to 4 u
+    const D r = (u - qn * 0.25) * 6.283185307179586;  // |r| <= pi/4
+    const D r2 = r * r;
+    D ps = D{} - 1.0 / 1307674368000.0;
+    ps = fma(ps, r2, D{} + 1.0 / 6227020800.0);
+    ps = fma(ps, r2, D{} - 1.0 / 39916800.0);
+    ps = fma(ps, r2, D{} + 1.0 / 362880.0);
+    ps = fma(ps, r2, D{} - 1.0 / 5040.0);
+    ps = fma(ps, r2, D{} + 1.0 / 120.0);
+    ps = fma(ps, r2, D{} - 1.0 / 6.0);
+    const D sr = r + r * r2 * ps;
+    D pc = D{} + 1.0 / 20922789888000.0;
+    pc = fma(pc, r2, D{} - 1.0 / 87178291200.0);
+    pc = fma(pc, r2, D{} + 1.0 / 479001600.0);
+    pc = fma(pc, r2, D{} - 1.0 / 3628800.0);
+    pc = fma(pc, r2, D{} + 1.0 / 40320.0);
+    pc = fma(pc, r2, D{} - 1.0 / 720.0);
+    pc = fma(pc, r2, D{} + 1.0 / 24.0);
+    pc = fma(pc, r2, D{} - 0.5);
+    const D cr = 1.0 + r2 * pc;
+    const auto quadrant = simd::bits(t) & 3u;
+    const D nsr = -sr, ncr = -cr;
+    s = quadrant == 0 ? sr : (quadrant == 1 ? cr : (quadrant == 2 ? nsr : ncr));
+    c = quadrant == 0 ? cr : (quadrant == 1 ? nsr : (quadrant == 2 ? ncr : sr));
 }
 
 // |x| and the sign bit of x (true for -0 and negative NaNs), for double or simd::f64v.

@@ -89,6 +89,18 @@ RE_INLINE f64v min_or_second(f64v a, f64v b) {
 #endif
 }
 
+// sqrt, correctly rounded (IEEE), so the lanes equal std::sqrt's.
+RE_INLINE double sqrt(double x) { return std::sqrt(x); }
+RE_INLINE f64v sqrt(f64v x) {
+#if defined(__AVX512F__)
+    return (f64v)_mm512_sqrt_pd((__m512d)x);
+#elif defined(__AVX__)
+    return (f64v)_mm256_sqrt_pd((__m256d)x);
+#else
+    return per_lane(x, [](double v) { return std::sqrt(v); });
+#endif
+}
+
 RE_INLINE double floor(double x) { return std::floor(x); }
 RE_INLINE f64v floor(f64v x) {
 #if defined(__AVX512F__)
@@ -139,6 +151,14 @@ RE_INLINE f64v scale2k(f64v y, f64v k) {
     // the all-lanes mask form: the unmasked intrinsic reads an "undefined" register, which GCC
     // 12 warns about under -Wall
     return (f64v)_mm512_mask_scalef_pd((__m512d)y, 0xff, (__m512d)y, (__m512d)k);
+#elif defined(__AVX__)
+    // Where every 2^floor(k) is a normal double, y 2^floor(k) is one correctly rounded product
+    // (IEEE multiplication rounds once, into the subnormals too): the same bits as the two
+    // steps for a third of the work (exp on the unit interval: 1.77 -> 1.66 ns a value).
+    f64v kf = floor(k);
+    auto normal = (kf >= -1022.0) & (kf <= 1023.0);
+    if (__builtin_expect(_mm256_movemask_pd((__m256d)normal) == 0xf, 1)) return y * pow2_integral(kf);
+    return scale2k_steps(y, k);
 #else
     return scale2k_steps(y, k);
 #endif

@@ -118,6 +118,46 @@ def test_domain_params_reject_a_wrong_shape_or_kind():
         rest.domain_params("torus", np.zeros((5, 2)))
 
 
+@pytest.mark.parametrize("kind", ["disk", "hemisphere", "sphere"])
+def test_domain_points_vector_lanes_equal_the_scalar_tail_and_numpy(kind):
+    rng = np.random.default_rng(3)
+    s = rng.random((N + 3, 2))      # not a multiple of any vector width: a scalar tail too
+    s[:6] = [[0, 0], [1, 0.25], [0.5, 0.5], [0, 0.75], [1, 1], [0.25, 0.999999]]
+    x = rest.domain_points(kind, s)
+    one_by_one = np.concatenate([rest.domain_points(kind, s[i:i + 1]) for i in range(200)])
+    np.testing.assert_array_equal(x[:200].view(np.uint64), one_by_one.view(np.uint64))
+    # numpy's forms of the maps; its cos(2 pi s1) first rounds 2 pi s1, so 1e-15 apart
+    phi = 2 * np.pi * s[:, 1]
+    if kind == "disk":
+        r, z = np.sqrt(s[:, 0]), None
+    else:
+        z = s[:, 0] if kind == "hemisphere" else 1 - 2 * s[:, 0]
+        r = np.sqrt(np.maximum(1 - z * z, 0))
+    ref = np.column_stack([r * np.cos(phi), r * np.sin(phi)] + ([] if z is None else [z]))
+    np.testing.assert_allclose(x, ref, rtol=0, atol=2e-15)
+
+
+def test_float32_unit_rows_match_numpy_and_name_the_bad_rows():
+    rng = np.random.default_rng(4)
+    x = rng.normal(size=(N, 3))
+    x /= np.linalg.norm(x, axis=1)[:, None]
+    x[: N // 4] *= 1 + rng.uniform(-3e-6, 3e-6, (N // 4, 1))   # around the slack
+    x[:6] = [[np.nan, 0, 1], [0, 0, 0], [2, 0, 0], [0, np.inf, 0], [0, 0, -1], [3e-100, 0, 0]]
+    cols, ok = rest.float32_unit_rows(x, 1e-6)
+    norm = np.sqrt(x[:, 0] * x[:, 0] + x[:, 1] * x[:, 1] + x[:, 2] * x[:, 2])
+    good = np.isfinite(norm) & (norm > 0)
+    with np.errstate(invalid="ignore"):
+        scale = np.where(good & (np.abs(norm - 1) > 1e-6), norm, 1.0)
+        ref = np.where(good[:, None], x / scale[:, None], [0.0, 0.0, 1.0]).astype(np.float32)
+    assert cols.dtype == np.float32 and cols.shape == (3, N) and all(c.flags.c_contiguous for c in cols)
+    np.testing.assert_array_equal(ok, good)
+    np.testing.assert_array_equal(cols.T, ref)
+    assert list(ok[:6]) == [False, False, True, False, True, True]
+    assert cols[:, 2].tolist() == [1, 0, 0] and cols[:, 5].tolist() == [1, 0, 0]
+    with pytest.raises(ValueError, match="shape"):
+        rest.float32_unit_rows(np.zeros((4, 2)), 1e-6)
+
+
 # --- histogram -------------------------------------------------------------------------------
 def histogram_reference(s: np.ndarray, inside: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     s = np.clip(s[inside], 0, np.nextafter(1, 0))

@@ -26,6 +26,8 @@ from typing import Any
 
 import numpy as np
 
+import reference_estimators as rest
+
 from harness.adapters.mitsuba.runtime import check_variant, is_jit, using_variant
 
 __all__ = ["UNIT_SLACK", "MitsubaSampler", "SampleBatch", "direction", "plugin_label", "polar_angle"]
@@ -80,13 +82,9 @@ UNIT_SLACK = 1e-6
 def unit_columns(x: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
     """Direction columns as float32 (rows of length 1 within UNIT_SLACK as given, others
     normalised in float64 first) and the rows that are finite non-zero vectors (the others
-    become +z)."""
-    x = np.asarray(x, dtype=float).reshape(-1, 3)
-    norm = np.sqrt(np.einsum("ij,ij->i", x, x))
-    ok = np.isfinite(norm) & (norm > 0)
-    scale = np.where(ok & (np.abs(norm - 1) > UNIT_SLACK), norm, 1.0)
-    y = np.where(ok[:, None], x / scale[:, None], np.array([0.0, 0.0, 1.0]))
-    return [floats(y[:, i]) for i in range(3)], ok
+    become +z): one pass in the core (reference_estimators.float32_unit_rows)."""
+    cols, ok = rest.float32_unit_rows(x, UNIT_SLACK)
+    return list(cols), ok
 
 
 def _to_numpy(value: Any, n: int) -> np.ndarray:
