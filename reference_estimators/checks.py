@@ -13,7 +13,8 @@ from . import _core
 
 __all__ = [
     "CHECK_DOMAINS", "domain_params", "domain_points", "cubature_nodes", "grid_histogram", "rosenblatt",
-    "piecewise_linear_lookup", "strip_bin_counts", "cramer_von_mises_root", "pdf_summary", "float32_unit_rows",
+    "piecewise_linear_lookup", "strip_bin_counts", "cramer_von_mises_root", "pdf_summary",
+    "float32_unit_rows",
 ]
 
 #: The sampling domains of the sampler check, in the order the core numbers them.
