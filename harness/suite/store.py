@@ -15,7 +15,6 @@ complete file; the row holds the file's size and SHA-256, so a damaged file is d
 """
 from __future__ import annotations
 
-import dataclasses
 import errno
 import hashlib
 import io
@@ -162,7 +161,7 @@ class Store:
         self.timeout = timeout
         self._open = False
         self.run: int | None = None   # the run in progress (start_run), if any
-        self._decoded: dict[str, dict[Unit, dict[str, Any]]] = {}   # payloads() per case key, until a put
+        self._decoded: dict[str, dict[Unit, dict[str, Any]]] = {}   # payloads() per case key
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as e:  # a parent that is a file, a read-only folder
@@ -233,7 +232,7 @@ class Store:
         self.commit()
         self.db.execute("BEGIN")
         self.db.executemany("INSERT OR IGNORE INTO planned VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-                            [(suite, *dataclasses.astuple(u)) for u in units])
+                            [(suite, *u.row()) for u in units])
         self.db.execute("COMMIT")
 
     def finish_run(self, run: int, rows: list[dict[str, Any]], planned: int, ran: int) -> None:
@@ -259,9 +258,7 @@ class Store:
             self.db.execute("INSERT OR IGNORE INTO run_keys VALUES (?, ?)", (self.run, case_key))
 
     def stored_keys(self, case_keys: Iterable[str]) -> set[Unit]:
-        """The stored units of these cases (another process may have stored some since
-        payloads() last decoded them: those are read afresh)."""
-        self._decoded.clear()
+        """The stored units of these cases (another process may have stored some since)."""
         keys: set[Unit] = set()
         for ck in set(case_keys):
             rows = self.db.execute(f"SELECT {_UNIT_COLUMNS} FROM units WHERE case_key = ?", (ck,))
@@ -273,10 +270,12 @@ class Store:
         if not self._open:
             self.db.execute("BEGIN")
             self._open = True
-        self._decoded.pop(unit.case_key, None)
-        self.db.execute("INSERT OR IGNORE INTO units VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                        (unit.case_key, unit.stream, unit.budget, unit.replica, unit.chunk_begin,
-                         unit.chunk_end, unit.kind, json.dumps(payload), seconds, time.time()))
+        cached = self.payloads(unit.case_key)   # the rows stored so far, decoded while workers run
+        text = json.dumps(payload)
+        cur = self.db.execute("INSERT OR IGNORE INTO units VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                              (*unit.row(), text, seconds, time.time()))
+        if cur.rowcount == 1:
+            cached[unit] = json.loads(text)
 
     def commit(self) -> None:
         if self._open:
@@ -285,13 +284,17 @@ class Store:
                 self.db.execute("COMMIT")
 
     def payloads(self, case_key: str) -> dict[Unit, dict[str, Any]]:
-        """The payload of each of the case's stored units.  Decoded once until a unit of the case
-        is put (a run's analysis reads them more than once): the same dicts, to read, not change."""
-        if case_key not in self._decoded:
-            rows = self.db.execute(f"SELECT {_UNIT_COLUMNS}, payload FROM units WHERE case_key = ?",
-                                   (case_key,))
-            self._decoded[case_key] = {Unit(*r[:7]): json.loads(r[7]) for r in rows}
-        return self._decoded[case_key]
+        """The payload of each of the case's stored units: the same dicts, to read, not change.
+        Decoded once and kept as units are put (``put`` runs in the runner's main thread while
+        its workers compute, so the analysis after them finds its payloads decoded), read
+        again where the store holds rows this connection did not put (another process's)."""
+        cached = self._decoded.get(case_key)
+        if cached is not None and self.db.execute("SELECT COUNT(*) FROM units WHERE case_key = ?",
+                                                  (case_key,)).fetchone()[0] == len(cached):
+            return cached
+        rows = self.db.execute(f"SELECT {_UNIT_COLUMNS}, payload FROM units WHERE case_key = ?", (case_key,))
+        self._decoded[case_key] = decoded = {Unit(*r[:7]): json.loads(r[7]) for r in rows}
+        return decoded
 
     def seconds(self, case_key: str) -> dict[Unit, float]:
         """Wall time (s) of each of the case's stored units."""
@@ -351,8 +354,8 @@ class Store:
         """Removes stored units (a damaged render, say), so the next plan computes them again."""
         self.commit()
         for u in units:
-            self.db.execute(f"DELETE FROM units WHERE ({_UNIT_COLUMNS}) = (?, ?, ?, ?, ?, ?, ?)",
-                            (u.case_key, u.stream, u.budget, u.replica, u.chunk_begin, u.chunk_end, u.kind))
+            self.db.execute(f"DELETE FROM units WHERE ({_UNIT_COLUMNS}) = (?, ?, ?, ?, ?, ?, ?)", u.row())
+            self._decoded.pop(u.case_key, None)
 
     # --- measurements ------------------------------------------------------------------------
     def put_measurements(self, rows: list[dict[str, Any]], *, run: int) -> None:
