@@ -67,6 +67,23 @@ def test_rows_are_visible_to_another_reader_only_once_committed(tmp_path):
     reader.close()
 
 
+def test_payloads_kept_as_units_are_put_and_read_again_where_another_store_added_rows(tmp_path):
+    one, other = Store(tmp_path / "r.sqlite"), Store(tmp_path / "r.sqlite")
+    one.put(A, {"mean": 1.0}, 1.0)
+    assert one.payloads("case-a") == {A: {"mean": 1.0}}
+    first = one.payloads("case-a")
+    one.put(A, {"mean": 9.0}, 1.0)                        # a unit is written once: the first stays
+    assert one.payloads("case-a") is first and first == {A: {"mean": 1.0}}
+    one.commit()
+    other.put(B, {"tail": [2.0]}, 1.0)                     # another process's row
+    other.commit()
+    assert one.payloads("case-a") == {A: {"mean": 1.0}, B: {"tail": [2.0]}}
+    one.drop_units([B])
+    assert one.payloads("case-a") == {A: {"mean": 1.0}}
+    one.close()
+    other.close()
+
+
 def test_close_commits_the_open_transaction(tmp_path):
     store = Store(tmp_path / "r.sqlite")
     store.put(A, {"mean": 1.0}, 1.0)
