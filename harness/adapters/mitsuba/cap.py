@@ -73,15 +73,23 @@ class Cap:
         point below the horizon maps outside the cap (at most to the cap's antipode)."""
         x = np.asarray(x, dtype=float).reshape(-1, 3)
         with np.errstate(all="ignore"):
-            x = x / np.linalg.norm(x, axis=1, keepdims=True)
-        c = np.clip(self.cos_alpha + x[:, 2] * self.scale, -1.0, 1.0)
-        s = np.sqrt(np.maximum(0.0, 1 - c * c))
-        phi = np.arctan2(x[:, 1], x[:, 0])
-        return ((s * np.cos(phi))[:, None] * self.t + (s * np.sin(phi))[:, None] * self.b
-                + c[:, None] * self.axis)
+            x = x / np.sqrt(np.einsum("ij,ij->i", x, x))[:, None]
+            c = np.clip(self.cos_alpha + x[:, 2] * self.scale, -1.0, 1.0)
+            # the azimuth's cosine and sine as x / r and y / r (no trigonometry: the cubature
+            # maps tens of millions of nodes); the pole (r = 0) at azimuth 0, as atan2(0, 0)
+            r = np.hypot(x[:, 0], x[:, 1])
+            pole = r == 0
+            s = np.sqrt(np.maximum(0.0, 1 - c * c)) / np.where(pole, 1.0, r)
+            cos_phi, sin_phi = np.where(pole, s, s * x[:, 0]), np.where(pole, 0.0, s * x[:, 1])
+        return cos_phi[:, None] * self.t + sin_phi[:, None] * self.b + c[:, None] * self.axis
 
     def spec(self) -> dict[str, object]:
         return {"axis": self.axis.tolist(), "cos_alpha": self.cos_alpha}
+
+
+#: Rows up to which ``CapView.pdf`` looks each one up among the last draw's points (a user's
+#: query, an example); larger calls are the cubature's nodes or the draw itself.
+_FEW_ROWS = 4096
 
 
 class CapView:
@@ -92,36 +100,53 @@ class CapView:
 
     The map's float64 round trip loses the float32 direction Mitsuba returned (its length is
     1 only within float32 rounding), and at a light's rim one ulp decides whether the ray
-    traced back hits the light.  So ``pdf`` at a point of the last draw is evaluated at the
-    world direction returned for it, exactly; elsewhere (cubature nodes) at the float32
-    rounding of the mapped-back direction."""
+    traced back hits the light.  So ``pdf`` at the points of the last draw (all its rows, or
+    the rows it produced, in its order, as the check passes them; or any few of them) is
+    evaluated at the world directions returned for them, exactly; elsewhere (cubature nodes)
+    at the float32 rounding of the mapped-back direction.  The density is the world pdf times
+    the map's constant Jacobian in float32, the world pdf's own precision, so that the
+    cubature stops at its rounding (harness.samplers.cubature.rounding_floor)."""
 
     domain = "hemisphere"
 
     def __init__(self, sampler: Any, cap: Cap):
         self.sampler, self.cap, self.udim = sampler, cap, sampler.udim
-        self._keys = np.empty(0)
-        self._points = np.empty((0, 3))
-        self._world = np.empty((0, 3))
+        self._drawn = np.empty((0, 3))      # the last draw's points (NaN rows: not produced)
+        self._world = np.empty((0, 3))      # and the world directions returned for them
+        self._produced = np.zeros(0, dtype=bool)
+        self._keys = np.empty(0)            # produced points sorted by x, for a few-row lookup
+        self._order = np.empty(0, dtype=np.int64)
 
     def sample(self, u: np.ndarray) -> np.ndarray:
         world = np.asarray(self.sampler.sample(u), dtype=float)
         h = self.cap.to_hemisphere(world)
-        ok = np.all(np.isfinite(h), axis=1)
-        order = np.argsort(h[ok, 0], kind="stable")
-        self._points, self._world = h[ok][order], world[ok][order]
-        self._keys = self._points[:, 0]
+        self._drawn, self._world = h, world
+        self._produced = np.all(np.isfinite(h), axis=1)
+        self._order = np.flatnonzero(self._produced)[np.argsort(h[self._produced, 0], kind="stable")]
+        self._keys = h[self._order, 0]
         return h
+
+    def _world_of_drawn(self, h: np.ndarray) -> np.ndarray | None:
+        """The world directions returned for h if h is the last draw (whole, or its produced
+        rows), else None."""
+        if h.shape == self._drawn.shape and np.array_equal(h, self._drawn, equal_nan=True):
+            return self._world
+        produced = self._produced.sum()
+        if h.shape[0] == produced and produced and np.array_equal(h, self._drawn[self._produced]):
+            return self._world[self._produced]
+        return None
 
     def pdf(self, h: np.ndarray) -> np.ndarray:
         h = np.asarray(h, dtype=float).reshape(-1, 3)
-        world = self.cap.to_world(h)
-        if self._keys.size:
-            i = np.minimum(np.searchsorted(self._keys, h[:, 0]), self._keys.size - 1)
-            drawn = np.all(self._points[i] == h, axis=1)
-            world[drawn] = self._world[i[drawn]]
-        p = np.asarray(self.sampler.pdf(world), dtype=float) * self.cap.scale
-        return np.where(np.all(np.isfinite(h), axis=1) & (h[:, 2] >= 0), p, 0.0)
+        world = self._world_of_drawn(h)
+        if world is None:
+            world = self.cap.to_world(h)
+            if self._keys.size and h.shape[0] <= _FEW_ROWS:   # a few rows: any drawn among them
+                i = self._order[np.minimum(np.searchsorted(self._keys, h[:, 0]), self._keys.size - 1)]
+                drawn = np.all(self._drawn[i] == h, axis=1)
+                world[drawn] = self._world[i[drawn]]
+        p = np.asarray(self.sampler.pdf(world), dtype=np.float32) * np.float32(self.cap.scale)
+        return np.where(np.all(np.isfinite(h), axis=1) & (h[:, 2] >= 0), p.astype(float), 0.0)
 
 
 def bounding_cap(ref: Sequence[float], center: Sequence[float], radius: float) -> Cap | None:
