@@ -208,6 +208,12 @@ _SPHERE_RIM = ("float32 at the sphere's silhouette: a direction sample_direction
                "traces it back, so pdf_direction / eval there are 0: about one sample in 1e6, a "
                "'zero_pdf' failure where the chi-square's draw holds it, a weight with eval/pdf "
                "undefined where the weight check's draw does")
+_RECTANGLE_EDGE = ("float32 at the rectangle's edge: seen obliquely from (0.6, -0.4, 0.3), with the "
+                   "bitmap brightest at the edge x = 1, sample_direction returns a direction whose "
+                   "ray, traced back by pdf_direction, passes the edge on the outside (it reaches "
+                   "z = 1 at x = 1.0000, y = -0.8875): pdf() and eval are 0 there, the reported pdf "
+                   "0.70; one sample in 1e6 at seed 0 (u = (0.98841, 0.89460)), a 'zero_pdf' "
+                   "failure")
 _SPHERE_TEXTURE = ("a bitmap radiance on a sphere: Mitsuba samples the texture in uv and maps it "
                    "onto the sphere, a density 1/sin(theta)-singular at the uv poles and "
                    "dist^2/cos-singular at the silhouette; there pdf_direction at the traced-back "
@@ -238,6 +244,7 @@ FINDINGS: dict[str, tuple[tuple[str, ...], str, int]] = {
        for d, w in (("ggx", "3.6e-3"), ("beckmann", "2.4e-3"))},
     "envmap 256x128 sky, sun with a soft rim": (("reported", "weight"), _ENVMAP_RIM, 0),
     "envmap 256x128 sky, hard-edged sun": (("reported", "weight"), _ENVMAP_RIM, 0),
+    "area rectangle bitmap 32x16 bilinear from (0.6, -0.4, 0.3)": (("chi2",), _RECTANGLE_EDGE, 1_000_000),
     "area sphere constant from (0, 0, 0)": (("weight",), _SPHERE_RIM, 1_000_000),
     "area sphere constant from (0.6, -0.4, 0.3)": (("chi2", "weight"), _SPHERE_RIM, 1_000_000),
     **{f"area sphere bitmap 32x16 {f} from {r}": (("chi2", "reported", "weight"), _SPHERE_TEXTURE, 0)
