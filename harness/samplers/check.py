@@ -34,7 +34,7 @@ import pandas as pd
 
 import reference_estimators as rest
 
-from harness.samplers.cubature import cell_integrals, rounding_floor
+from harness.samplers.cubature import all_float32, cell_integrals, rounding_floor
 from harness.samplers.domains import Domain, as_domain
 from harness.samplers.reported import reported_pdf_failure
 from harness.samplers.transform import STRIPS, Transform, cramer_von_mises_columns, equiprobable_counts
@@ -478,13 +478,9 @@ def _check_drawn(u: np.ndarray, x: np.ndarray, reported: np.ndarray | None,
 
 
 def _float32_points(x: np.ndarray) -> bool:
-    """Whether every finite coordinate of x is a float32 (and there is one); a float64
-    sampler's points are told from their first few thousand values, without a pass."""
-    for v in (x.reshape(-1)[:4096], x):
-        v = v[np.isfinite(v)]
-        if not (v.size and np.array_equal(v.astype(np.float32).astype(float), v)):
-            return False
-    return True
+    """Whether x's coordinates are float32 (:func:`~harness.samplers.cubature.all_float32`); a
+    float64 sampler's points are told from their first few thousand values, without a pass."""
+    return all_float32(x.reshape(-1)[:4096]) and all_float32(x)
 
 
 def _dithered(x: np.ndarray, seed: int) -> np.ndarray:
