@@ -13,7 +13,7 @@ from . import _core
 
 __all__ = [
     "CHECK_DOMAINS", "domain_params", "domain_points", "cubature_nodes", "grid_histogram", "rosenblatt",
-    "piecewise_linear_lookup", "strip_bin_counts", "cramer_von_mises_root", "pdf_summary",
+    "piecewise_linear_lookup", "transform_statistics", "cramer_von_mises_root", "pdf_summary",
     "float32_unit_rows",
 ]
 
@@ -106,22 +106,29 @@ def _strided(a: Any) -> np.ndarray:
     return np.ascontiguousarray(v) if any(s < 0 for s in v.strides) else v
 
 
-def strip_bin_counts(strip: Any, u: Any, strips: int, bins: int) -> np.ndarray:
-    """Counts (strips * bins,) float64 of points in cells strip * bins + min(floor(u bins),
-    bins - 1): ``strip`` (N,) in 0 .. strips - 1, u (N,) in [0, 1] (a strided column is read
-    in place); a NaN u or a strip out of range counts nowhere.  One pass in C++."""
-    g = np.ascontiguousarray(strip, dtype=np.int64).reshape(-1)
-    return _core.strip_bin_counts(g, _strided(u), int(strips), int(bins))
+def transform_statistics(marginal: tuple, conditional: tuple | None, edges: Any, s: Any,
+                         bins: int) -> tuple[np.ndarray, np.ndarray]:
+    """(roots (k,), counts (strips * bins,) float64) of the Rosenblatt transform u of parameter
+    points s (N, k) (as :func:`rosenblatt`), without returning u: the
+    :func:`cramer_von_mises_root` of each column of u, and the counts of the cells of equal
+    claimed probability, strip g and bin min(floor(v bins), bins - 1) of v = u1 on the square
+    (strips: len(edges) - 1), of v = u0 on an interval (one strip); a NaN v counts nowhere.
+    In C++ on all hardware threads (fixed chunks: the same for any thread count), u kept in
+    buffers that are reused from call to call."""
+    a = np.ascontiguousarray(s, dtype=np.float64)
+    cond = None if conditional is None else _table(conditional)
+    e = np.ascontiguousarray(edges, dtype=np.float64).reshape(-1)
+    return _core.transform_statistics(_table(marginal), cond, e, a, int(bins))
 
 
 def cramer_von_mises_root(u: Any) -> np.ndarray:
     """For each column of u (N, k) (or the one of u (N,)): sqrt(sum_i ((2 i - 1) / (2 N) -
     u_(i))^2) over the sorted values u_(1) <= ... <= u_(N), meant in [0, 1]; the column's
     Cramer-von Mises statistic is its square plus 1 / (12 N).  NaN for a column holding a NaN.
-    Array (k,).  In C++ (one thread: on a shared machine a helper thread that is not scheduled
-    costs more than it saves), each column by a radix sort on floor(u 2^20) (O(N) for
-    values spread over [0, 1]) and a compensated sum of blocks (numpy's pairwise sum of the
-    same terms differs by rounding only); strided columns are read in place."""
+    Array (k,).  In C++, the columns on the hardware threads, each by a radix sort on
+    floor(u 2^20) (O(N) for values spread over [0, 1]) and a compensated sum of blocks
+    (numpy's pairwise sum of the same terms differs by rounding only); strided columns are
+    read in place."""
     v = _strided(u)
     if v.ndim not in (1, 2):
         raise ValueError(f"'u' must have shape (N,) or (N, k), got {v.shape}")

@@ -37,7 +37,7 @@ import reference_estimators as rest
 from harness.samplers.cubature import all_float32, cell_integrals, rounding_floor
 from harness.samplers.domains import Domain, as_domain
 from harness.samplers.reported import reported_pdf_failure
-from harness.samplers.transform import STRIPS, Transform, cramer_von_mises_columns, equiprobable_counts
+from harness.samplers.transform import STRIPS, Transform, cramer_von_mises_from_roots
 from harness.stats import distributions, holm
 from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
 from harness.usercode import UserCodeError, array_result, call, callable_name
@@ -320,16 +320,15 @@ class SamplerTest:
         t, m = self.transform, s.shape[0]
         if m == 0:
             return []
-        u, strip = t.apply(s)
+        bins = min(1024, max(m // 50, 16)) if t.conditional is None else 64
+        roots, observed, prob = t.statistics(s, bins)
         tables = [t.marginal] if t.conditional is None else [t.marginal, t.conditional]
         names = ["u0 = F(s0)", "u1 = F(s1 | strip of s0)"]
         tests = []
-        cvm = cramer_von_mises_columns(u, [table.error for table in tables])
+        cvm = cramer_von_mises_from_roots(roots, m, [table.error for table in tables])
         for axis, (table, (w2, p)) in enumerate(zip(tables, cvm)):
             tests.append((f"Cramer-von Mises {names[axis]}", w2, 0, p,
                           f"smooth warps below the bin width (CDF error bound {table.error:.1e} carried)"))
-        bins = min(1024, max(m // 50, 16)) if t.conditional is None else 64
-        observed, prob = equiprobable_counts(t, strip, u, bins)
         stat, df, _ = _chi_square(observed, m * prob, 2 * m * t.error * prob * bins)
         cells = "x".join(map(str, (bins,) if t.conditional is None else (STRIPS, bins)))
         p = distributions.chi2_sf(stat, df) if df > 0 else 1.0

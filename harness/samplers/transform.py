@@ -13,7 +13,7 @@ Under H0 (the points have density q) u0 and u1 are each exactly uniform on [0, 1
 strip, s1 follows the strip's conditional law, whatever the strip.  So a smooth warp that no
 bin resolves (an azimuth u^1.005, a lobe 0.3 % too wide) moves the empirical CDF of u0 or u1,
 which :func:`cramer_von_mises` sees; and the strips with bins of u1 are cells of equal claimed
-probability (:func:`equiprobable_counts`): a narrow lobe gets as many cells as the rest of the
+probability (:meth:`Transform.statistics`): a narrow lobe gets as many cells as the rest of the
 sphere.
 
 The CDFs are tabulated once per claimed pdf (:class:`Transform`, sample-independent) from box
@@ -38,8 +38,8 @@ import reference_estimators as rest
 
 from harness.samplers.cubature import box_integrals
 
-__all__ = ["AxisCdf", "Transform", "cramer_von_mises", "cramer_von_mises_columns", "cvm_sf",
-           "equiprobable_counts"]
+__all__ = ["AxisCdf", "Transform", "cramer_von_mises", "cramer_von_mises_columns",
+           "cramer_von_mises_from_roots", "cvm_sf"]
 
 #: Strips of equal claimed mass along s0 on the square (the conditioning of u1), each
 #: integrated across as SUBSTRIPS boxes of equal claimed mass.
@@ -240,6 +240,17 @@ class Transform:
         conditional = None if self.conditional is None else self.conditional.table
         return rest.rosenblatt(self.marginal.table, conditional, self.edges, s)
 
+    def statistics(self, s: np.ndarray, bins: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What the tests need of the transform u of parameter points s (N, k), without u
+        itself: (the Cramer-von Mises root of each column of u (k,), the observed counts and
+        the claimed probabilities of the cells of equal claimed probability (C,): bins of u0 on
+        an interval, strips x bins of u1 on the square).  One call to the core
+        (:func:`reference_estimators.transform_statistics`)."""
+        conditional = None if self.conditional is None else self.conditional.table
+        roots, counts = rest.transform_statistics(self.marginal.table, conditional, self.edges, s, bins)
+        prob = np.full(bins, 1.0 / bins) if self.conditional is None else np.repeat(self.probability / bins, bins)
+        return roots, counts, prob
+
 
 def cvm_sf(w2: float) -> float:
     """P(W^2 > w2) under H0 for the Cramer-von Mises statistic of n uniform points, in its
@@ -275,22 +286,17 @@ def cramer_von_mises(u: np.ndarray, error: float) -> tuple[float, float]:
 def cramer_von_mises_columns(u: np.ndarray, errors: list[float]) -> list[tuple[float, float]]:
     """:func:`cramer_von_mises` of each column of u (N, k), column j with ``errors[j]``, in one
     call to the core (strided columns read in place)."""
-    n = u.shape[0]
-    roots = rest.cramer_von_mises_root(u)   # sqrt(sum_i ((2 i - 1) / (2 n) - u_(i))^2), u sorted
+    # sqrt(sum_i ((2 i - 1) / (2 n) - u_(i))^2), u sorted
+    return cramer_von_mises_from_roots(rest.cramer_von_mises_root(u), u.shape[0], errors)
+
+
+def cramer_von_mises_from_roots(roots: np.ndarray, n: int, errors: list[float]) -> list[tuple[float, float]]:
+    """(W^2, p) of :func:`cramer_von_mises` for each column of n points from its root part
+    sqrt(n W^2 - 1/(12 n)) (:func:`reference_estimators.cramer_von_mises_root`), column j
+    allowed ``errors[j]``."""
     out = []
     for root, error in zip(roots, errors):
         w2 = root * root + 1 / (12 * n)
         reduced = max(root - math.sqrt(n) * error, 0.0) ** 2 + 1 / (12 * n)
         out.append((float(w2), cvm_sf(reduced)))
     return out
-
-
-def equiprobable_counts(t: Transform, strip: np.ndarray, u: np.ndarray,
-                        bins: int) -> tuple[np.ndarray, np.ndarray]:
-    """Observed counts and claimed probabilities of cells of equal claimed probability: bins
-    of u0 on an interval; strips x bins of u1 on the square (``strip``, ``u`` from
-    :meth:`Transform.apply`).  (counts (C,), probabilities (C,)).  Counting: one pass in the
-    core (:func:`reference_estimators.strip_bin_counts`)."""
-    if t.conditional is None:
-        return rest.strip_bin_counts(strip, u[:, 0], 1, bins), np.full(bins, 1.0 / bins)
-    return rest.strip_bin_counts(strip, u[:, 1], STRIPS, bins), np.repeat(t.probability / bins, bins)

@@ -535,7 +535,11 @@ NB_MODULE(_core, m) {
         auto ia = new_bool_array(n, &inside);
         {
             nb::gil_scoped_release g;
-            domain_params(d, lo, hi, x.data(), n, s, inside);
+            // each point's parameters depend on that point alone (the azimuths' vector and
+            // scalar paths give the same bits): chunks on all threads
+            for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t b, int) {
+                domain_params(d, lo, hi, x.data() + a * size_t(pdim), b - a, s + a * size_t(k), inside + a);
+            });
         }
         return nb::make_tuple(sa, ia);
     }, "kind"_a, "lo"_a, "hi"_a, "x"_a,
@@ -624,26 +628,44 @@ NB_MODULE(_core, m) {
        "(u (N, k), strip (N,)): the Rosenblatt transform of parameter points s through the marginal table "
        "and, on the square, the conditional one given the strip of s0 among `edges`; tables are "
        "(lo, hi, start, mass, offsets).");
-    m.def("strip_bin_counts", [](I64Array strip, StridedArray u, int64_t strips, int64_t bins) {
-        if (strip.size() != u.size()) throw nb::value_error("'strip' and 'u' must have one value per point");
-        if (strips < 1 || bins < 1) throw nb::value_error("'strips' and 'bins' must be positive");
-        double *c;
-        OutArray counts = new_array(size_t(strips * bins), 0, &c);
+    m.def("transform_statistics", [](nb::handle marginal, nb::handle conditional, InArray edges, InArray s,
+                                     int64_t bins) {
+        const bool square = !conditional.is_none();
+        const size_t k = square ? 2 : 1;
+        const size_t n = check_params(s, k);
+        if (bins < 1) throw nb::value_error("'bins' must be positive");
+        const BoundTable m0(marginal);
+        std::unique_ptr<BoundTable> m1;
+        if (square) {
+            m1 = std::make_unique<BoundTable>(conditional);
+            if (edges.size() != m1->offsets.size())
+                throw nb::value_error("'edges' must hold one more value than the conditional has strips");
+        }
+        double *r, *c;
+        OutArray roots = new_array(k, 0, &r);
+        OutArray counts = new_array(size_t((square ? int64_t(edges.size()) - 1 : 1) * bins), 0, &c);
         {
             nb::gil_scoped_release g;
-            strip_bin_counts(strip.data(), u.data(), size_t(u.stride(0)), u.size(), strips, bins, c);
+            transform_statistics(*m0.table, square ? m1->table.get() : nullptr, edges.data(), edges.size(), s.data(),
+                                 k, n, bins, r, c);
         }
-        return counts;
-    }, "strip"_a, "u"_a, "strips"_a, "bins"_a,
-       "Counts (strips * bins,) of points in cell strip * bins + min(floor(u bins), bins - 1).");
+        return nb::make_tuple(roots, counts);
+    }, "marginal"_a, "conditional"_a.none(), "edges"_a, "s"_a, "bins"_a,
+       "(roots (k,), counts (strips * bins,)) of the Rosenblatt transform u of parameter points s (as rosenblatt): "
+       "the Cramer-von Mises root of each column of u (as cramer_von_mises_root) and the counts of strips x bins "
+       "of u1 on the square, of bins of u0 on an interval (cell strip * bins + min(floor(u bins), bins - 1); "
+       "NaN u nowhere), without returning u.");
     m.def("cramer_von_mises_root", [](nb::ndarray<const double, nb::ndim<2>, nb::device::cpu> u) {
         const size_t n = u.shape(0), k = u.shape(1);
         double *r;
         OutArray roots = new_array(k, 0, &r);
         {
             nb::gil_scoped_release g;
-            for (size_t c = 0; c < k; ++c)
+            // a column on each thread (each with its own sort buffers): the roots do not
+            // depend on which thread computed them
+            ThreadPool::instance().run(k, ThreadPool::default_threads(), [&](size_t c, int) {
                 r[c] = cramer_von_mises_root(u.data() + c * size_t(u.stride(1)), size_t(u.stride(0)), n);
+            });
         }
         return roots;
     }, "u"_a, "For each column of u (N, k): sqrt(sum_i ((2 i - 1) / (2 N) - u_(i))^2) over its sorted values; "

@@ -10,6 +10,8 @@
 #include <cstdint>
 #include <vector>
 
+#include "thread_pool.h"
+
 namespace re {
 
 // The first element of the sorted a[0 .. n) greater than x (std::upper_bound), by a search
@@ -53,29 +55,55 @@ class BucketedUpperBound {
 };
 
 // A piecewise-linear table over leaves [lo, hi) in strips (leaves offsets[g] .. offsets[g+1]-1
-// of strip g, sorted by lo, inside [0, 1]), looked up in batch.  A bucket index of B buckets
-// per strip (a power of two, about eight per leaf of the fullest strip, 256 to 2^16, at most
-// 2^17 32-bit entries in all, so that it stays in cache) narrows each search to the leaves
-// that start in the point's bucket (or the one before): mostly none, so that the search is
-// skipped.  The answer does not depend on B.
+// of strip g, sorted by lo, inside [0, 1]), looked up in batch.  A two-level bucket index
+// narrows each search to the leaves that start in the point's sub-bucket, and the one before:
+// mostly one or two candidates, told apart by one comparison without a branch.  The top level
+// has B buckets per strip (a power of two, about two per leaf of the fullest strip, 256 to
+// 2^14, at most 2^16 in all, so that it stays in cache); bucket b is cut into S_b sub-buckets
+// (S_b = 1 where at most one leaf starts in it; else a power of two, about four per leaf
+// starting there, to 2^16): a narrow lobe's leaves, down to 2^-40 wide, crowd into a few
+// buckets, where a one-level index left a binary search of seven dependent loads and its
+// mispredicted loop a point.  Every lookup takes the same path (bucket, sub-bucket, leaf),
+// so the branch predictor has nothing to miss.  Bucket and sub-bucket edges are exact binary
+// fractions and a point's sub-bucket is computed with exact operations (products by powers
+// of two, x B - b by Sterbenz), so the index agrees with the comparisons lo <= x it stands
+// for, and the answer does not depend on it.
 class PiecewiseLinearTable {
   public:
     PiecewiseLinearTable(const double *lo, const double *hi, const double *start, const double *mass,
                          const int64_t *offsets, int64_t strips)
-        : offsets_(offsets), strips_(strips), leaves_(size_t(offsets[strips])) {
-        // a leaf's four numbers side by side: one cache line a lookup instead of four
-        for (size_t i = 0; i < leaves_.size(); ++i) leaves_[i] = {lo[i], hi[i], start[i], mass[i]};
+        : offsets_(offsets), strips_(strips), leaves_(size_t(offsets[strips]) + 1) {
+        // a leaf's four numbers side by side: one cache line a lookup instead of four; the
+        // last leaf is a sentinel that no x reaches (lo = +inf), so a lookup may always read
+        // the leaf after its first candidate
+        for (size_t i = 0; i + 1 < leaves_.size(); ++i) leaves_[i] = {lo[i], hi[i], start[i], mass[i]};
+        leaves_.back() = {__builtin_inf(), __builtin_inf(), 0.0, 0.0};
         int64_t most = 0;
         for (int64_t g = 0; g < strips; ++g) most = std::max(most, offsets[g + 1] - offsets[g]);
-        const int64_t cap = std::max<int64_t>(256, (int64_t(1) << 17) / std::max<int64_t>(strips, 1));
-        while (buckets_ < 8 * most && buckets_ < (int64_t(1) << 16) && buckets_ < cap) buckets_ *= 2;
-        // first_[g * (B + 1) + b]: the first leaf of strip g whose lo >= b / B (offsets[g + 1] if none)
-        first_.resize(size_t(strips * (buckets_ + 1)));
+        const int64_t cap = std::max<int64_t>(256, (int64_t(1) << 16) / std::max<int64_t>(strips, 1));
+        while (buckets_ < 2 * most && buckets_ < (int64_t(1) << 14) && buckets_ < cap) buckets_ *= 2;
+        // the first leaf of strip g at or after `edge`, searched from leaf i on
+        auto first_from = [&](int64_t g, int64_t i, double edge) {
+            while (i < offsets[g + 1] && lo[i] < edge) ++i;
+            return i;
+        };
+        index_.resize(size_t(strips * buckets_));
+        const double B = double(buckets_);
         for (int64_t g = 0; g < strips; ++g) {
-            int64_t i = offsets[g];
-            for (int64_t b = 0; b <= buckets_; ++b) {
-                while (i < offsets[g + 1] && lo[i] < double(b) / double(buckets_)) ++i;
-                first_[size_t(g * (buckets_ + 1) + b)] = int32_t(i);
+            int64_t i = offsets[g], next = first_from(g, i, 0.0);
+            for (int64_t b = 0; b < buckets_; ++b) {
+                i = next;
+                next = first_from(g, i, double(b + 1) / B);
+                int shift = 0;
+                while ((int64_t(1) << shift) < 4 * (next - i) && next - i > 1 && shift < 16) ++shift;
+                const int64_t S = int64_t(1) << shift;
+                index_[size_t(g * buckets_ + b)] = {int32_t(subs_.size()), shift};
+                // subs_[base + j]: the first leaf of strip g whose lo >= (b + j / S) / B
+                // (offsets[g + 1] if none), j = 0 .. S; the edges are exact
+                int64_t k = i;
+                for (int64_t j = 0; j < S; ++j)
+                    subs_.push_back(int32_t(k = first_from(g, k, (double(b) + double(j) / double(S)) / B)));
+                subs_.push_back(int32_t(next));
             }
         }
     }
@@ -85,19 +113,26 @@ class PiecewiseLinearTable {
     // A strip outside [0, strips), an empty strip or a NaN x gives NaN.
     double operator()(int64_t g, double x) const {
         if (g < 0 || g >= strips_ || offsets_[g + 1] <= offsets_[g] || !(x == x)) return __builtin_nan("");
-        int64_t b = int64_t(x * double(buckets_));
-        b = b < 0 ? 0 : (b >= buckets_ ? buckets_ - 1 : b);
-        // the answer lies in [first[b] - 1, first[b + 1] - 1]: leaves starting before b / B end
-        // with the last one, and none starting at or after (b + 1) / B can hold x
-        const int32_t *row = &first_[size_t(g * (buckets_ + 1))];
-        const int64_t begin = std::max(int64_t(row[b]) - 1, offsets_[g]), end = std::max(int64_t(row[b + 1]), begin + 1);
+        const double xb = x * double(buckets_);
+        const int64_t b = xb < 0 ? 0 : (xb < double(buckets_ - 1) ? int64_t(xb) : buckets_ - 1);
+        const Bucket bucket = index_[size_t(g * buckets_ + b)];
+        const int64_t S = int64_t(1) << bucket.shift;
+        const double f = (xb - double(b)) * double(S);
+        const int64_t j = f < 0 ? 0 : (f < double(S - 1) ? int64_t(f) : S - 1);
+        // the answer lies in [first[j] - 1, first[j + 1] - 1]: leaves starting before the
+        // sub-bucket end with the last one, and none starting after it can hold x
+        const int32_t *first = &subs_[size_t(bucket.base + j)];
+        const int64_t begin = std::max(int64_t(first[0]) - 1, offsets_[g]);
+        const int64_t end = std::max(int64_t(first[1]), begin + 1);
         const Leaf *leaf = &leaves_[size_t(begin)];
-        // mostly a single candidate (no leaf starts in the bucket): no search, no extra load;
-        // else the last candidate with lo <= x (the first when none is), without branches
-        for (size_t m = size_t(end - begin); m > 1;) {
-            const size_t half = m / 2;
-            leaf = leaf[half].lo <= x ? leaf + half : leaf;
-            m -= half;
+        if (end - begin > 2) {  // leaves narrower than the finest sub-bucket: rare
+            for (size_t m = size_t(end - begin); m > 1;) {
+                const size_t half = m / 2;
+                leaf = leaf[half].lo <= x ? leaf + half : leaf;
+                m -= half;
+            }
+        } else {
+            leaf += (end - begin == 2) & (leaf[1].lo <= x);
         }
         const double width = leaf->hi - leaf->lo;
         double t = (x - leaf->lo) / (width > 0 ? width : 1.0);  // unconditional: a select, not a branch
@@ -111,10 +146,14 @@ class PiecewiseLinearTable {
     struct Leaf {
         double lo, hi, start, mass;
     };
+    struct Bucket {
+        int32_t base, shift;  // leaf indices: the tables hold well under 2^31 leaves
+    };
     const int64_t *offsets_;
     int64_t strips_, buckets_ = 256;
     std::vector<Leaf> leaves_;
-    std::vector<int32_t> first_;  // leaf indices: the tables hold well under 2^31 leaves
+    std::vector<Bucket> index_;   // [g * B + b]: where bucket b's sub-buckets start in subs_, log2 S_b
+    std::vector<int32_t> subs_;   // per bucket, its S_b + 1 sub-bucket firsts
 };
 
 // out[j] = the table's value at x[j] in strip strip[j], for n points.
@@ -128,26 +167,51 @@ inline void piecewise_linear_lookup(const double *lo, const double *hi, const do
 // The Rosenblatt transform of the sampler check (harness/samplers/transform.py) of parameter
 // points s (n, k): u0 = marginal(0, s0); on the square (k == 2) also the strip g of s0 among
 // the strip edges (the last edge e with e <= s0, clamped to 0 .. edges - 2; NaN: the last
-// strip, as numpy's searchsorted) and u1 = conditional(g, s1).  u (n, k), strip (n,) (0 when
-// k == 1).
+// strip, as numpy's searchsorted) and u1 = conditional(g, s1).  Each point's result depends
+// on that point alone, so callers may cut the points into chunks on any threads.
+class RosenblattTransform {
+  public:
+    RosenblattTransform(const PiecewiseLinearTable &marginal, const PiecewiseLinearTable *conditional,
+                        const double *edges, size_t nedges)
+        : marginal_(marginal), conditional_(conditional), above_(edges, nedges), last_(int64_t(nedges) - 2) {}
+
+    // Points a .. b - 1 of s (n, k): u0 to u0[j * stride], on the square u1 to u1[j * stride],
+    // and the strip to strip[j - a] (0 on an interval).
+    void operator()(const double *s, size_t k, size_t a, size_t b, double *u0, double *u1, size_t stride,
+                    int64_t *strip) const {
+        // three passes, each with a short loop body, so that the out-of-order core overlaps
+        // the dependent loads of many points (one fused loop ran at half the speed)
+        for (size_t j = a; j < b; ++j) u0[j * stride] = marginal_(0, s[k * j]);
+        if (k == 1) {
+            std::fill(strip, strip + (b - a), int64_t(0));
+            return;
+        }
+        for (size_t j = a; j < b; ++j) {
+            const double s0 = s[k * j];
+            const int64_t g = s0 == s0 ? int64_t(above_(s0)) - 1 : last_;
+            strip[j - a] = g < 0 ? 0 : (g > last_ ? last_ : g);
+        }
+        for (size_t j = a; j < b; ++j) u1[j * stride] = (*conditional_)(strip[j - a], s[k * j + 1]);
+    }
+
+  private:
+    const PiecewiseLinearTable &marginal_;
+    const PiecewiseLinearTable *conditional_;
+    BucketedUpperBound above_;
+    int64_t last_;
+};
+
+// Points a chunk of the sampler check's batch kernels (this transform, the histogram, the
+// domain maps): fixed, so that work is cut the same way on any number of threads.
+inline constexpr size_t kCheckChunk = size_t(1) << 16;
+
+// rosenblatt: u (n, k) and strip (n,) of the points s (n, k), on all hardware threads.
 inline void rosenblatt(const PiecewiseLinearTable &marginal, const PiecewiseLinearTable *conditional,
                        const double *edges, size_t nedges, const double *s, size_t k, size_t n, double *u,
                        int64_t *strip) {
-    // three passes, each with a short loop body, so that the out-of-order core overlaps the
-    // dependent loads of many points (one fused loop ran at half the speed)
-    for (size_t j = 0; j < n; ++j) u[k * j] = marginal(0, s[k * j]);
-    if (k == 1) {
-        std::fill(strip, strip + n, int64_t(0));
-        return;
-    }
-    const int64_t last = int64_t(nedges) - 2;
-    const BucketedUpperBound above(edges, nedges);
-    for (size_t j = 0; j < n; ++j) {
-        const double s0 = s[k * j];
-        int64_t g = s0 == s0 ? int64_t(above(s0)) - 1 : last;
-        strip[j] = g < 0 ? 0 : (g > last ? last : g);
-    }
-    for (size_t j = 0; j < n; ++j) u[k * j + 1] = conditional->operator()(strip[j], s[k * j + 1]);
+    const RosenblattTransform transform(marginal, conditional, edges, nedges);
+    for_chunks(n, kCheckChunk,
+               [&](size_t, size_t a, size_t b, int) { transform(s, k, a, b, u, u + 1, k, strip + a); });
 }
 
 }  // namespace re

@@ -4,6 +4,7 @@
 // 1.. the helpers) lets a caller keep per-thread scratch memory, so chunks reuse buffers
 // instead of allocating (and page-faulting) their own.
 #pragma once
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
@@ -134,5 +135,17 @@ class ThreadPool {
     std::exception_ptr error_;
     bool stop_ = false;
 };
+
+// fn(c, a, b, worker) for the fixed chunks [a, b) = [c chunk, min(n, (c + 1) chunk)) of n
+// items, on all hardware threads (none started for a single chunk).  For per-item work whose
+// result depends on the item alone, or per-chunk results merged in chunk order: the same for
+// any thread count.
+template <class Fn>
+void for_chunks(size_t n, size_t chunk, Fn &&fn) {
+    const size_t chunks = (n + chunk - 1) / chunk;
+    ThreadPool::instance().run(chunks, ThreadPool::default_threads(), [&](size_t c, int worker) {
+        fn(c, c * chunk, std::min(n, (c + 1) * chunk), worker);
+    });
+}
 
 }  // namespace re

@@ -263,15 +263,53 @@ def test_rosenblatt_puts_a_nan_point_in_the_last_strip_as_searchsorted_does():
     assert list(strip) == [3, 2] and np.isnan(u[0, 0]) and np.isnan(u[1, 1])
 
 
-# --- equiprobable cells, Cramer-von Mises, pdf summary --------------------------------------
-def test_strip_bin_counts_match_bincount():
+# --- transform statistics, Cramer-von Mises, pdf summary --------------------------------------
+@pytest.mark.parametrize("square", [False, True])
+def test_transform_statistics_match_the_transform_counted_and_sorted_in_numpy(square):
     rng = np.random.default_rng(7)
-    u = rng.random((N, 2))
-    u[:3, 1] = [0.0, 1.0, np.nextafter(1, 0)]
-    strip = rng.integers(0, 32, N)
-    got = rest.strip_bin_counts(strip, u[:, 1], 32, 64)      # a strided column, read in place
-    j = np.minimum((u[:, 1] * 64).astype(np.int64), 63)
-    np.testing.assert_array_equal(got, np.bincount(strip * 64 + j, minlength=32 * 64).astype(float))
+    marginal = random_table(rng, 1, 3000)
+    conditional = random_table(rng, 32, 200) if square else None
+    edges = np.concatenate([[0.0], np.sort(rng.random(31)), [1.0]])
+    n = 200_000        # several chunks of the core's, on every thread
+    s = rng.random((n, 2 if square else 1))
+    s[:3, -1] = [0.0, 1.0, np.nextafter(1, 0)]
+    bins = 64
+    roots, counts = rest.transform_statistics(marginal, conditional, edges, s, bins)
+    u, strip = rest.rosenblatt(marginal, conditional, edges, s)
+    v = u[:, -1]
+    j = np.minimum((v * bins).astype(np.int64), bins - 1)
+    np.testing.assert_array_equal(counts, np.bincount(strip * bins + j, minlength=(32 if square else 1) * bins))
+    assert roots == pytest.approx([cvm_root_reference(u[:, c]) for c in range(u.shape[1])], rel=1e-12)
+
+
+def test_transform_statistics_count_no_nan_and_give_nan_roots():
+    rng = np.random.default_rng(10)
+    marginal, conditional = random_table(rng, 1, 10), random_table(rng, 4, 10)
+    edges = np.array([0.0, 0.25, 0.5, 0.75, 1.0])
+    s = rng.random((1000, 2))
+    s[0, 1] = np.nan
+    roots, counts = rest.transform_statistics(marginal, conditional, edges, s, 8)
+    assert counts.sum() == 999 and np.isnan(roots[1]) and np.isfinite(roots[0])
+
+
+def crowded_table(rng: np.random.Generator):
+    """A narrow lobe's CDF table: a few leaves over most of [0, 1] and thousands crowded into
+    [0, 1e-3], widths down to 2^-40 at 0 (the leaves a GGX alpha = 0.01 marginal has)."""
+    cuts = np.unique(np.concatenate([[0.0, 1.0], 2.0 ** -np.arange(10, 41), 1e-3 * rng.random(3000),
+                                     rng.random(20), 5e-4 + 1e-12 * np.arange(40)]))
+    mass = rng.gamma(0.5, 1.0, cuts.size - 1)
+    mass /= mass.sum()
+    return cuts[:-1], cuts[1:], np.concatenate([[0.0], np.cumsum(mass)[:-1]]), mass, np.array([0, cuts.size - 1])
+
+
+def test_piecewise_linear_lookup_in_crowded_buckets_matches_its_definition():
+    rng = np.random.default_rng(11)
+    table = crowded_table(rng)
+    lo = table[0]
+    x = np.concatenate([1e-3 * rng.random(N), rng.random(N // 4), lo, np.nextafter(lo, -1), np.nextafter(lo, 2),
+                        2.0 ** -np.arange(30, 60), [-0.1, 1.0, 1.1, np.inf, -np.inf]])
+    g = np.zeros(x.size, dtype=np.int64)
+    np.testing.assert_array_equal(rest.piecewise_linear_lookup(*table, g, x), lookup_reference(*table, g, x))
 
 
 def cvm_root_reference(u: np.ndarray) -> float:
