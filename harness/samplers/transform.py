@@ -248,8 +248,9 @@ class Transform:
         (:func:`reference_estimators.transform_statistics`)."""
         conditional = None if self.conditional is None else self.conditional.table
         roots, counts = rest.transform_statistics(self.marginal.table, conditional, self.edges, s, bins)
-        prob = np.full(bins, 1.0 / bins) if self.conditional is None else np.repeat(self.probability / bins, bins)
-        return roots, counts, prob
+        if self.conditional is None:
+            return roots, counts, np.full(bins, 1.0 / bins)
+        return roots, counts, np.repeat(self.probability / bins, bins)
 
 
 def cvm_sf(w2: float) -> float:

@@ -278,7 +278,8 @@ def test_transform_statistics_match_the_transform_counted_and_sorted_in_numpy(sq
     u, strip = rest.rosenblatt(marginal, conditional, edges, s)
     v = u[:, -1]
     j = np.minimum((v * bins).astype(np.int64), bins - 1)
-    np.testing.assert_array_equal(counts, np.bincount(strip * bins + j, minlength=(32 if square else 1) * bins))
+    expected = np.bincount(strip * bins + j, minlength=(32 if square else 1) * bins)
+    np.testing.assert_array_equal(counts, expected)
     assert roots == pytest.approx([cvm_root_reference(u[:, c]) for c in range(u.shape[1])], rel=1e-12)
 
 
@@ -299,15 +300,16 @@ def crowded_table(rng: np.random.Generator):
                                      rng.random(20), 5e-4 + 1e-12 * np.arange(40)]))
     mass = rng.gamma(0.5, 1.0, cuts.size - 1)
     mass /= mass.sum()
-    return cuts[:-1], cuts[1:], np.concatenate([[0.0], np.cumsum(mass)[:-1]]), mass, np.array([0, cuts.size - 1])
+    start = np.concatenate([[0.0], np.cumsum(mass)[:-1]])
+    return cuts[:-1], cuts[1:], start, mass, np.array([0, cuts.size - 1])
 
 
 def test_piecewise_linear_lookup_in_crowded_buckets_matches_its_definition():
     rng = np.random.default_rng(11)
     table = crowded_table(rng)
     lo = table[0]
-    x = np.concatenate([1e-3 * rng.random(N), rng.random(N // 4), lo, np.nextafter(lo, -1), np.nextafter(lo, 2),
-                        2.0 ** -np.arange(30, 60), [-0.1, 1.0, 1.1, np.inf, -np.inf]])
+    x = np.concatenate([1e-3 * rng.random(N), rng.random(N // 4), lo, np.nextafter(lo, -1),
+                        np.nextafter(lo, 2), 2.0 ** -np.arange(30, 60), [-0.1, 1.0, 1.1, np.inf, -np.inf]])
     g = np.zeros(x.size, dtype=np.int64)
     np.testing.assert_array_equal(rest.piecewise_linear_lookup(*table, g, x), lookup_reference(*table, g, x))
 
