@@ -14,7 +14,7 @@ from . import _core
 __all__ = [
     "CHECK_DOMAINS", "domain_params", "domain_points", "cubature_nodes", "grid_histogram", "rosenblatt",
     "piecewise_linear_lookup", "transform_statistics", "cramer_von_mises_root", "pdf_summary",
-    "float32_unit_rows",
+    "float32_unit_rows", "cap_to_world",
 ]
 
 #: The sampling domains of the sampler check, in the order the core numbers them.
@@ -49,6 +49,18 @@ def domain_points(kind: str, s: Any, lo: float = 0.0, hi: float = 1.0) -> np.nda
     rounds 2 pi s1): the same points to rounding.  In C++ with the GIL released."""
     a = np.ascontiguousarray(s, dtype=np.float64)
     return _core.domain_points(_check_domain(kind), float(lo), float(hi), a)
+
+
+def cap_to_world(h: Any, axis: Any, t: Any, b: Any, cos_alpha: float, scale: float) -> np.ndarray:
+    """World directions (N, 3) of points h (N, 3) of the hemisphere (normalised first) through
+    the equal-area map of the cap {d : <d, axis> >= cos_alpha} onto it, frame (t, b, axis)
+    orthonormal, scale = 1 - cos_alpha: c = clip(cos_alpha + z scale, -1, 1) along the axis,
+    the azimuth kept (its cosine and sine as x / r and y / r; the pole at azimuth 0).  A point
+    below the horizon maps outside the cap, a NaN row to NaN.  In C++ on all threads, in
+    numpy's order of operations (harness.adapters.mitsuba.cap.Cap.to_world)."""
+    a = np.ascontiguousarray(h, dtype=np.float64).reshape(-1, 3)
+    frame = [np.ascontiguousarray(v, dtype=np.float64).reshape(-1) for v in (axis, t, b)]
+    return _core.cap_to_world(a, *frame, float(cos_alpha), float(scale))
 
 
 def float32_unit_rows(x: Any, slack: float) -> tuple[np.ndarray, np.ndarray]:

@@ -51,6 +51,10 @@ _MIN_WIDTH = 2.0**-30   # nor below this width: a domain map loses its precision
 _MAX_BOXES = 300_000    # box integrals a tabulation may spend (then it stops with its bound)
 _MAX_EVALS = 6_000_000  # pdf evaluations one round of box integrals may spend: a float32 pdf's
                         # rounding noise would otherwise drive every box to the depth limit
+_MAX_TABLE_EVALS = 40_000_000  # pdf evaluations a whole tabulation may spend (then it stops with
+                        # its bound): a bitmap area light's texel edges, curved in the cap's
+                        # map, had cost 200 million (40 s) for a bound that left the tests no
+                        # power anyway; the zoo's tables spend at most 27 million
 
 
 @dataclass(frozen=True)
@@ -88,13 +92,20 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
     box per piece, so the cubature starts where the mass is).  Leaves are halved while the
     CDF deviates from linearity by more than eps (times the strip's mass) at a quarter point
     or a quarter holds more than ``max_share`` of it, or until _MAX_DEPTH, _MIN_WIDTH or
-    _MAX_BOXES; the cubature stops at q's rounding ``floor`` (relative).  A box whose
-    integral is not finite counts as mass 0 with error 1 (the bound then covers the whole
-    strip: its tests lose their power, never their level)."""
+    _MAX_BOXES or _MAX_TABLE_EVALS; the cubature stops at q's rounding ``floor`` (relative).
+    A box whose integral is not finite counts as mass 0 with error 1 (the bound then covers
+    the whole strip: its tests lose their power, never their level)."""
     nstrip, npiece = pieces.shape[:2]
     strip = np.repeat(np.arange(nstrip), leaves)
     a = np.tile(np.arange(leaves) / leaves, nstrip)
     b = np.tile((np.arange(leaves) + 1) / leaves, nstrip)
+
+    evals = 0
+
+    def counted(sp: np.ndarray) -> np.ndarray:
+        nonlocal evals
+        evals += sp.shape[0]
+        return q(sp)
 
     def quarters(strip: np.ndarray, a: np.ndarray, b: np.ndarray, strip_tol: np.ndarray):
         """(L, 4) quarter integrals of leaves and their (L,) summed cubature error."""
@@ -109,7 +120,8 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
         lo[:, axis], hi[:, axis] = np.repeat(qa, npiece), np.repeat(qb, npiece)
         if k == 2:
             lo[:, 1 - axis], hi[:, 1 - axis] = pieces[g, :, 0].reshape(-1), pieces[g, :, 1].reshape(-1)
-        val, err = box_integrals(q, lo, hi, tol, max_depth=16 if k == 1 else 8, max_evals=_MAX_EVALS,
+        budget = min(_MAX_EVALS, max(_MAX_TABLE_EVALS - evals, 0))
+        val, err = box_integrals(counted, lo, hi, tol, max_depth=16 if k == 1 else 8, max_evals=budget,
                                  floor=floor)
         bad = ~(np.isfinite(val[:, 0]) & np.isfinite(err[:, 0]))   # a pdf infinite at a node
         val = np.where(bad, 0.0, val[:, 0])
@@ -131,7 +143,8 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
         gap = np.max(np.abs(cum - m[:, None] * np.array([0.25, 0.5, 0.75])), axis=1)
         bound = np.minimum(2 * gap, qs.max(axis=1))     # a quarter's mass bounds any CDF within it
         fine = (bound <= eps * strip_mass[strip]) & (qs.max(axis=1) <= max_share * strip_mass[strip])
-        ok = fine | (depth == _MAX_DEPTH) | (b - a < _MIN_WIDTH) | (spent > _MAX_BOXES)
+        spent_all = (spent > _MAX_BOXES) | (evals > _MAX_TABLE_EVALS)
+        ok = fine | (depth == _MAX_DEPTH) | (b - a < _MIN_WIDTH) | spent_all
         done.append((strip[ok], a[ok], b[ok], qs[ok], bound[ok]))
         if ok.all():
             break

@@ -553,10 +553,31 @@ NB_MODULE(_core, m) {
         OutArray xa = new_array(n, pdim == 1 ? 0 : size_t(pdim), &x);
         {
             nb::gil_scoped_release g;
-            domain_points(d, lo, hi, s.data(), n, x);
+            // each point depends on its parameters alone (the vector and scalar maps give the
+            // same bits): chunks on all threads
+            for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t b, int) {
+                domain_points(d, lo, hi, s.data() + a * size_t(k), b - a, x + a * size_t(pdim));
+            });
         }
         return xa;
     }, "kind"_a, "lo"_a, "hi"_a, "s"_a, "Points x(s) (N,) or (N, point_dim) of parameters s (N, k) on domain `kind`.");
+    m.def("cap_to_world", [](InArray h, InArray axis, InArray t, InArray b, double cos_alpha, double scale) {
+        const size_t n = check_points(h, 3, "h");
+        if (axis.size() != 3 || t.size() != 3 || b.size() != 3)
+            throw nb::value_error("'axis', 't' and 'b' must be 3-vectors");
+        double *out;
+        OutArray wa = new_array(n, 3, &out);
+        {
+            nb::gil_scoped_release g;
+            // each row from that row alone: chunks on all threads
+            for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t e, int) {
+                cap_to_world(h.data() + 3 * a, e - a, axis.data(), t.data(), b.data(), cos_alpha, scale, out + 3 * a);
+            });
+        }
+        return wa;
+    }, "h"_a, "axis"_a, "t"_a, "b"_a, "cos_alpha"_a, "scale"_a,
+       "World directions (N, 3) of hemisphere points h (N, 3) through the equal-area map of the cap about `axis` "
+       "(frame t, b, axis) with cosine `cos_alpha`, scale = 1 - cos_alpha.");
     m.def("float32_unit_rows", [](InArray x, double slack) {
         const size_t n = check_points(x, 3, "x");
         float *cols = new float[n > 0 ? 3 * n : 1];
@@ -582,7 +603,10 @@ NB_MODULE(_core, m) {
         OutArray pts = new_array(boxes * per, k, &out);
         {
             nb::gil_scoped_release r;
-            cubature_nodes(lo.data(), hi.data(), boxes, k, nodes.data(), g, out);
+            // box by box, each box's nodes from that box alone: chunks of boxes on all threads
+            for_chunks(boxes, std::max<size_t>(kCheckChunk / per, 1), [&](size_t, size_t a, size_t b, int) {
+                cubature_nodes(lo.data() + a * k, hi.data() + a * k, b - a, k, nodes.data(), g, out + a * per * k);
+            });
         }
         return pts;
     }, "lo"_a, "hi"_a, "nodes"_a,

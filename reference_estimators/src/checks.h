@@ -109,6 +109,28 @@ inline void domain_params(CheckDomain d, double lo, double hi, const double *x, 
     }
 }
 
+// World directions out (n, 3) of the points h (n, 3) of the hemisphere through the
+// equal-area map of the cap {d : <d, axis> >= cos_alpha} (harness/adapters/mitsuba/cap.py,
+// Cap.to_world; frame t, b, axis orthonormal, scale = 1 - cos_alpha): h normalised, then
+// c = clamp(cos_alpha + z scale, -1, 1) along the axis and the azimuth's cosine and sine as
+// x / r and y / r (the pole r = 0 at azimuth 0), in numpy's order of operations.  A point
+// below the horizon maps outside the cap; NaN rows give NaN.
+inline void cap_to_world(const double *h, size_t n, const double *axis, const double *t, const double *b,
+                         double cos_alpha, double scale, double *out) {
+    for (size_t i = 0; i < n; ++i) {
+        const double *p = h + 3 * i;
+        const double len = std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
+        const double x = p[0] / len, y = p[1] / len, z = p[2] / len;
+        double c = cos_alpha + z * scale;
+        c = c < -1 ? -1.0 : (c > 1 ? 1.0 : c);  // NaN passes
+        const double r = std::hypot(x, y);
+        const bool pole = r == 0;
+        const double s = std::sqrt(std::max(0.0, 1 - c * c)) / (pole ? 1.0 : r);
+        const double cos_phi = pole ? s : s * x, sin_phi = pole ? 0.0 : s * y;
+        for (int j = 0; j < 3; ++j) out[3 * i + j] = cos_phi * t[j] + sin_phi * b[j] + c * axis[j];
+    }
+}
+
 // Points x (n, point_dim; n values on the interval and half line) of parameters s (n, k):
 // the inverse maps of domain_params, in numpy's order of operations except the azimuth's
 // cosine and sine, which are fastmath's sincos_2pi of s1 (exact argument reduction; numpy's

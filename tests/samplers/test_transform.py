@@ -75,6 +75,32 @@ def test_a_singularity_and_a_narrow_lobe_on_the_interval_are_tabulated_within_th
         assert t.error * math.sqrt(n) <= 0.01, name   # the carry moves sqrt(n W^2) by <= 0.01
 
 
+def test_a_tabulation_over_its_evaluation_budget_stops_within_its_bound(monkeypatch):
+    """A disk of uniform density on the square: its rim, a curve across every box it meets,
+    keeps the cubature refining; with the budget cut to 2 million pdf calls the tabulation
+    stops there, and the marginal it gives is still within its (larger) bound of the exact
+    CDF, the disk's segment area left of s0."""
+    import harness.samplers.transform as tr
+
+    monkeypatch.setattr(tr, "_MAX_TABLE_EVALS", 2_000_000)
+    r = 0.3
+    calls = []
+
+    def q(sp: np.ndarray) -> np.ndarray:
+        calls.append(sp.shape[0])
+        return np.where(np.hypot(sp[:, 0] - 0.5, sp[:, 1] - 0.5) <= r, 1 / (math.pi * r * r), 0.0)
+
+    t = Transform.build(q, 2, 1_000_000)
+    # the budget, then at most one round of box integrals (_MAX_EVALS) past it, per table
+    # (without the cut: 60 million)
+    assert sum(calls) <= 2 * (2_000_000 + tr._MAX_EVALS)
+    x = np.linspace(0.2, 0.8, 2001)
+    d = np.clip((x - 0.5) / r, -1, 1)
+    exact = (np.arccos(-d) * r * r - (-d) * r * r * np.sqrt(1 - d * d)) / (math.pi * r * r)
+    got = t(np.column_stack([x, np.full_like(x, 0.5)]))[:, 0]
+    assert np.max(np.abs(got - exact)) <= t.marginal.error + 1e-9
+
+
 @pytest.mark.parametrize("name, domain, params", [("linear", "interval", {"a": 1.0, "b": 0.37}),
                                                    ("power", "interval", {"k": -0.5}),
                                                    ("cosine_hemisphere", "hemisphere", {}),
