@@ -321,7 +321,7 @@ class SamplerTest:
         if m == 0:
             return []
         bins = min(1024, max(m // 50, 16)) if t.conditional is None else 64
-        roots, observed, prob = t.statistics(s, bins)
+        roots, observed, prob, prob_err = t.statistics(s, bins)
         tables = [t.marginal] if t.conditional is None else [t.marginal, t.conditional]
         names = ["u0 = F(s0)", "u1 = F(s1 | strip of s0)"]
         tests = []
@@ -329,7 +329,7 @@ class SamplerTest:
         for axis, (table, (w2, p)) in enumerate(zip(tables, cvm)):
             tests.append((f"Cramer-von Mises {names[axis]}", w2, 0, p,
                           f"smooth warps below the bin width (CDF error bound {table.error:.1e} carried)"))
-        stat, df, _ = _chi_square(observed, m * prob, 2 * m * t.error * prob * bins)
+        stat, df, _ = _chi_square(observed, m * prob, m * prob_err)
         cells = "x".join(map(str, (bins,) if t.conditional is None else (STRIPS, bins)))
         p = distributions.chi2_sf(stat, df) if df > 0 else 1.0
         tests.append((f"chi-square equiprobable {cells}", stat, df, p,

@@ -51,10 +51,10 @@ _MIN_WIDTH = 2.0**-30   # nor below this width: a domain map loses its precision
 _MAX_BOXES = 300_000    # box integrals a tabulation may spend (then it stops with its bound)
 _MAX_EVALS = 6_000_000  # pdf evaluations one round of box integrals may spend: a float32 pdf's
                         # rounding noise would otherwise drive every box to the depth limit
-_MAX_TABLE_EVALS = 40_000_000  # pdf evaluations a whole tabulation may spend (then it stops with
-                        # its bound): a bitmap area light's texel edges, curved in the cap's
-                        # map, had cost 200 million (40 s) for a bound that left the tests no
-                        # power anyway; the zoo's tables spend at most 27 million
+_MAX_TABLE_EVALS = 160_000_000  # pdf evaluations a whole tabulation may spend (then it stops
+                        # with its bound): a backstop behind the stop at a useless bound
+                        # (_tabulate); the most a useful table spent is 96 million (Mitsuba's
+                        # Beckmann alpha = 0.01), the zoo's at most 27 million
 
 
 @dataclass(frozen=True)
@@ -85,14 +85,16 @@ class AxisCdf:
 
 
 def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: np.ndarray, leaves: int,
-              eps: float, max_share: float = 1.0, floor: float = 0.0) -> AxisCdf:
+              eps: float, max_share: float = 1.0, floor: float = 0.0, useless: float = math.inf) -> AxisCdf:
     """The CDF of q along ``axis`` within each strip: strip g spans all of [0, 1] along
     ``axis`` (cut into ``leaves`` leaves to start) and, on the square, the pieces
     pieces[g, j] = (lo, hi) across it (arrays (S, P, 2); each leaf quarter is integrated as one
     box per piece, so the cubature starts where the mass is).  Leaves are halved while the
     CDF deviates from linearity by more than eps (times the strip's mass) at a quarter point
     or a quarter holds more than ``max_share`` of it, or until _MAX_DEPTH, _MIN_WIDTH or
-    _MAX_BOXES or _MAX_TABLE_EVALS; the cubature stops at q's rounding ``floor`` (relative).
+    _MAX_BOXES or _MAX_TABLE_EVALS, or until the cubature error summed in a strip (which
+    refinement only adds to) exceeds ``useless`` (times the strip's mass): a bound the tests
+    can no longer see through.  The cubature stops at q's rounding ``floor`` (relative).
     A box whose integral is not finite counts as mass 0 with error 1 (the bound then covers
     the whole strip: its tests lose their power, never their level)."""
     nstrip, npiece = pieces.shape[:2]
@@ -144,7 +146,8 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
         bound = np.minimum(2 * gap, qs.max(axis=1))     # a quarter's mass bounds any CDF within it
         fine = (bound <= eps * strip_mass[strip]) & (qs.max(axis=1) <= max_share * strip_mass[strip])
         spent_all = (spent > _MAX_BOXES) | (evals > _MAX_TABLE_EVALS)
-        ok = fine | (depth == _MAX_DEPTH) | (b - a < _MIN_WIDTH) | spent_all
+        hopeless = err_sum[strip] > useless * strip_mass[strip]
+        ok = fine | (depth == _MAX_DEPTH) | (b - a < _MIN_WIDTH) | spent_all | hopeless
         done.append((strip[ok], a[ok], b[ok], qs[ok], bound[ok]))
         if ok.all():
             break
@@ -224,18 +227,21 @@ class Transform:
         edges are the marginal's quantiles g / STRIPS, each strip integrated across as
         SUBSTRIPS pieces of equal claimed mass; a strip whose integral disagrees with the
         marginal's 1 / STRIPS (mass the cubature missed) adds the disagreement to the bound.
-        ``floor``: q's rounding (:func:`harness.samplers.cubature.rounding_floor`)."""
+        ``floor``: q's rounding (:func:`harness.samplers.cubature.rounding_floor`).  A table
+        whose summed cubature error passes 1 / sqrt(n) stops refining: carried, that error
+        moves sqrt(n W^2) by 1 or more, and the tests on it have no power left to gain."""
         eps = 0.02 / math.sqrt(n)
+        useless = 1 / math.sqrt(n)
         if k == 1:
             eps /= 10
-            marginal = _tabulate(q, 1, 0, np.zeros((1, 1, 2)), 1024, eps, floor=floor)
+            marginal = _tabulate(q, 1, 0, np.zeros((1, 1, 2)), 1024, eps, floor=floor, useless=useless)
             return cls(marginal, None, np.array([0.0, 1.0]), np.ones(1), marginal.error)
         cuts = np.arange(_MARGINAL_PIECES + 1) / _MARGINAL_PIECES
         marginal = _tabulate(q, 2, 0, np.stack([cuts[:-1], cuts[1:]], axis=1)[None], 128, eps / 8,
-                             max_share=1 / (4 * STRIPS * SUBSTRIPS), floor=floor)
+                             max_share=1 / (4 * STRIPS * SUBSTRIPS), floor=floor, useless=useless)
         levels, cdf = _snapped_levels(marginal, STRIPS * SUBSTRIPS)
         pieces = np.stack([levels[:-1], levels[1:]], axis=1).reshape(STRIPS, SUBSTRIPS, 2)
-        conditional = _tabulate(q, 2, 1, pieces, 64, eps, floor=floor)
+        conditional = _tabulate(q, 2, 1, pieces, 64, eps, floor=floor, useless=useless)
         probability = np.diff(cdf[::SUBSTRIPS])
         share = marginal.strip_mass[0] * probability
         missed = np.abs(conditional.strip_mass - share) / np.maximum(share, 1e-300)
@@ -253,17 +259,25 @@ class Transform:
         conditional = None if self.conditional is None else self.conditional.table
         return rest.rosenblatt(self.marginal.table, conditional, self.edges, s)
 
-    def statistics(self, s: np.ndarray, bins: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def statistics(self, s: np.ndarray, bins: int) -> tuple[np.ndarray, ...]:
         """What the tests need of the transform u of parameter points s (N, k), without u
-        itself: (the Cramer-von Mises root of each column of u (k,), the observed counts and
-        the claimed probabilities of the cells of equal claimed probability (C,): bins of u0 on
-        an interval, strips x bins of u1 on the square).  One call to the core
+        itself: (the Cramer-von Mises root of each column of u (k,), the observed counts, the
+        claimed probabilities and a bound on those probabilities' error of the cells of equal
+        claimed probability (C,): bins of u0 on an interval, strips x bins of u1 on the
+        square).  The bound: on an interval a bin's two edges are each off by at most the
+        marginal's error e0; on the square strip g's probability p_g is off by at most 2 e0
+        (its edges), spread over its bins, and each bin's share of the strip by at most 2 e1
+        (the conditional's error), so a cell is off by at most 2 e0 / bins + 2 e1 (p_g + 2 e0),
+        whatever p_g claims.  One call to the core
         (:func:`reference_estimators.transform_statistics`)."""
         conditional = None if self.conditional is None else self.conditional.table
         roots, counts = rest.transform_statistics(self.marginal.table, conditional, self.edges, s, bins)
+        e0 = self.marginal.error
         if self.conditional is None:
-            return roots, counts, np.full(bins, 1.0 / bins)
-        return roots, counts, np.repeat(self.probability / bins, bins)
+            return roots, counts, np.full(bins, 1.0 / bins), np.full(bins, 2 * e0)
+        e1 = self.conditional.error
+        strip = np.repeat(self.probability, bins)
+        return roots, counts, strip / bins, 2 * e0 / bins + 2 * e1 * (strip + 2 * e0)
 
 
 def cvm_sf(w2: float) -> float:
