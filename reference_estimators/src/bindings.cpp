@@ -116,6 +116,22 @@ struct BoundTable {
     }
 };
 
+// A Rosenblatt transform's tables as Python passes them: the marginal and, on the square (a
+// conditional given), the conditional, whose strips `edges` bound (one more edge than strips).
+struct BoundTransform {
+    BoundTable marginal;
+    std::unique_ptr<BoundTable> conditional;
+    size_t k;
+
+    BoundTransform(nb::handle m, nb::handle c, const InArray &edges) : marginal(m), k(c.is_none() ? 1 : 2) {
+        if (k == 1) return;
+        conditional = std::make_unique<BoundTable>(c);
+        if (edges.size() != conditional->offsets.size())
+            throw nb::value_error("'edges' must hold one more value than the conditional has strips");
+    }
+    const PiecewiseLinearTable *conditional_table() const { return conditional ? conditional->table.get() : nullptr; }
+};
+
 nb::dict diagnostics_dict(const Diagnostics &d) {
     nb::dict counts;
     for (int k = 0; k < kIssueKinds; ++k) counts[kIssueNames[k]] = d.counts[k];
@@ -627,16 +643,8 @@ NB_MODULE(_core, m) {
        "Counts of the inside points s (N, k) in [0, 1]^k on the regular grid `shape`, coordinates clamped "
        "to [0, 1).");
     m.def("rosenblatt", [](nb::handle marginal, nb::handle conditional, InArray edges, InArray s) {
-        const bool square = !conditional.is_none();
-        const size_t k = square ? 2 : 1;
-        const size_t n = check_params(s, k);
-        const BoundTable m0(marginal);
-        std::unique_ptr<BoundTable> m1;
-        if (square) {
-            m1 = std::make_unique<BoundTable>(conditional);
-            if (edges.size() != m1->offsets.size())
-                throw nb::value_error("'edges' must hold one more value than the conditional has strips");
-        }
+        const BoundTransform t(marginal, conditional, edges);
+        const size_t k = t.k, n = check_params(s, k);
         double *u;
         OutArray ua = new_array(n, k, &u);
         int64_t *g = new int64_t[n > 0 ? n : 1];
@@ -644,8 +652,7 @@ NB_MODULE(_core, m) {
         nb::ndarray<nb::numpy, int64_t> strip(g, {n}, owner);
         {
             nb::gil_scoped_release r;
-            rosenblatt(*m0.table, square ? m1->table.get() : nullptr, edges.data(), edges.size(), s.data(), k, n,
-                       u, g);
+            rosenblatt(*t.marginal.table, t.conditional_table(), edges.data(), edges.size(), s.data(), k, n, u, g);
         }
         return nb::make_tuple(ua, strip);
     }, "marginal"_a, "conditional"_a.none(), "edges"_a, "s"_a,
@@ -654,24 +661,16 @@ NB_MODULE(_core, m) {
        "(lo, hi, start, mass, offsets).");
     m.def("transform_statistics", [](nb::handle marginal, nb::handle conditional, InArray edges, InArray s,
                                      int64_t bins) {
-        const bool square = !conditional.is_none();
-        const size_t k = square ? 2 : 1;
-        const size_t n = check_params(s, k);
+        const BoundTransform t(marginal, conditional, edges);
+        const size_t k = t.k, n = check_params(s, k);
         if (bins < 1) throw nb::value_error("'bins' must be positive");
-        const BoundTable m0(marginal);
-        std::unique_ptr<BoundTable> m1;
-        if (square) {
-            m1 = std::make_unique<BoundTable>(conditional);
-            if (edges.size() != m1->offsets.size())
-                throw nb::value_error("'edges' must hold one more value than the conditional has strips");
-        }
         double *r, *c;
         OutArray roots = new_array(k, 0, &r);
-        OutArray counts = new_array(size_t((square ? int64_t(edges.size()) - 1 : 1) * bins), 0, &c);
+        OutArray counts = new_array(size_t((k == 2 ? int64_t(edges.size()) - 1 : 1) * bins), 0, &c);
         {
             nb::gil_scoped_release g;
-            transform_statistics(*m0.table, square ? m1->table.get() : nullptr, edges.data(), edges.size(), s.data(),
-                                 k, n, bins, r, c);
+            transform_statistics(*t.marginal.table, t.conditional_table(), edges.data(), edges.size(), s.data(), k,
+                                 n, bins, r, c);
         }
         return nb::make_tuple(roots, counts);
     }, "marginal"_a, "conditional"_a.none(), "edges"_a, "s"_a, "bins"_a,
