@@ -10,7 +10,8 @@ import numpy as np
 from scipy import stats as sps
 
 from harness import stats
-from harness.samplers.check import SamplerCheck, check_sampler
+from harness.samplers.check import check_sampler
+from harness.samplers.result import SamplerCheck
 from harness.usercode import callable_name
 
 __all__ = ["HarnessWarning", "assert_unbiased", "assert_biased", "assert_converges", "assert_sampler",

@@ -2,9 +2,9 @@
 
 Domains and their equal-measure maps (``domains``), adaptive cubature of the claimed pdf over
 many cells at once (``cubature``), the chi-square check with its deterministic pre-checks and
-marginal and moment tests (``check``), the emcee cross-check (``mcmc``), and the zoo of
-correct and wrong samplers (``zoo``).  ``mcmc_crosscheck`` loads on first use (it imports
-emcee and scipy.stats).
+marginal and moment tests (``check``) and its outcome (``result``), the emcee cross-check
+(``mcmc``), and the zoo of correct and wrong samplers (``zoo``).  ``mcmc_crosscheck`` loads on
+first use (it imports emcee and scipy.stats).
 """
 from __future__ import annotations
 
@@ -12,7 +12,6 @@ from typing import TYPE_CHECKING, Any
 
 from harness.samplers.check import (
     SAMPLE_CASE,
-    SamplerCheck,
     SamplerTest,
     check_sampler,
     check_with_missing,
@@ -21,6 +20,7 @@ from harness.samplers.check import (
 )
 from harness.samplers.cubature import cell_integrals
 from harness.samplers.domains import DOMAINS, Domain, as_domain
+from harness.samplers.result import SamplerCheck
 
 if TYPE_CHECKING:
     from harness.samplers.mcmc import mcmc_crosscheck

@@ -45,9 +45,10 @@ from scipy import special, stats
 
 import reference_estimators as rest
 
-from harness.samplers.check import SamplerCheck, _checked_pdf, _drawn, histogram
+from harness.samplers.check import _checked_pdf, _drawn, histogram
 from harness.samplers.domains import Domain, as_domain
 from harness.samplers.reported import reported_pdf_failure
+from harness.samplers.result import SamplerCheck
 from harness.stats import holm
 from harness.stats.results import Failure
 

@@ -27,7 +27,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from harness.samplers.check import SamplerCheck
+from harness.samplers.result import SamplerCheck
 from harness.stats import CLOCK, ConvergenceResult, Efficiency, UnbiasedResult, failure_counts
 from harness.suite.store import Store
 

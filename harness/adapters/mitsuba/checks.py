@@ -52,8 +52,9 @@ import reference_estimators as rest
 
 from harness.adapters.mitsuba.cap import CapView
 from harness.adapters.mitsuba.runtime import is_jit
-from harness.samplers.check import SAMPLE_CASE, SamplerCheck, check_with_missing
+from harness.samplers.check import SAMPLE_CASE, check_with_missing
 from harness.samplers.reported import reported_pdf_failure, rounding_spread
+from harness.samplers.result import SamplerCheck
 from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
 
 __all__ = ["WeightCheck", "check_mitsuba_sampler", "weight_consistency"]
