@@ -3,7 +3,7 @@
 cell, pooling below 5), on the same zoo of correct and subtly wrong samplers
 (harness.samplers.zoo), at the same sample count and seeds.
 
-    .venv/bin/python benchmarks/sampler_tests.py [--seeds 10] [--samples 1e6]
+    .venv/bin/python benchmarks/sampler_tests.py [--seeds 10] [--samples 1e6] [--match TEXT]
 
 For each sampler (the zoo's correct ones, its mutants and the smooth warps below any bin
 width): how many of the seeds each test rejected (false alarms for correct samplers at
@@ -86,6 +86,7 @@ def main() -> None:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--samples", default="1e6")
+    parser.add_argument("--match", default="", help="only the samplers whose name contains this")
     args = parser.parse_args()
     n = int(float(args.samples))
     use_libllvm()  # before drjit is imported
@@ -98,6 +99,8 @@ def main() -> None:
     print(f"{'sampler':50s} {'truth':7s} {'Mitsuba rej':>11s} {'s/test':>7s} {'ours rej':>8s} "
           f"{'setup s':>8s} {'sampler s':>9s} {'check s':>8s} {'pdf s':>6s} {'own s':>6s}")
     for s in sampler_zoo.correct() + sampler_zoo.wrong() + sampler_zoo.smooth_warps():
+        if args.match not in s.name:
+            continue
         m = [mitsuba_test(mi, s, n, seed) for seed in range(args.seeds)]
         t0 = time.perf_counter()
         test = SamplerTest(s.pdf, s.domain, sample_count=n)

@@ -173,8 +173,22 @@ def smooth_warps() -> list[ZooSampler]:
         r = np.sqrt(np.maximum(0, 1 - z * z))
         return np.column_stack([r * np.cos(ph), r * np.sin(ph), z])
 
+    pole, env = _uniform_theta_sphere(), _envmap(_env_table())
+
+    def pole_azimuth_warp(u):
+        return pole.sample(np.column_stack([u[:, 0], u[:, 1] ** 1.005]))
+
+    def envmap_azimuth_warp(u):   # the table's columns (the azimuth) are chosen by u0
+        return env.sample(np.column_stack([u[:, 0] ** 1.005, u[:, 1]]))
+
     return [
         ZooSampler("cosine hemisphere, azimuth u^1.005", "hemisphere", cosine_azimuth_warp, cos.pdf,
+                   "azimuth warped by u^1.005"),
+        # the same warp where the density is singular at the poles, and has texel steps: the
+        # conditional's tables must be accurate there too for the transform to see it
+        ZooSampler("uniform_theta_sphere, azimuth u^1.005", "sphere", pole_azimuth_warp, pole.pdf,
+                   "azimuth warped by u^1.005"),
+        ZooSampler("envmap 16x32, azimuth u^1.005", "sphere", envmap_azimuth_warp, env.pdf,
                    "azimuth warped by u^1.005"),
         ZooSampler("ggx alpha 0.1003 sampled, 0.1 claimed", "hemisphere", lambda u: ggx_off.sample(u)[0],
                    ggx.pdf, "lobe 0.3 % too wide"),
