@@ -28,6 +28,34 @@ alignas(64) inline constexpr double kExp2Table[16] = {
     0x1.ae89f995ad3adp+0, 0x1.c199bdd85529cp+0, 0x1.d5818dcfba487p+0, 0x1.ea4afa2a490dap+0,
 };
 
+// y 2^k for exp below, k = floor(n / 16), n = t - 1.5 2^52 (the integer in t's low bits).
+// Where |x| keeps y 2^k normal (x in (-707, 709), y in [0.97, 2.05)), k is added to y's
+// exponent field: n's bits shifted so that bits 4.. land at 52.. (two's complement, so a
+// negative k wraps into the field exactly), four integer operations where the scaling by
+// 2^floor(k) took eight; elsewhere (and for NaN) scale2k, which rounds subnormals once.  Both
+// give the same bits wherever both apply.  AVX-512's vscalefpd is one instruction already.
+RE_INLINE double times_2k(double y, double t, double n, double x) {
+    if (x > -707.0 && x < 709.0)
+        return simd::from_bits(simd::bits(y) + (((simd::bits(t) - simd::bits(0x1.8p52)) << 48) & 0xfff0000000000000ULL));
+    return simd::scale2k(y, n * 0.0625);
+}
+RE_INLINE simd::f64v times_2k(simd::f64v y, simd::f64v t, simd::f64v n, simd::f64v x) {
+#if defined(__AVX512F__)
+    (void)t, (void)x;
+    return simd::scale2k(y, n * 0.0625);
+#else
+    const auto normal = (x > -707.0) & (x < 709.0);
+#if defined(__AVX__)
+    const bool all = _mm256_movemask_pd((__m256d)normal) == 0xf;
+#else
+    const bool all = normal[0] && normal[1];
+#endif
+    if (__builtin_expect(all, 1))
+        return simd::from_bits(simd::bits(y) + (((simd::bits(t) - simd::bits(0x1.8p52)) << 48u) & 0xfff0000000000000ULL));
+    return simd::scale2k(y, n * 0.0625);
+#endif
+}
+
 // exp(x) for double or simd::f64v (the same bits lane by lane): x = (16 k + j) ln2/16 + r
 // with |r| <= ln2/32, exp(x) = 2^k 2^(j/16) exp(r), exp(r) - 1 by a degree-7 Taylor
 // polynomial (truncation < 2e-18; the terms past r are below r^2/2 < 2.4e-4, so their
@@ -55,7 +83,7 @@ RE_INLINE D exp(D x) {
     const D c45 = fma(r, D{} + 1.0 / 5040, D{} + 1.0 / 720);
     const D p = fma(r2, fma(r2, fma(r2, c45, c23), c01), r);
     D tj = simd::lookup16(kExp2Table, t);
-    D y = simd::scale2k(fma(tj, p, tj), n * 0.0625);
+    D y = times_2k(fma(tj, p, tj), t, n, xc);
     const D inf = D{} + std::numeric_limits<double>::infinity();
     return x > D{} + 709.782712893384 ? inf : y;
 }

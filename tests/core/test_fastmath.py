@@ -49,10 +49,15 @@ def exp_inputs(kind: str) -> np.ndarray:
         return rng.uniform(-745.0, -708.4, N // 10)  # exp(x) < 2^-1022 below ~ -708.396
     if kind == "near_zero":
         return rng.uniform(-1.0, 1.0, N)
+    if kind == "scaling_switch":   # where exp moves between its exponent-field add and scale2k
+        edges = np.nextafter(np.array([-707.0, -707.0, 709.0, 709.0]), [-np.inf, 0, 0, np.inf])
+        low, high = rng.uniform(-707.01, -706.99, N // 20), rng.uniform(708.99, 709.01, N // 20)
+        return np.concatenate([low, high, edges])
     raise AssertionError(kind)
 
 
-@pytest.mark.parametrize("kind", ["uniform", "log_uniform", "subnormal_results", "near_zero"])
+@pytest.mark.parametrize("kind", ["uniform", "log_uniform", "subnormal_results", "near_zero",
+                                  "scaling_switch"])
 def test_exp_within_2_ulp(kind):
     x = exp_inputs(kind)
     got, ref = kernels.fast_exp(x), np.exp(x)
