@@ -5,6 +5,8 @@
 #include <string>
 #include <vector>
 
+#include "simd.h"
+
 namespace re {
 
 enum class DomainKind { Box, HalfLine, Hemisphere, Sphere };
@@ -83,14 +85,31 @@ struct Domain {
                 for (size_t i = 0; i < n; ++i)
                     out += !((x[i] >= 0) & (x[i] <= std::numeric_limits<double>::max()));
                 return out;
-            case DomainKind::Hemisphere:
-                for (size_t i = 0; i < n; ++i) out += !on_hemisphere(x + 3 * i);
-                return out;
-            case DomainKind::Sphere:
-                for (size_t i = 0; i < n; ++i) out += !on_sphere(x + 3 * i);
-                return out;
+            case DomainKind::Hemisphere: return count_off_sphere<true>(x, n);
+            case DomainKind::Sphere: return count_off_sphere<false>(x, n);
         }
         return n;
+    }
+
+    // Directions not on_sphere (not on_hemisphere when `hemisphere`) among x[0..n): kWidth at
+    // a time, (x, y, z) gathered into vector lanes (the scalar loop's stride-3 loads did not
+    // vectorise: an eighth of importance sampling's time on ggx_lobe).
+    template <bool hemisphere>
+    static size_t count_off_sphere(const double *x, size_t n) {
+        constexpr size_t W = simd::kWidth;
+        size_t i = 0, out = 0;
+        simd::i64v off = {};
+        for (; i + W <= n; i += W) {
+            simd::f64v w0, w1, w2;
+            for (size_t l = 0; l < W; ++l) { w0[l] = x[3 * (i + l)]; w1[l] = x[3 * (i + l) + 1]; w2[l] = x[3 * (i + l) + 2]; }
+            const simd::f64v d = w0 * w0 + w1 * w1 + w2 * w2 - 1.0;
+            auto in = (d <= 1e-5) & (d >= -1e-5);   // |d| <= 1e-5, NaN out: on_sphere
+            if (hemisphere) in &= w2 >= 0.0;
+            off += in ? simd::i64v{} : simd::i64v{} + 1;
+        }
+        for (size_t l = 0; l < W; ++l) out += size_t(off[l]);
+        for (; i < n; ++i) out += hemisphere ? !on_hemisphere(x + 3 * i) : !on_sphere(x + 3 * i);
+        return out;
     }
 
     std::string kind_name() const {

@@ -10,10 +10,6 @@
 
 namespace re {
 
-// max(0, v), NaN giving 0 as std::fmax(0, v) does, but inline: GCC emits a libm call for
-// std::fmax, which keeps the samplers' loops from vectorising (cosine-hemisphere importance
-// sampling of ggx_lobe: 60 -> 175 Msamples/s on one thread).
-inline double non_negative(double v) { return v > 0 ? v : 0.0; }
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kInvPi = 0.31830988618379067154;
@@ -72,51 +68,70 @@ inline double invert_trimmed_logistic(double x, double mu, double s, double a, d
 }
 
 // --- directions: points are unit vectors (x, y, z), pdfs per steradian --------------------
-inline void sample_uniform_hemisphere(double u0, double u1, double w[3]) {
-    double z = u0, r = std::sqrt(non_negative(1 - z * z)), s, c;
-    fm::sincos_2pi(u1, s, c);
-    w[0] = r * c; w[1] = r * s; w[2] = z;
-}
-inline double uniform_hemisphere_pdf(const double w[3]) { return w[2] >= 0 ? 0.5 * kInvPi : 0.0; }
+// max(0, v), NaN giving 0 as std::fmax(0, v) does, but inline: GCC emits a libm call for
+// std::fmax, which keeps the samplers' loops from vectorising.
+// Templates over D = double or simd::f64v (the same bits lane by lane): the batch loops run
+// them on whole vectors of samples (samplers.cpp, Directional), the scalar triples on one.
+template <class D>
+RE_INLINE D non_negative(D v) { return v > D{} ? v : D{}; }
 
-inline void sample_uniform_sphere(double u0, double u1, double w[3]) {
-    double z = 1 - 2 * u0, r = std::sqrt(non_negative(1 - z * z)), s, c;
+template <class D>
+RE_INLINE void sample_uniform_hemisphere(D u0, D u1, D &w0, D &w1, D &w2) {
+    D z = u0, r = simd::sqrt(non_negative(1.0 - z * z)), s, c;
     fm::sincos_2pi(u1, s, c);
-    w[0] = r * c; w[1] = r * s; w[2] = z;
+    w0 = r * c; w1 = r * s; w2 = z;
 }
-inline double uniform_sphere_pdf(const double *) { return 0.25 * kInvPi; }
+template <class D>
+RE_INLINE D uniform_hemisphere_pdf(D z) { return z >= D{} ? D{} + 0.5 * kInvPi : D{}; }
 
-inline void sample_cosine_hemisphere(double u0, double u1, double w[3]) {
-    double r = std::sqrt(u0), s, c;
+template <class D>
+RE_INLINE void sample_uniform_sphere(D u0, D u1, D &w0, D &w1, D &w2) {
+    D z = 1.0 - 2.0 * u0, r = simd::sqrt(non_negative(1.0 - z * z)), s, c;
     fm::sincos_2pi(u1, s, c);
-    w[0] = r * c; w[1] = r * s; w[2] = std::sqrt(non_negative(1 - u0));
+    w0 = r * c; w1 = r * s; w2 = z;
 }
-inline double cosine_hemisphere_pdf(const double w[3]) { return w[2] > 0 ? w[2] * kInvPi : 0.0; }
+template <class D>
+RE_INLINE D uniform_sphere_pdf(D) { return D{} + 0.25 * kInvPi; }
+
+template <class D>
+RE_INLINE void sample_cosine_hemisphere(D u0, D u1, D &w0, D &w1, D &w2) {
+    D r = simd::sqrt(u0), s, c;
+    fm::sincos_2pi(u1, s, c);
+    w0 = r * c; w1 = r * s; w2 = simd::sqrt(non_negative(1.0 - u0));
+}
+template <class D>
+RE_INLINE D cosine_hemisphere_pdf(D z) { return z > D{} ? z * kInvPi : D{}; }
 
 // Uniform in the cone of directions with cos(theta) >= cos_max around +z.
-inline void sample_uniform_cone(double u0, double u1, double cos_max, double w[3]) {
-    double z = (1 - u0) + u0 * cos_max, r = std::sqrt(non_negative(1 - z * z)), s, c;
+template <class D>
+RE_INLINE void sample_uniform_cone(D u0, D u1, double cos_max, D &w0, D &w1, D &w2) {
+    D z = (1.0 - u0) + u0 * cos_max, r = simd::sqrt(non_negative(1.0 - z * z)), s, c;
     fm::sincos_2pi(u1, s, c);
-    w[0] = r * c; w[1] = r * s; w[2] = z;
+    w0 = r * c; w1 = r * s; w2 = z;
 }
-inline double uniform_cone_pdf(const double w[3], double cos_max) {
-    return w[2] >= cos_max ? 1.0 / (2 * M_PI * (1 - cos_max)) : 0.0;
+template <class D>
+RE_INLINE D uniform_cone_pdf(D z, double cos_max) {
+    return z >= cos_max ? D{} + 1.0 / (2 * M_PI * (1 - cos_max)) : D{};
 }
 
 // GGX (Trowbridge-Reitz) normal distribution D(w) with roughness alpha, sampled
 // proportionally to D(w) cos(theta): tan^2 theta = alpha^2 u0 / (1 - u0), phi = 2 pi u1.
-inline double ggx_d(double z, double alpha) {
-    if (!(z > 0)) return 0.0;
-    double a2 = alpha * alpha, t = z * z * (a2 - 1) + 1;
-    return a2 / (M_PI * t * t);
+template <class D>
+RE_INLINE D ggx_d(D z, double alpha) {
+    const double a2 = alpha * alpha;
+    D t = z * z * (a2 - 1) + 1.0;
+    D d = a2 / (M_PI * t * t);
+    return z > D{} ? d : D{};
 }
-inline void sample_ggx(double u0, double u1, double alpha, double w[3]) {
-    double t2 = alpha * alpha * u0 / (1 - u0);
-    double z = 1 / std::sqrt(1 + t2), r = std::sqrt(t2) * z, s, c;
+template <class D>
+RE_INLINE void sample_ggx(D u0, D u1, double alpha, D &w0, D &w1, D &w2) {
+    D t2 = alpha * alpha * u0 / (1.0 - u0);
+    D z = 1.0 / simd::sqrt(1.0 + t2), r = simd::sqrt(t2) * z, s, c;
     fm::sincos_2pi(u1, s, c);
-    w[0] = r * c; w[1] = r * s; w[2] = z;
+    w0 = r * c; w1 = r * s; w2 = z;
 }
-inline double ggx_pdf(const double w[3], double alpha) { return ggx_d(w[2], alpha) * w[2]; }
+template <class D>
+RE_INLINE D ggx_pdf(D z, double alpha) { return ggx_d(z, alpha) * z; }
 
 // Inversions of the direction samplers: u from w (NaN outside the support).
 inline double azimuth_fraction(const double w[3]) {

@@ -810,3 +810,22 @@ def test_every_analytic_sampler_has_a_complete_triple_by_name():
         np.testing.assert_array_equal(fns[2](x), s.invert(x), err_msg=name)
     assert (sampling.sample_ggx(np.full((1, 2), 0.5), alpha=0.3)[0, 2]
             == pytest.approx(1 / math.sqrt(1 + 0.09)))
+
+
+@pytest.mark.parametrize("integrand, hemisphere", [("ggx_lobe", True), ("spherical_cap", False)])
+def test_directions_off_the_sphere_are_counted_in_vector_bodies_and_tails(integrand, hemisphere):
+    """Membership (|w|^2 within 1e-5 of 1, z >= 0 on the hemisphere) is counted kWidth directions
+    at a time: planted points in every lane position and in the tail, against numpy's count."""
+    s = rest.sampler("cosine_hemisphere" if hemisphere else "uniform_sphere")
+    w, p = s.sample(np.random.default_rng(5).random((1003, 2)))
+    w = w.copy()
+    w[[0, 5, 10, 15, 1001]] *= 1.0001                    # off by 2e-4 in |w|^2
+    w[[1, 6, 11, 1002], 2] = np.nan
+    w[[2, 7], :] *= 1 + 4e-6                              # within the tolerance: on the sphere
+    w[[3, 8, 13], 2] = -np.abs(w[[3, 8, 13], 2]) - 1e-3   # below the horizon (renormalised)
+    w[[3, 8, 13]] /= np.linalg.norm(w[[3, 8, 13]], axis=1)[:, None]
+    r2 = np.sum(w * w, axis=1)
+    with np.errstate(invalid="ignore"):
+        on = (np.abs(r2 - 1) <= 1e-5) & ((w[:, 2] >= 0) | (not hemisphere))
+    est = rest.estimate_from_samples(integrand, w, p)
+    assert est.counts["outside_domain"] == int((~on).sum()) == (12 if hemisphere else 9)
