@@ -68,17 +68,33 @@ struct Kernel {
 };
 
 // Copies columns [from, from + count) of the m x ud matrix u into out (m x count).
-void take_columns(const double *u, size_t m, int ud, int from, int count, double *out) {
-    for (size_t i = 0; i < m; ++i)
-        for (int j = 0; j < count; ++j) out[i * count + j] = u[i * ud + from + j];
+// (the common widths by fixed-size copies: the generic double loop, its trip counts unknown,
+// was a fifth of an MIS estimate's time)
+void take_columns(const double *__restrict u, size_t m, int ud, int from, int count, double *__restrict out) {
+    const double *src = u + from;
+    if (count == 1) {
+        for (size_t i = 0; i < m; ++i) out[i] = src[i * ud];
+    } else if (count == 2) {
+        for (size_t i = 0; i < m; ++i) { out[2 * i] = src[i * ud]; out[2 * i + 1] = src[i * ud + 1]; }
+    } else {
+        for (size_t i = 0; i < m; ++i)
+            for (int j = 0; j < count; ++j) out[i * count + j] = src[i * ud + j];
+    }
 }
 
 // Checks sampled points against the sampler's domain and pdf values for NaN / Inf / <= 0;
 // records what fails and marks it in `drop`.  Returns the number marked.
 size_t check_samples(const Domain &dom, const double *x, const double *p, size_t m, uint64_t first,
                      Diagnostics &diag, unsigned char *drop) {
-    size_t badp = 0;
-    for (size_t i = 0; i < m; ++i) badp += !(p[i] > 0 && p[i] <= kMax);
+    // pdfs not in (0, kMax] (NaN included), in vector lanes (GCC's loop compared one at a time)
+    size_t badp = 0, i = 0;
+    simd::i64v bad = {};
+    for (; i + simd::kWidth <= m; i += simd::kWidth) {
+        const simd::f64v v = simd::load(p + i);
+        bad += (v > 0.0) & (v <= kMax) ? simd::i64v{} : simd::i64v{} + 1;
+    }
+    for (size_t l = 0; l < simd::kWidth; ++l) badp += size_t(bad[l]);
+    for (; i < m; ++i) badp += !(p[i] > 0 && p[i] <= kMax);
     const size_t outside = dom.count_outside(x, m);
     const int d = dom.dim;
     if (badp == 0 && outside == 0) return 0;
@@ -253,11 +269,14 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
             std::fill(s.q.begin(), s.q.begin() + m, 0.0);
             add_power(s.p.data(), beta - 1, s.q.data(), m);
             f.eval(xi_pts, s.f.data(), m);
-            for (size_t i = 0; i < m; ++i) {
-                double y = s.q[i] * s.f[i] / s.w[i];
-                s.y[i] += s.f[i] == 0 ? 0.0 : y;
-                if (bad && s.sub_drop[i] && !s.drop[i]) { s.drop[i] = 1; ++dropped; }
-            }
+            // in explicit vector lanes with a select (GCC kept the scalar loop, branching on f)
+            simd::map4(s.q.data(), s.f.data(), s.w.data(), s.y.data(), m, [](auto q, auto fv, auto w, auto y) {
+                using V = decltype(q);
+                return y + (fv == V{} ? V{} : q * fv / w);
+            });
+            if (bad)
+                for (size_t i = 0; i < m; ++i)
+                    if (s.sub_drop[i] && !s.drop[i]) { s.drop[i] = 1; ++dropped; }
             if (a == 0) std::copy(xi_pts, xi_pts + m * xd, s.x.begin());
         }
         break;
