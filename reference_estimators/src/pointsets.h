@@ -10,6 +10,7 @@
 // Stratified and Sobol estimates are not sums of independent samples: their error comes
 // from replicas (independent randomisations), never from the per-sample variance.
 #pragma once
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <stdexcept>
@@ -127,16 +128,19 @@ inline void fill_points(const PointSetContext &ctx, UniformStream &stream, uint6
                 StreamKey dk = ctx.key;
                 dk.chunk = 0x50b01ULL + uint64_t(j);
                 uint32_t seed = uint32_t(splitmix64(dk.seed ^ splitmix64(dk.case_id ^ splitmix64(dk.replica ^ splitmix64(dk.chunk)))));
-                uint64_t hi_index = ~uint64_t(0);
-                uint32_t hi_bits = 0;
-                for (size_t i = 0; i < m; ++i) {
-                    uint64_t index = first + i;
-                    if ((index >> kLowBits) != hi_index) {
-                        hi_index = index >> kLowBits;
-                        hi_bits = sobol_bits(hi_index << kLowBits, j, dirs);
+                // in runs of one high index, so that the loop over a run has no branch and
+                // vectorises (a Sobol' estimate had spent two thirds of its time here)
+                for (size_t i0 = 0; i0 < m;) {
+                    const uint64_t hi_index = (first + i0) >> kLowBits;
+                    const size_t i1 = std::min<uint64_t>(m, ((hi_index + 1) << kLowBits) - first);
+                    const uint32_t hi_bits = sobol_bits(hi_index << kLowBits, j, dirs);
+                    const uint32_t lo0 = uint32_t((first + i0) & (kLow - 1));
+                    double *out = u + j;
+                    for (size_t i = i0; i < i1; ++i) {
+                        const uint32_t x = owen_scramble(hi_bits ^ low[lo0 + (i - i0)], seed);
+                        out[i * ud] = (double(x) + 0.5) * 0x1p-32;
                     }
-                    uint32_t x = owen_scramble(hi_bits ^ low[index & (kLow - 1)], seed);
-                    u[i * ud + j] = (double(x) + 0.5) * 0x1p-32;
+                    i0 = i1;
                 }
             }
             return;
