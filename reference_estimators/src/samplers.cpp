@@ -294,9 +294,12 @@ class PiecewiseConstant1D final : public Pointwise<PiecewiseConstant1D> {
         double t = (double(o) + du) / double(f_.size());
         double xs = std::min(a_ + t * (b_ - a_), b_);
         // Rounding can put x on the edge of a neighbouring bin (then pdf(x) would report that
-        // bin's density, possibly 0): step to the nearest double inside bin o.
-        while (bin_of_x(xs) > o) xs = std::nextafter(xs, -INFINITY);
-        while (bin_of_x(xs) < o) xs = std::nextafter(xs, INFINITY);
+        // bin's density, possibly 0): step to the nearest double inside bin o.  (One bin_of_x,
+        // a division, where x is inside: the loops' two tests were the sampler's critical path.)
+        if (bin_of_x(xs) != o) {
+            while (bin_of_x(xs) > o) xs = std::nextafter(xs, -INFINITY);
+            while (bin_of_x(xs) < o) xs = std::nextafter(xs, INFINITY);
+        }
         x[0] = xs;
         return f_[o] * scale_;
     }
