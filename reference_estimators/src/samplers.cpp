@@ -60,28 +60,38 @@ class Pointwise : public Sampler {
     }
 };
 
-// Direction samplers (u in [0,1)^2 to unit vectors), vectorised: D supplies sample_v(u0, u1,
-// w0, w1, w2) -> pdf and pdf_v(w0, w1, w2) -> pdf, templates over double and simd::f64v (the
-// same bits lane by lane); the batch loops run them on kWidth samples at a time, the point's
-// (x, y, z) gathered into and scattered from vector lanes, and the scalar tail and the scalar
-// triple on one.  The per-sample scalar loop was a third of drjit's speed on ggx_lobe.
+// Direction samplers (u in [0,1)^2 to unit vectors), vectorised: D supplies draw(u0, u1, w0,
+// w1, w2) and density(z) (the pdf at a direction of cosine z inside the support), templates
+// over double and simd::f64v (the same bits lane by lane); the batch loops run them on kWidth
+// samples at a time, the point's (x, y, z) gathered into and scattered from vector lanes, and
+// the scalar tail and the scalar triple on one.  The per-sample scalar loop was a third of
+// drjit's speed on ggx_lobe.  pdf is 0 off the sphere (off the hemisphere when `hemisphere`).
 template <class V>
 RE_INLINE auto on_sphere_v(V w0, V w1, V w2) { return fm::abs(w0 * w0 + w1 * w1 + w2 * w2 - 1.0) <= 1e-5; }
-template <class V>
-RE_INLINE auto on_hemisphere_v(V w0, V w1, V w2) { return on_sphere_v(w0, w1, w2) & (w2 >= V{}); }
 
-template <class D>
+template <class D, bool hemisphere>
 class Directional : public Pointwise<D> {
   public:
-    double sample_one(const double *u, double *w) const { return self().sample_v(u[0], u[1], w[0], w[1], w[2]); }
-    double pdf_one(const double *w) const { return self().pdf_v(w[0], w[1], w[2]); }
+    template <class V>
+    V sample_v(V u0, V u1, V &w0, V &w1, V &w2) const {
+        self().draw(u0, u1, w0, w1, w2);
+        return self().density(w2);
+    }
+    template <class V>
+    V pdf_v(V w0, V w1, V w2) const {
+        auto in = on_sphere_v(w0, w1, w2);
+        if (hemisphere) in &= w2 >= V{};
+        return in ? self().density(w2) : V{};
+    }
+    double sample_one(const double *u, double *w) const { return sample_v(u[0], u[1], w[0], w[1], w[2]); }
+    double pdf_one(const double *w) const { return pdf_v(w[0], w[1], w[2]); }
     void sample(const double *u, double *x, double *p, size_t n) const override {
         constexpr size_t W = simd::kWidth;
         size_t i = 0;
         for (; i + W <= n; i += W) {
             simd::f64v u0, u1, w0, w1, w2;
             for (size_t l = 0; l < W; ++l) { u0[l] = u[2 * (i + l)]; u1[l] = u[2 * (i + l) + 1]; }
-            simd::store(p + i, self().sample_v(u0, u1, w0, w1, w2));
+            simd::store(p + i, sample_v(u0, u1, w0, w1, w2));
             for (size_t l = 0; l < W; ++l) {
                 double *w = x + 3 * (i + l);
                 w[0] = w0[l]; w[1] = w1[l]; w[2] = w2[l];
@@ -95,7 +105,7 @@ class Directional : public Pointwise<D> {
         for (; i + W <= n; i += W) {
             simd::f64v w0, w1, w2;
             for (size_t l = 0; l < W; ++l) { const double *w = x + 3 * (i + l); w0[l] = w[0]; w1[l] = w[1]; w2[l] = w[2]; }
-            simd::store(p + i, self().pdf_v(w0, w1, w2));
+            simd::store(p + i, pdf_v(w0, w1, w2));
         }
         for (; i < n; ++i) p[i] = pdf_one(x + 3 * i);
     }
@@ -181,16 +191,13 @@ class TrimmedLogistic final : public Pointwise<TrimmedLogistic> {
     double mu_, s_, a_, b_;
 };
 
-class UniformHemisphere final : public Directional<UniformHemisphere> {
+class UniformHemisphere final : public Directional<UniformHemisphere, true> {
   public:
     UniformHemisphere() { name = "uniform_hemisphere"; domain = Domain::hemisphere(); udim = 2; }
     template <class V>
-    V sample_v(V u0, V u1, V &w0, V &w1, V &w2) const {
-        sample_uniform_hemisphere(u0, u1, w0, w1, w2);
-        return uniform_hemisphere_pdf(w2);
-    }
+    void draw(V u0, V u1, V &w0, V &w1, V &w2) const { sample_uniform_hemisphere(u0, u1, w0, w1, w2); }
     template <class V>
-    V pdf_v(V w0, V w1, V w2) const { return on_hemisphere_v(w0, w1, w2) ? uniform_hemisphere_pdf(w2) : V{}; }
+    V density(V z) const { return uniform_hemisphere_pdf(z); }
     void invert_one(const double *w, double *u) const {
         bool in = domain.contains(w);
         u[0] = in ? w[2] : kNaN;
@@ -198,16 +205,13 @@ class UniformHemisphere final : public Directional<UniformHemisphere> {
     }
 };
 
-class UniformSphere final : public Directional<UniformSphere> {
+class UniformSphere final : public Directional<UniformSphere, false> {
   public:
     UniformSphere() { name = "uniform_sphere"; domain = Domain::sphere(); udim = 2; }
     template <class V>
-    V sample_v(V u0, V u1, V &w0, V &w1, V &w2) const {
-        sample_uniform_sphere(u0, u1, w0, w1, w2);
-        return uniform_sphere_pdf(w2);
-    }
+    void draw(V u0, V u1, V &w0, V &w1, V &w2) const { sample_uniform_sphere(u0, u1, w0, w1, w2); }
     template <class V>
-    V pdf_v(V w0, V w1, V w2) const { return on_sphere_v(w0, w1, w2) ? uniform_sphere_pdf(w2) : V{}; }
+    V density(V z) const { return uniform_sphere_pdf(z); }
     void invert_one(const double *w, double *u) const {
         bool in = domain.contains(w);
         u[0] = in ? (1 - w[2]) / 2 : kNaN;
@@ -215,16 +219,13 @@ class UniformSphere final : public Directional<UniformSphere> {
     }
 };
 
-class CosineHemisphere final : public Directional<CosineHemisphere> {
+class CosineHemisphere final : public Directional<CosineHemisphere, true> {
   public:
     CosineHemisphere() { name = "cosine_hemisphere"; domain = Domain::hemisphere(); udim = 2; }
     template <class V>
-    V sample_v(V u0, V u1, V &w0, V &w1, V &w2) const {
-        sample_cosine_hemisphere(u0, u1, w0, w1, w2);
-        return cosine_hemisphere_pdf(w2);
-    }
+    void draw(V u0, V u1, V &w0, V &w1, V &w2) const { sample_cosine_hemisphere(u0, u1, w0, w1, w2); }
     template <class V>
-    V pdf_v(V w0, V w1, V w2) const { return on_hemisphere_v(w0, w1, w2) ? cosine_hemisphere_pdf(w2) : V{}; }
+    V density(V z) const { return cosine_hemisphere_pdf(z); }
     void invert_one(const double *w, double *u) const {
         bool in = domain.contains(w);
         u[0] = in ? w[0] * w[0] + w[1] * w[1] : kNaN;
@@ -232,18 +233,15 @@ class CosineHemisphere final : public Directional<CosineHemisphere> {
     }
 };
 
-class UniformCone final : public Directional<UniformCone> {
+class UniformCone final : public Directional<UniformCone, false> {
   public:
     explicit UniformCone(double cos_max) : c_(cos_max) {
         name = "uniform_cone"; params = {{"cos_max", cos_max}}; domain = Domain::sphere(); udim = 2;
     }
     template <class V>
-    V sample_v(V u0, V u1, V &w0, V &w1, V &w2) const {
-        sample_uniform_cone(u0, u1, c_, w0, w1, w2);
-        return uniform_cone_pdf(w2, c_);
-    }
+    void draw(V u0, V u1, V &w0, V &w1, V &w2) const { sample_uniform_cone(u0, u1, c_, w0, w1, w2); }
     template <class V>
-    V pdf_v(V w0, V w1, V w2) const { return on_sphere_v(w0, w1, w2) ? uniform_cone_pdf(w2, c_) : V{}; }
+    V density(V z) const { return uniform_cone_pdf(z, c_); }
     void invert_one(const double *w, double *u) const {
         bool in = domain.contains(w) && w[2] >= c_;
         u[0] = in ? (1 - w[2]) / (1 - c_) : kNaN;
@@ -253,16 +251,13 @@ class UniformCone final : public Directional<UniformCone> {
     double c_;
 };
 
-class Ggx final : public Directional<Ggx> {
+class Ggx final : public Directional<Ggx, true> {
   public:
     explicit Ggx(double alpha) : a_(alpha) { name = "ggx"; params = {{"alpha", alpha}}; domain = Domain::hemisphere(); udim = 2; }
     template <class V>
-    V sample_v(V u0, V u1, V &w0, V &w1, V &w2) const {
-        sample_ggx(u0, u1, a_, w0, w1, w2);
-        return ggx_pdf(w2, a_);
-    }
+    void draw(V u0, V u1, V &w0, V &w1, V &w2) const { sample_ggx(u0, u1, a_, w0, w1, w2); }
     template <class V>
-    V pdf_v(V w0, V w1, V w2) const { return on_hemisphere_v(w0, w1, w2) ? ggx_pdf(w2, a_) : V{}; }
+    V density(V z) const { return ggx_pdf(z, a_); }
     void invert_one(const double *w, double *u) const {
         bool in = domain.contains(w) && w[2] > 0;
         double t2 = (w[0] * w[0] + w[1] * w[1]) / (w[2] * w[2]), a2 = a_ * a_;
