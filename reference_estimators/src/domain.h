@@ -15,10 +15,13 @@ enum class DomainKind { Box, HalfLine, Hemisphere, Sphere };
 // vectors with |w|^2 - 1 of order 1e-7), and z >= 0 for the hemisphere.  Free functions,
 // branch-free, so that the direction samplers' pdf loops vectorise (Domain::contains switches
 // on the kind at run time).
-inline bool on_sphere(const double *w) {
-    double r2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
-    return std::fabs(r2 - 1.0) <= 1e-5;
+// on_sphere for double or simd::f64v coordinates (a bool, or a lane mask).
+template <class V>
+RE_INLINE auto on_sphere_v(V w0, V w1, V w2) {
+    const V d = w0 * w0 + w1 * w1 + w2 * w2 - 1.0;
+    return (d <= 1e-5) & (d >= -1e-5);   // |d| <= 1e-5; NaN: false
 }
+inline bool on_sphere(const double *w) { return on_sphere_v(w[0], w[1], w[2]); }
 inline bool on_hemisphere(const double *w) { return on_sphere(w) & (w[2] >= 0); }
 
 struct Domain {
@@ -102,8 +105,7 @@ struct Domain {
         for (; i + W <= n; i += W) {
             simd::f64v w0, w1, w2;
             for (size_t l = 0; l < W; ++l) { w0[l] = x[3 * (i + l)]; w1[l] = x[3 * (i + l) + 1]; w2[l] = x[3 * (i + l) + 2]; }
-            const simd::f64v d = w0 * w0 + w1 * w1 + w2 * w2 - 1.0;
-            auto in = (d <= 1e-5) & (d >= -1e-5);   // |d| <= 1e-5, NaN out: on_sphere
+            auto in = on_sphere_v(w0, w1, w2);
             if (hemisphere) in &= w2 >= 0.0;
             off += in ? simd::i64v{} : simd::i64v{} + 1;
         }

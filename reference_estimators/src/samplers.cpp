@@ -66,9 +66,6 @@ class Pointwise : public Sampler {
 // samples at a time, the point's (x, y, z) gathered into and scattered from vector lanes, and
 // the scalar tail and the scalar triple on one.  The per-sample scalar loop was a third of
 // drjit's speed on ggx_lobe.  pdf is 0 off the sphere (off the hemisphere when `hemisphere`).
-template <class V>
-RE_INLINE auto on_sphere_v(V w0, V w1, V w2) { return fm::abs(w0 * w0 + w1 * w1 + w2 * w2 - 1.0) <= 1e-5; }
-
 template <class D, bool hemisphere>
 class Directional : public Pointwise<D> {
   public:
