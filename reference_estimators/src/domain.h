@@ -95,8 +95,8 @@ struct Domain {
     }
 
     // Directions not on_sphere (not on_hemisphere when `hemisphere`) among x[0..n): kWidth at
-    // a time, (x, y, z) gathered into vector lanes (the scalar loop's stride-3 loads did not
-    // vectorise: an eighth of importance sampling's time on ggx_lobe).
+    // a time, in vector lanes (the scalar loop's stride-3 loads did not vectorise: an eighth of
+    // importance sampling's time on ggx_lobe).
     template <bool hemisphere>
     static size_t count_off_sphere(const double *x, size_t n) {
         constexpr size_t W = simd::kWidth;
@@ -104,7 +104,7 @@ struct Domain {
         simd::i64v off = {};
         for (; i + W <= n; i += W) {
             simd::f64v w0, w1, w2;
-            for (size_t l = 0; l < W; ++l) { w0[l] = x[3 * (i + l)]; w1[l] = x[3 * (i + l) + 1]; w2[l] = x[3 * (i + l) + 2]; }
+            simd::load3(x + 3 * i, w0, w1, w2);
             auto in = on_sphere_v(w0, w1, w2);
             if (hemisphere) in &= w2 >= 0.0;
             off += in ? simd::i64v{} : simd::i64v{} + 1;

@@ -34,10 +34,12 @@ alignas(64) inline constexpr double kExp2Table[16] = {
 // negative k wraps into the field exactly), four integer operations where the scaling by
 // 2^floor(k) took eight; elsewhere (and for NaN) scale2k, which rounds subnormals once.  Both
 // give the same bits wherever both apply.  AVX-512's vscalefpd is one instruction already.
+template <class D>
+RE_INLINE D add_k_to_exponent(D y, D t) {
+    return simd::from_bits(simd::bits(y) + (((simd::bits(t) - simd::bits(0x1.8p52)) << 48u) & 0xfff0000000000000ULL));
+}
 RE_INLINE double times_2k(double y, double t, double n, double x) {
-    if (x > -707.0 && x < 709.0)
-        return simd::from_bits(simd::bits(y) + (((simd::bits(t) - simd::bits(0x1.8p52)) << 48) & 0xfff0000000000000ULL));
-    return simd::scale2k(y, n * 0.0625);
+    return x > -707.0 && x < 709.0 ? add_k_to_exponent(y, t) : simd::scale2k(y, n * 0.0625);
 }
 RE_INLINE simd::f64v times_2k(simd::f64v y, simd::f64v t, simd::f64v n, simd::f64v x) {
 #if defined(__AVX512F__)
@@ -50,9 +52,7 @@ RE_INLINE simd::f64v times_2k(simd::f64v y, simd::f64v t, simd::f64v n, simd::f6
 #else
     const bool all = normal[0] && normal[1];
 #endif
-    if (__builtin_expect(all, 1))
-        return simd::from_bits(simd::bits(y) + (((simd::bits(t) - simd::bits(0x1.8p52)) << 48u) & 0xfff0000000000000ULL));
-    return simd::scale2k(y, n * 0.0625);
+    return __builtin_expect(all, 1) ? add_k_to_exponent(y, t) : simd::scale2k(y, n * 0.0625);
 #endif
 }
 

@@ -205,15 +205,8 @@ class GgxLobe final : public Integrand {
         description = s.str();
     }
     void eval(const double *w, double *f, size_t n) const override {
-        // z gathered into vector lanes: the scalar loop did not vectorise (stride 3)
-        constexpr size_t W = simd::kWidth;
-        size_t i = 0;
-        for (; i + W <= n; i += W) {
-            simd::f64v z;
-            for (size_t l = 0; l < W; ++l) z[l] = w[3 * (i + l) + 2];
-            simd::store(f + i, ggx_pdf(z, a_));
-        }
-        for (; i < n; ++i) f[i] = ggx_pdf(w[3 * i + 2], a_);
+        // in vector lanes: the scalar loop did not vectorise (stride 3)
+        simd::map3(w, f, n, [a = a_](auto, auto, auto z) { return ggx_pdf(z, a); });
     }
   private:
     double a_;

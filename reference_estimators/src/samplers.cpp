@@ -89,22 +89,12 @@ class Directional : public Pointwise<D> {
             simd::f64v u0, u1, w0, w1, w2;
             for (size_t l = 0; l < W; ++l) { u0[l] = u[2 * (i + l)]; u1[l] = u[2 * (i + l) + 1]; }
             simd::store(p + i, sample_v(u0, u1, w0, w1, w2));
-            for (size_t l = 0; l < W; ++l) {
-                double *w = x + 3 * (i + l);
-                w[0] = w0[l]; w[1] = w1[l]; w[2] = w2[l];
-            }
+            simd::store3(x + 3 * i, w0, w1, w2);
         }
         for (; i < n; ++i) p[i] = sample_one(u + 2 * i, x + 3 * i);
     }
     void pdf(const double *x, double *p, size_t n) const override {
-        constexpr size_t W = simd::kWidth;
-        size_t i = 0;
-        for (; i + W <= n; i += W) {
-            simd::f64v w0, w1, w2;
-            for (size_t l = 0; l < W; ++l) { const double *w = x + 3 * (i + l); w0[l] = w[0]; w1[l] = w[1]; w2[l] = w[2]; }
-            simd::store(p + i, pdf_v(w0, w1, w2));
-        }
-        for (; i < n; ++i) p[i] = pdf_one(x + 3 * i);
+        simd::map3(x, p, n, [this](auto w0, auto w1, auto w2) { return pdf_v(w0, w1, w2); });
     }
   private:
     const D &self() const { return static_cast<const D &>(*this); }

@@ -10,7 +10,6 @@
 
 namespace re {
 
-
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kInvPi = 0.31830988618379067154;
 

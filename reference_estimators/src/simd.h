@@ -173,6 +173,27 @@ RE_INLINE void map(const double *x, double *y, size_t n, Fn fn) {
     for (; i < n; ++i) y[i] = fn(x[i]);
 }
 
+// kWidth consecutive 3-vectors at x (coordinates interleaved, as directions are stored)
+// gathered into one vector per coordinate, and scattered back: stride-3 loops do not vectorise.
+RE_INLINE void load3(const double *x, f64v &a, f64v &b, f64v &c) {
+    for (size_t l = 0; l < kWidth; ++l) { a[l] = x[3 * l]; b[l] = x[3 * l + 1]; c[l] = x[3 * l + 2]; }
+}
+RE_INLINE void store3(double *x, f64v a, f64v b, f64v c) {
+    for (size_t l = 0; l < kWidth; ++l) { x[3 * l] = a[l]; x[3 * l + 1] = b[l]; x[3 * l + 2] = c[l]; }
+}
+
+// y[i] = fn(x[3 i], x[3 i + 1], x[3 i + 2]) for i < n (n 3-vectors in, one value each out), as map.
+template <class Fn>
+RE_INLINE void map3(const double *x, double *y, size_t n, Fn fn) {
+    size_t i = 0;
+    for (; i + kWidth <= n; i += kWidth) {
+        f64v a, b, c;
+        load3(x + 3 * i, a, b, c);
+        store(y + i, fn(a, b, c));
+    }
+    for (; i < n; ++i) y[i] = fn(x[3 * i], x[3 * i + 1], x[3 * i + 2]);
+}
+
 // y[i] = fn(a[i], b[i], c[i], y[i]) for i < n, as map.
 template <class Fn>
 RE_INLINE void map4(const double *a, const double *b, const double *c, double *y, size_t n, Fn fn) {
