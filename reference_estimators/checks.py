@@ -13,7 +13,7 @@ from . import _core
 
 __all__ = [
     "CHECK_DOMAINS", "domain_params", "domain_points", "cubature_nodes", "grid_histogram", "rosenblatt",
-    "piecewise_linear_lookup", "transform_statistics", "cramer_von_mises_root", "pdf_summary",
+    "piecewise_linear_lookup", "transform_statistics", "cramer_von_mises_sum", "pdf_summary",
     "float32_unit_rows", "cap_to_world",
 ]
 
@@ -120,9 +120,9 @@ def _strided(a: Any) -> np.ndarray:
 
 def transform_statistics(marginal: tuple, conditional: tuple | None, edges: Any, s: Any,
                          bins: int) -> tuple[np.ndarray, np.ndarray]:
-    """(roots (k,), counts (strips * bins,) float64) of the Rosenblatt transform u of parameter
+    """(sums (k, 2), counts (strips * bins,) float64) of the Rosenblatt transform u of parameter
     points s (N, k) (as :func:`rosenblatt`), without returning u: the
-    :func:`cramer_von_mises_root` of each column of u, and the counts of the cells of equal
+    :func:`cramer_von_mises_sum` of each column of u, and the counts of the cells of equal
     claimed probability, strip g and bin min(floor(v bins), bins - 1) of v = u1 on the square
     (strips: len(edges) - 1), of v = u0 on an interval (one strip); a NaN v counts nowhere.
     In C++ on all hardware threads (fixed chunks: the same for any thread count), u kept in
@@ -133,18 +133,19 @@ def transform_statistics(marginal: tuple, conditional: tuple | None, edges: Any,
     return _core.transform_statistics(_table(marginal), cond, e, a, int(bins))
 
 
-def cramer_von_mises_root(u: Any) -> np.ndarray:
-    """For each column of u (N, k) (or the one of u (N,)): sqrt(sum_i ((2 i - 1) / (2 N) -
-    u_(i))^2) over the sorted values u_(1) <= ... <= u_(N), meant in [0, 1]; the column's
-    Cramer-von Mises statistic is its square plus 1 / (12 N).  NaN for a column holding a NaN.
-    Array (k,).  In C++, the columns on the hardware threads, each by a radix sort on
-    floor(u 2^20) (O(N) for values spread over [0, 1]) and a compensated sum of blocks
-    (numpy's pairwise sum of the same terms differs by rounding only); strided columns are
-    read in place."""
+def cramer_von_mises_sum(u: Any) -> np.ndarray:
+    """For each column of u (N, k) (or the one of u (N,)), meant in [0, 1]: (upper, slack),
+    bracketing S = sum_i ((2 i - 1) / (2 N) - u_(i))^2 over the sorted values u_(1) <= ... <=
+    u_(N) as upper >= S >= upper - slack; S + 1 / (12 N) is the column's Cramer-von Mises
+    statistic N W^2.  Without a sort: from the values' counts in cells of width about
+    1 / (64 sqrt(N)), the order within a cell bounded (slack about N / (2 K^2), 1.2e-4 for
+    uniform values at any N, K the cell count; see checks.h).  NaN for a column holding a NaN.
+    Array (k, 2).  In C++, the columns on the hardware threads, each summed in a fixed order
+    (the same on any thread count); strided columns are read in place."""
     v = _strided(u)
     if v.ndim not in (1, 2):
         raise ValueError(f"'u' must have shape (N,) or (N, k), got {v.shape}")
-    return _core.cramer_von_mises_root(v.reshape(v.shape[0], -1))
+    return _core.cramer_von_mises_sum(v.reshape(v.shape[0], -1))
 
 
 def pdf_summary(kind: str, measure: float, s: Any, inside: Any, p: Any,

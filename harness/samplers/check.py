@@ -36,7 +36,7 @@ from harness.samplers.cubature import all_float32, cell_integrals, rounding_floo
 from harness.samplers.domains import Domain, as_domain
 from harness.samplers.reported import reported_pdf_failure
 from harness.samplers.result import SamplerCheck
-from harness.samplers.transform import STRIPS, Transform, cramer_von_mises_from_roots
+from harness.samplers.transform import STRIPS, Transform, cramer_von_mises_from_sums
 from harness.stats import distributions, holm
 from harness.stats.results import Failure
 from harness.usercode import UserCodeError, array_result, call, callable_name
@@ -233,11 +233,11 @@ class SamplerTest:
         if m == 0:
             return []
         bins = min(1024, max(m // 50, 16)) if t.conditional is None else 64
-        roots, observed, prob, prob_err = t.statistics(s, bins)
+        sums, observed, prob, prob_err = t.statistics(s, bins)
         tables = [t.marginal] if t.conditional is None else [t.marginal, t.conditional]
         names = ["u0 = F(s0)", "u1 = F(s1 | strip of s0)"]
         tests = []
-        cvm = cramer_von_mises_from_roots(roots, m, [table.error for table in tables])
+        cvm = cramer_von_mises_from_sums(sums, m, [table.error for table in tables])
         for axis, (table, (w2, p)) in enumerate(zip(tables, cvm)):
             tests.append((f"Cramer-von Mises {names[axis]}", w2, 0, p,
                           f"smooth warps below the bin width (CDF error bound {table.error:.1e} carried)"))

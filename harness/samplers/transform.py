@@ -39,7 +39,7 @@ import reference_estimators as rest
 from harness.samplers.cubature import box_integrals
 
 __all__ = ["AxisCdf", "Transform", "cramer_von_mises", "cramer_von_mises_columns",
-           "cramer_von_mises_from_roots", "cvm_sf"]
+           "cramer_von_mises_from_sums", "cvm_sf"]
 
 #: Strips of equal claimed mass along s0 on the square (the conditioning of u1), each
 #: integrated across as SUBSTRIPS boxes of equal claimed mass.
@@ -320,7 +320,7 @@ class Transform:
 
     def statistics(self, s: np.ndarray, bins: int) -> tuple[np.ndarray, ...]:
         """What the tests need of the transform u of parameter points s (N, k), without u
-        itself: (the Cramer-von Mises root of each column of u (k,), the observed counts, the
+        itself: (the Cramer-von Mises sum's bracket of each column of u (k, 2), the observed counts, the
         claimed probabilities and a bound on those probabilities' error of the cells of equal
         claimed probability (C,): bins of u0 on an interval, strips x bins of u1 on the
         square).  The bound: on an interval a bin's two edges are each off by at most the
@@ -330,13 +330,13 @@ class Transform:
         whatever p_g claims.  One call to the core
         (:func:`reference_estimators.transform_statistics`)."""
         conditional = None if self.conditional is None else self.conditional.table
-        roots, counts = rest.transform_statistics(self.marginal.table, conditional, self.edges, s, bins)
+        sums, counts = rest.transform_statistics(self.marginal.table, conditional, self.edges, s, bins)
         e0 = self.marginal.error
         if self.conditional is None:
-            return roots, counts, np.full(bins, 1.0 / bins), np.full(bins, 2 * e0)
+            return sums, counts, np.full(bins, 1.0 / bins), np.full(bins, 2 * e0)
         e1 = self.conditional.error
         strip = np.repeat(self.probability, bins)
-        return roots, counts, strip / bins, 2 * e0 / bins + 2 * e1 * (strip + 2 * e0)
+        return sums, counts, strip / bins, 2 * e0 / bins + 2 * e1 * (strip + 2 * e0)
 
 
 def cvm_sf(w2: float) -> float:
@@ -364,26 +364,29 @@ def cvm_sf(w2: float) -> float:
 def cramer_von_mises(u: np.ndarray, error: float) -> tuple[float, float]:
     """(W^2, p) of the points u (N,) against the uniform law, every u allowed to be off by
     ``error`` from its exact value: by the triangle inequality in R^N the statistic's root
-    part sqrt(W^2 - 1/(12 N)) can then exceed the exact one by at most sqrt(N) * error, so
-    that much is taken off before the p-value (conservative: the level holds).  W^2 is the
-    reported statistic, the p-value that of the reduced one."""
+    part sqrt(N W^2 - 1/(12 N)) can then exceed the exact one by at most sqrt(N) * error, so
+    that much is taken off before the p-value (conservative: the level holds).  N W^2 is the
+    reported statistic (to about 1e-4: :func:`reference_estimators.cramer_von_mises_sum`
+    brackets it without a sort), the p-value that of the reduced one from the bracket's
+    lower end."""
     return cramer_von_mises_columns(np.asarray(u).reshape(-1, 1), [error])[0]
 
 
 def cramer_von_mises_columns(u: np.ndarray, errors: list[float]) -> list[tuple[float, float]]:
     """:func:`cramer_von_mises` of each column of u (N, k), column j with ``errors[j]``, in one
     call to the core (strided columns read in place)."""
-    # sqrt(sum_i ((2 i - 1) / (2 n) - u_(i))^2), u sorted
-    return cramer_von_mises_from_roots(rest.cramer_von_mises_root(u), u.shape[0], errors)
+    return cramer_von_mises_from_sums(rest.cramer_von_mises_sum(u), u.shape[0], errors)
 
 
-def cramer_von_mises_from_roots(roots: np.ndarray, n: int, errors: list[float]) -> list[tuple[float, float]]:
-    """(W^2, p) of :func:`cramer_von_mises` for each column of n points from its root part
-    sqrt(n W^2 - 1/(12 n)) (:func:`reference_estimators.cramer_von_mises_root`), column j
-    allowed ``errors[j]``."""
+def cramer_von_mises_from_sums(sums: np.ndarray, n: int, errors: list[float]) -> list[tuple[float, float]]:
+    """(N W^2, p) of :func:`cramer_von_mises` for each column of n points from the bracket
+    (upper, slack) of its sum S = N W^2 - 1/(12 N)
+    (:func:`reference_estimators.cramer_von_mises_sum`), column j allowed ``errors[j]``: the
+    statistic from the upper end, the p-value from the lower end (conservative)."""
     out = []
-    for root, error in zip(roots, errors):
-        w2 = root * root + 1 / (12 * n)
-        reduced = max(root - math.sqrt(n) * error, 0.0) ** 2 + 1 / (12 * n)
+    for (upper, slack), error in zip(np.asarray(sums).reshape(-1, 2), errors):
+        w2 = upper + 1 / (12 * n)
+        low = math.sqrt(max(upper - slack, 0.0)) if upper == upper else upper   # NaN stays NaN
+        reduced = max(low - math.sqrt(n) * error, 0.0) ** 2 + 1 / (12 * n)
         out.append((float(w2), cvm_sf(reduced)))
     return out

@@ -665,34 +665,37 @@ NB_MODULE(_core, m) {
         const size_t k = t.k, n = check_params(s, k);
         if (bins < 1) throw nb::value_error("'bins' must be positive");
         double *r, *c;
-        OutArray roots = new_array(k, 0, &r);
+        OutArray sums = new_array(k, 2, &r);
         OutArray counts = new_array(size_t((k == 2 ? int64_t(edges.size()) - 1 : 1) * bins), 0, &c);
         {
             nb::gil_scoped_release g;
+            CramerVonMisesSum found[2];
             transform_statistics(*t.marginal.table, t.conditional_table(), edges.data(), edges.size(), s.data(), k,
-                                 n, bins, r, c);
+                                 n, bins, found, c);
+            for (size_t j = 0; j < k; ++j) r[2 * j] = found[j].upper, r[2 * j + 1] = found[j].slack;
         }
-        return nb::make_tuple(roots, counts);
+        return nb::make_tuple(sums, counts);
     }, "marginal"_a, "conditional"_a.none(), "edges"_a, "s"_a, "bins"_a,
-       "(roots (k,), counts (strips * bins,)) of the Rosenblatt transform u of parameter points s (as rosenblatt): "
-       "the Cramer-von Mises root of each column of u (as cramer_von_mises_root) and the counts of strips x bins "
+       "(sums (k, 2), counts (strips * bins,)) of the Rosenblatt transform u of parameter points s (as rosenblatt): "
+       "the Cramer-von Mises sum of each column of u (as cramer_von_mises_sum) and the counts of strips x bins "
        "of u1 on the square, of bins of u0 on an interval (cell strip * bins + min(floor(u bins), bins - 1); "
        "NaN u nowhere), without returning u.");
-    m.def("cramer_von_mises_root", [](nb::ndarray<const double, nb::ndim<2>, nb::device::cpu> u) {
+    m.def("cramer_von_mises_sum", [](nb::ndarray<const double, nb::ndim<2>, nb::device::cpu> u) {
         const size_t n = u.shape(0), k = u.shape(1);
         double *r;
-        OutArray roots = new_array(k, 0, &r);
+        OutArray sums = new_array(k, 2, &r);
         {
             nb::gil_scoped_release g;
-            // a column on each thread (each with its own sort buffers): the roots do not
-            // depend on which thread computed them
+            // a column on each thread: the sums do not depend on which thread computed them
             ThreadPool::instance().run(k, ThreadPool::default_threads(), [&](size_t c, int) {
-                r[c] = cramer_von_mises_root(u.data() + c * size_t(u.stride(1)), size_t(u.stride(0)), n);
+                const CramerVonMisesSum s =
+                    cramer_von_mises_sum(u.data() + c * size_t(u.stride(1)), size_t(u.stride(0)), n);
+                r[2 * c] = s.upper, r[2 * c + 1] = s.slack;
             });
         }
-        return roots;
-    }, "u"_a, "For each column of u (N, k): sqrt(sum_i ((2 i - 1) / (2 N) - u_(i))^2) over its sorted values; "
-       "NaN for a column holding a NaN.");
+        return sums;
+    }, "u"_a, "For each column of u (N, k), (upper, slack) with upper >= S >= upper - slack, S = "
+       "sum_i ((2 i - 1) / (2 N) - u_(i))^2 over its sorted values; NaN for a column holding a NaN.");
     m.def("pdf_summary", [](int kind, double measure, InArray s, BoolArray inside, InArray p, double c) {
         const CheckDomain d = check_domain(kind);
         const size_t n = check_params(s, size_t(domain_param_dim(d)));

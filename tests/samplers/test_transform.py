@@ -35,12 +35,14 @@ def test_cvm_law_is_a_survival_function_down_to_tiny_p():
 
 def test_cvm_holds_alpha_on_uniform_points_and_the_carried_error_only_raises_p():
     """alpha = 0.01, n = 2000, seeds 0..399: rejections within the Binomial(400, 0.01) 1e-3
-    upper quantile; a carried error never lowers a p-value."""
+    upper quantile; a carried error never lowers a p-value.  The statistic is scipy's to the
+    core's bracket (it is reported from the bracket's upper end, within 1.3e-4)."""
     rejected = 0
     for seed in range(400):
         u = np.random.default_rng(seed).random(2000)
         w2, p = cramer_von_mises(u, 0.0)
-        assert w2 == pytest.approx(stats.cramervonmises(u, "uniform").statistic, rel=1e-9)
+        exact = stats.cramervonmises(u, "uniform").statistic
+        assert exact - 1e-12 <= w2 <= exact + 1.3e-4
         assert cramer_von_mises(u, 1e-3)[1] >= p
         rejected += p <= 0.01
     assert rejected <= stats.binom.isf(1e-3, 400, 0.01)
