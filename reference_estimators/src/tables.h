@@ -65,9 +65,8 @@ class BucketedUpperBound {
 // buckets, where a one-level index left a binary search of seven dependent loads and its
 // mispredicted loop a point.  Every lookup takes the same path (bucket, sub-bucket, leaf),
 // so the branch predictor has nothing to miss.  Bucket and sub-bucket edges are exact binary
-// fractions and a point's sub-bucket is computed with exact operations (products by powers
-// of two, x B - b by Sterbenz), so the index agrees with the comparisons lo <= x it stands
-// for, and the answer does not depend on it.
+// fractions and a point's sub-bucket is read off the bits of floor(x 2^52) (exact), so the
+// index agrees with the comparisons lo <= x it stands for, and the answer does not depend on it.
 class PiecewiseLinearTable {
   public:
     PiecewiseLinearTable(const double *lo, const double *hi, const double *start, const double *mass,
@@ -81,7 +80,7 @@ class PiecewiseLinearTable {
         int64_t most = 0;
         for (int64_t g = 0; g < strips; ++g) most = std::max(most, offsets[g + 1] - offsets[g]);
         const int64_t cap = std::max<int64_t>(256, (int64_t(1) << 16) / std::max<int64_t>(strips, 1));
-        while (buckets_ < 2 * most && buckets_ < (int64_t(1) << 14) && buckets_ < cap) buckets_ *= 2;
+        while (buckets_ < 2 * most && buckets_ < (int64_t(1) << 14) && buckets_ < cap) buckets_ *= 2, ++log2_buckets_;
         // the first leaf of strip g at or after `edge`, searched from leaf i on
         auto first_from = [&](int64_t g, int64_t i, double edge) {
             while (i < offsets[g + 1] && lo[i] < edge) ++i;
@@ -130,14 +129,15 @@ class PiecewiseLinearTable {
     // [0, strips), an empty strip or a NaN x.
     uint32_t leaf(int64_t g, double x) const {
         if (g < 0 || g >= strips_ || offsets_[g + 1] <= offsets_[g] || !(x == x)) return uint32_t(leaves_.size() - 1);
-        const double xb = x * double(buckets_);
-        const int64_t b = xb < 0 ? 0 : (xb < double(buckets_ - 1) ? int64_t(xb) : buckets_ - 1);
-        const Bucket bucket = index_[size_t(g * buckets_ + b)];
-        const int64_t S = int64_t(1) << bucket.shift;
-        const double f = (xb - double(b)) * double(S);
-        const int64_t j = f < 0 ? 0 : (f < double(S - 1) ? int64_t(f) : S - 1);
-        // the answer lies in [first[j] - 1, first[j + 1] - 1]: leaves starting before the
-        // sub-bucket end with the last one, and none starting after it can hold x
+        // x in 52-bit fixed point, floor(x 2^52) of x clamped to [0, 1 - 2^-53]: the bucket and
+        // sub-bucket are its leading bits, found by shifts (exact: x 2^52 is, and floor commutes
+        // with them), where clamped double products and conversions had lengthened each
+        // lookup's chain of dependent loads (1.3-1.5x slower)
+        const double clamped = std::min(std::max(x, 0.0), 0x1.fffffffffffffp-1);
+        const uint64_t fixed = uint64_t(clamped * 0x1p52);
+        const uint64_t b = fixed >> (52 - log2_buckets_);
+        const Bucket bucket = index_[size_t(g * buckets_ + int64_t(b))];
+        const uint64_t j = (fixed >> (52 - log2_buckets_ - bucket.shift)) & ((uint64_t(1) << bucket.shift) - 1);
         const int32_t *first = &subs_[size_t(bucket.base + j)];
         const int64_t begin = std::max(int64_t(first[0]) - 1, offsets_[g]);
         const int64_t end = std::max(int64_t(first[1]), begin + 1);
@@ -172,6 +172,7 @@ class PiecewiseLinearTable {
     };
     const int64_t *offsets_;
     int64_t strips_, buckets_ = 256;
+    int log2_buckets_ = 8;
     std::vector<Leaf> leaves_;
     std::vector<Bucket> index_;   // [g * B + b]: where bucket b's sub-buckets start in subs_, log2 S_b
     std::vector<int32_t> subs_;   // per bucket, its S_b + 1 sub-bucket firsts
