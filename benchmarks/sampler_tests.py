@@ -3,7 +3,7 @@
 cell, pooling below 5), on the same zoo of correct and subtly wrong samplers
 (harness.samplers.zoo), at the same sample count and seeds.
 
-    .venv/bin/python benchmarks/sampler_tests.py [--seeds 10] [--samples 1e6] [--match TEXT]
+    .venv/bin/python benchmarks/sampler_tests.py [--seeds 10] [--samples 1e6] [--match TEXT] [--ours-only]
 
 For each sampler (the zoo's correct ones, its mutants and the smooth warps below any bin
 width): how many of the seeds each test rejected (false alarms for correct samplers at
@@ -87,12 +87,16 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--samples", default="1e6")
     parser.add_argument("--match", default="", help="only the samplers whose name contains this")
+    parser.add_argument("--ours-only", action="store_true",
+                        help="skip Mitsuba's test (its columns show '-'): a calibration run of ours alone")
     args = parser.parse_args()
     n = int(float(args.samples))
-    use_libllvm()  # before drjit is imported
-    import mitsuba as mi
+    mi = None
+    if not args.ours_only:
+        use_libllvm()  # before drjit is imported
+        import mitsuba as mi
 
-    mi.set_variant("llvm_ad_rgb")
+        mi.set_variant("llvm_ad_rgb")
     print(f"{n:.0e} samples per test, seeds 0..{args.seeds - 1}, alpha = 0.01; "
           f"'rejected' = failed tests of {args.seeds}; ours: the pdf's cubature and CDF tables once per "
           f"sampler ('setup'), then per seed the sampler's own time and the check's\n")
@@ -101,14 +105,15 @@ def main() -> None:
     for s in sampler_zoo.correct() + sampler_zoo.wrong() + sampler_zoo.smooth_warps():
         if args.match not in s.name:
             continue
-        m = [mitsuba_test(mi, s, n, seed) for seed in range(args.seeds)]
+        m = [] if args.ours_only else [mitsuba_test(mi, s, n, seed) for seed in range(args.seeds)]
         t0 = time.perf_counter()
         test = SamplerTest(s.pdf, s.domain, sample_count=n)
         setup = time.perf_counter() - t0
         o = [ours(test, s, seed) for seed in range(args.seeds)]
         check, pdf = statistics.median(r[2] for r in o), statistics.median(r[3] for r in o)
         print(f"{s.name[:50]:50s} {'wrong' if s.fault else 'correct':7s} "
-              f"{sum(not ok for ok, _ in m):>11d} {statistics.median(t for _, t in m):7.2f} "
+              f"{sum(not ok for ok, _ in m) if m else '-':>11} "
+              f"{f'{statistics.median(t for _, t in m):7.2f}' if m else '-':>7} "
               f"{sum(not r[0] for r in o):>8d} {setup:8.2f} "
               f"{statistics.median(r[1] for r in o):9.3f} {check:8.3f} {pdf:6.3f} {check - pdf:6.3f}",
               flush=True)

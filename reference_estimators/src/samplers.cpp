@@ -255,26 +255,84 @@ class Ggx final : public Directional<Ggx, true> {
     double a_;
 };
 
-// pbrt-v4's PiecewiseConstant1D over [a, b]: a CDF table, binary search to sample.
-class PiecewiseConstant1D final : public Pointwise<PiecewiseConstant1D> {
-  public:
-    PiecewiseConstant1D(std::vector<double> values, double a, double b) : f_(std::move(values)), a_(a), b_(b) {
-        name = "piecewise_constant_1d";
-        params = {{"a", a}, {"b", b}, {"bins", double(f_.size())}};
-        domain = Domain::interval(a, b);
-        cdf_.assign(f_.size() + 1, 0.0);
+// Tables of pbrt-v4's PiecewiseConstant1D over [a, b], any number of them with the same bin
+// count laid out flat (table k's CDF at cdf[k (bins + 1) ..], its values and empty-bin map at
+// [k bins ..]): one table for the 1-D sampler, a row's conditional each for the 2-D one,
+// whose points draw from their rows' tables in one batch (sample_many).
+struct PiecewiseTables {
+    size_t bins = 0;
+    double a = 0, b = 1;
+    std::vector<double> cdf, f, scale;
+    std::vector<int64_t> below;   // below[k bins + o]: the last non-empty bin at or below o (or 0)
+
+    // Appends the table of the values f (bins of them, the same count for every table; not all
+    // zero): table k = the count of tables before it.
+    void add(const std::vector<double> &values) {
+        const size_t base = cdf.size();
+        cdf.push_back(0.0);
         CompensatedSum s;
-        for (size_t i = 0; i < f_.size(); ++i) { s.add(f_[i]); cdf_[i + 1] = s.value(); }
-        total_ = s.value();
-        for (auto &c : cdf_) c /= total_;
-        cdf_.back() = 1.0;
-        scale_ = double(f_.size()) / (total_ * (b - a));
+        for (double v : values) { s.add(v); cdf.push_back(s.value()); }
+        const double total = s.value();
+        for (size_t i = base; i < cdf.size(); ++i) cdf[i] /= total;
+        cdf.back() = 1.0;
+        f.insert(f.end(), values.begin(), values.end());
+        scale.push_back(double(values.size()) / (total * (b - a)));
+        for (size_t o = 0; o < bins; ++o) {
+            size_t e = o;
+            while (e > 0 && cdf[base + e + 1] == cdf[base + e]) --e;
+            below.push_back(int64_t(e));
+        }
     }
-    double sample_one(const double *u, double *x) const {
-        size_t o = bin_of_u(u[0]);
-        double du = (u[0] - cdf_[o]) / (cdf_[o + 1] - cdf_[o]);
-        double t = (double(o) + du) / double(f_.size());
-        double xs = std::min(a_ + t * (b_ - a_), b_);
+
+    // Bin o of table k for uniform u: the last with cdf[o] <= u (counted by a branch-free
+    // halving search: a mispredicted branch a step cost more than the rest), moved down past
+    // empty bins.
+    size_t bin_of_u(size_t k, double u) const {
+        const double *c = &cdf[k * (bins + 1)];
+        size_t lo = 0, len = bins + 1;
+        while (len > 1) {
+            const size_t half = len / 2;
+            lo = c[lo + half] <= u ? lo + half : lo;
+            len -= half;
+        }
+        size_t o = lo + (c[lo] <= u);   // the count of cdf values <= u (NaN u: 0)
+        o = o == 0 ? 0 : o - 1;
+        o = std::min(o, bins - 1);
+        return size_t(below[k * bins + o]);
+    }
+    size_t bin_of_x(double x) const {
+        double t = (x - a) / (b - a) * double(bins);
+        return std::min(size_t(t), bins - 1);
+    }
+
+    // pbrt's sample: x in bin o of table k, its density back.
+    double sample_one(size_t k, double u, double *x) const { return point_in(k, bin_of_u(k, u), u, x); }
+
+    // sample_one for n points, point j from table k[j] (table 0 when k is null) with the
+    // uniform u[j * ustride], its x to x[j * xstride] and its density to p[j]: the bins of a
+    // block of points found in one pass, their points in a second, so that the out-of-order
+    // core overlaps many points' dependent searches (one point at a time, each waited on its
+    // own; vector lanes with gathers were slower still on AMD's gathers).  The same bits as
+    // sample_one.
+    void sample_many(const int64_t *k, const double *u, size_t ustride, size_t n, double *x, size_t xstride,
+                     double *p) const {
+        constexpr size_t kBlock = 256;
+        uint32_t bin[kBlock];
+        for (size_t a0 = 0; a0 < n; a0 += kBlock) {
+            const size_t m = std::min(kBlock, n - a0);
+            for (size_t j = 0; j < m; ++j) bin[j] = uint32_t(bin_of_u(k ? size_t(k[a0 + j]) : 0, u[(a0 + j) * ustride]));
+            for (size_t j = 0; j < m; ++j)
+                p[a0 + j] = point_in(k ? size_t(k[a0 + j]) : 0, bin[j], u[(a0 + j) * ustride], x + (a0 + j) * xstride);
+        }
+    }
+
+  private:
+    // x in bin o of table k for uniform u, and its density.
+    double point_in(size_t k, size_t o, double u, double *x) const {
+        const double *c = &cdf[k * (bins + 1)];
+        double du = (u - c[o]) / (c[o + 1] - c[o]);
+        double t = (double(o) + du) / double(bins);
+        double xs = std::min(a + t * (b - a), b);
         // Rounding can put x on the edge of a neighbouring bin (then pdf(x) would report that
         // bin's density, possibly 0): step to the nearest double inside bin o.  (One bin_of_x,
         // a division, where x is inside: the loops' two tests were the sampler's critical path.)
@@ -283,94 +341,109 @@ class PiecewiseConstant1D final : public Pointwise<PiecewiseConstant1D> {
             while (bin_of_x(xs) < o) xs = std::nextafter(xs, INFINITY);
         }
         x[0] = xs;
-        return f_[o] * scale_;
+        return f[k * bins + o] * scale[k];
     }
+};
+
+// pbrt-v4's PiecewiseConstant1D over [a, b]: a CDF table, a halving search to sample.
+class PiecewiseConstant1D final : public Pointwise<PiecewiseConstant1D> {
+  public:
+    PiecewiseConstant1D(const std::vector<double> &values, double a, double b) {
+        name = "piecewise_constant_1d";
+        params = {{"a", a}, {"b", b}, {"bins", double(values.size())}};
+        domain = Domain::interval(a, b);
+        t_.bins = values.size();
+        t_.a = a;
+        t_.b = b;
+        t_.add(values);
+    }
+    void sample(const double *u, double *x, double *p, size_t n) const override {
+        t_.sample_many(nullptr, u, 1, n, x, 1, p);
+    }
+    double sample_one(const double *u, double *x) const { return t_.sample_one(0, u[0], x); }
     double pdf_one(const double *x) const {
-        if (!(x[0] >= a_ && x[0] <= b_)) return 0.0;
-        return f_[bin_of_x(x[0])] * scale_;
+        if (!(x[0] >= t_.a && x[0] <= t_.b)) return 0.0;
+        return t_.f[t_.bin_of_x(x[0])] * t_.scale[0];
     }
     void invert_one(const double *x, double *u) const {
-        if (!(x[0] >= a_ && x[0] <= b_)) { u[0] = kNaN; return; }
-        size_t o = bin_of_x(x[0]);
-        double t = (x[0] - a_) / (b_ - a_) * double(f_.size()) - double(o);
-        u[0] = cdf_[o] + t * (cdf_[o + 1] - cdf_[o]);
+        if (!(x[0] >= t_.a && x[0] <= t_.b)) { u[0] = kNaN; return; }
+        size_t o = t_.bin_of_x(x[0]);
+        double t = (x[0] - t_.a) / (t_.b - t_.a) * double(t_.bins) - double(o);
+        u[0] = t_.cdf[o] + t * (t_.cdf[o + 1] - t_.cdf[o]);
     }
-    size_t bins() const { return f_.size(); }
 
   private:
-    size_t bin_of_u(double u) const {  // last o with cdf[o] <= u and a non-empty bin
-        // std::upper_bound's index, the count of cdf values <= u (NaN u: 0): for tables of up to
-        // 64 bins by counting over all of them (vector compares, no dependent loads), else by a
-        // branch-free halving search.  Both were 2-3x faster than std::upper_bound's branches.
-        size_t o = 0;
-        if (cdf_.size() <= 65) {
-            for (double c : cdf_) o += c <= u;
-        } else {
-            size_t lo = 0, len = cdf_.size();
-            while (len > 1) {
-                size_t half = len / 2;
-                lo = cdf_[lo + half] <= u ? lo + half : lo;
-                len -= half;
-            }
-            o = lo + (cdf_[lo] <= u);
-        }
-        o = o == 0 ? 0 : o - 1;
-        o = std::min(o, f_.size() - 1);
-        while (o > 0 && cdf_[o + 1] == cdf_[o]) --o;
-        return o;
-    }
-    size_t bin_of_x(double x) const {
-        double t = (x - a_) / (b_ - a_) * double(f_.size());
-        return std::min(size_t(t), f_.size() - 1);
-    }
-    std::vector<double> f_, cdf_;
-    double a_, b_, total_, scale_;
+    PiecewiseTables t_;
 };
 
 // pbrt-v4's PiecewiseConstant2D over [0,1]^2: a marginal over rows (y) and one conditional
 // per row over columns (x).  Table shape (rows, cols), row-major.
 class PiecewiseConstant2D final : public Pointwise<PiecewiseConstant2D> {
   public:
-    PiecewiseConstant2D(const std::vector<double> &values, size_t rows, size_t cols) : rows_(rows), cols_(cols) {
+    PiecewiseConstant2D(const std::vector<double> &values, size_t rows, size_t cols) : rows_(rows) {
         name = "piecewise_constant_2d";
         params = {{"rows", double(rows)}, {"cols", double(cols)}};
         domain = Domain::box({0, 0}, {1, 1});
         udim = 2;
         std::vector<double> row_sums(rows);
+        conditional_.bins = cols;
         for (size_t r = 0; r < rows; ++r) {
             std::vector<double> row(values.begin() + r * cols, values.begin() + (r + 1) * cols);
             CompensatedSum s;
             for (double v : row) s.add(v);
             row_sums[r] = s.value() / double(cols);
             if (!(s.value() > 0)) row.assign(cols, 1.0);  // an empty row is never selected
-            conditional_.emplace_back(std::move(row), 0.0, 1.0);
+            conditional_.add(row);
         }
-        marginal_ = std::make_unique<PiecewiseConstant1D>(row_sums, 0.0, 1.0);
+        marginal_.bins = rows;
+        marginal_.add(row_sums);
+    }
+    // In blocks: the marginal's y and density for every point, then each point's row, then
+    // the conditionals' x and density (PiecewiseTables::sample_many's passes).
+    void sample(const double *u, double *x, double *p, size_t n) const override {
+        constexpr size_t kBlock = 256;
+        int64_t row[kBlock];
+        double px[kBlock];
+        for (size_t a = 0; a < n; a += kBlock) {
+            const size_t m = std::min(kBlock, n - a);
+            marginal_.sample_many(nullptr, u + 2 * a + 1, 2, m, x + 2 * a + 1, 2, p + a);
+            for (size_t j = 0; j < m; ++j) row[j] = int64_t(std::min(size_t(x[2 * (a + j) + 1] * double(rows_)), rows_ - 1));
+            conditional_.sample_many(row, u + 2 * a, 2, m, x + 2 * a, 2, px);
+            for (size_t j = 0; j < m; ++j) p[a + j] *= px[j];
+        }
     }
     double sample_one(const double *u, double *x) const {
-        double y, py, px;
-        py = marginal_->sample_one(u + 1, &y);
-        size_t r = std::min(size_t(y * double(rows_)), rows_ - 1);
-        px = conditional_[r].sample_one(u, x);
+        double y;
+        const double py = marginal_.sample_one(0, u[1], &y);
+        const size_t r = std::min(size_t(y * double(rows_)), rows_ - 1);
+        const double px = conditional_.sample_one(r, u[0], x);
         x[1] = y;
         return py * px;
     }
     double pdf_one(const double *x) const {
         if (!domain.contains(x)) return 0.0;
-        size_t r = std::min(size_t(x[1] * double(rows_)), rows_ - 1);
-        return marginal_->pdf_one(x + 1) * conditional_[r].pdf_one(x);
+        const size_t r = std::min(size_t(x[1] * double(rows_)), rows_ - 1);
+        return density(marginal_, 0, x[1]) * density(conditional_, r, x[0]);
     }
     void invert_one(const double *x, double *u) const {
         if (!domain.contains(x)) { u[0] = u[1] = kNaN; return; }
-        size_t r = std::min(size_t(x[1] * double(rows_)), rows_ - 1);
-        conditional_[r].invert_one(x, u);
-        marginal_->invert_one(x + 1, u + 1);
+        const size_t r = std::min(size_t(x[1] * double(rows_)), rows_ - 1);
+        u[0] = cdf_at(conditional_, r, x[0]);
+        u[1] = cdf_at(marginal_, 0, x[1]);
     }
 
   private:
-    size_t rows_, cols_;
-    std::vector<PiecewiseConstant1D> conditional_;
-    std::unique_ptr<PiecewiseConstant1D> marginal_;
+    static double density(const PiecewiseTables &t, size_t k, double x) {
+        return t.f[k * t.bins + t.bin_of_x(x)] * t.scale[k];
+    }
+    static double cdf_at(const PiecewiseTables &t, size_t k, double x) {
+        const size_t o = t.bin_of_x(x);
+        const double *c = &t.cdf[k * (t.bins + 1)];
+        const double s = (x - t.a) / (t.b - t.a) * double(t.bins) - double(o);
+        return c[o] + s * (c[o + 1] - c[o]);
+    }
+    size_t rows_;
+    PiecewiseTables marginal_, conditional_;
 };
 
 class Rejection final : public Sampler {
