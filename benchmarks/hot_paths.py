@@ -256,7 +256,7 @@ class PiecewiseConstant2D:
 
     @staticmethod
     def _within_bin(ops: Any, cdf: np.ndarray, at: Any, o: Any, u: Any, bins: int, last: np.ndarray) -> Any:
-        """PiecewiseConstant1D::sample_one's point in bin o (its CDF entry at index `at`)."""
+        """PiecewiseTables::point_in's point in bin o (its CDF entry at index `at`)."""
         lo, hi = ops.gather(cdf, at), ops.gather(cdf, at + 1)
         t = (ops.to_float(o) + (u - lo) / (hi - lo)) / bins
         return ops.clip(t, ops.to_float(o) / bins, ops.gather(last, o))

@@ -134,14 +134,15 @@ def transform_statistics(marginal: tuple, conditional: tuple | None, edges: Any,
 
 
 def cramer_von_mises_sum(u: Any) -> np.ndarray:
-    """For each column of u (N, k) (or the one of u (N,)), meant in [0, 1]: (upper, slack),
-    bracketing S = sum_i ((2 i - 1) / (2 N) - u_(i))^2 over the sorted values u_(1) <= ... <=
-    u_(N) as upper >= S >= upper - slack; S + 1 / (12 N) is the column's Cramer-von Mises
-    statistic N W^2.  Without a sort: from the values' counts in cells of width about
-    1 / (64 sqrt(N)), the order within a cell bounded (slack about N / (2 K^2), 1.2e-4 for
-    uniform values at any N, K the cell count; see checks.h).  NaN for a column holding a NaN.
-    Array (k, 2).  In C++, the columns on the hardware threads, each summed in a fixed order
-    (the same on any thread count); strided columns are read in place."""
+    """For each column of u (N, k) (or the one of u (N,)), its values clamped to [0, 1] (the
+    uniform law's CDF there, as in scipy's cramervonmises): (upper, slack), bracketing S =
+    sum_i ((2 i - 1) / (2 N) - u_(i))^2 over the sorted values u_(1) <= ... <= u_(N) as
+    upper >= S >= upper - slack; S + 1 / (12 N) is the column's Cramer-von Mises statistic
+    N W^2.  Without a sort: from the values' counts in K cells of width about 1 / (64 sqrt(N)),
+    the order within a cell bounded (slack about N / (2 K^2), 1.2e-4 for uniform values at any
+    N; see checks.h).  NaN for a column holding a NaN.  Array (k, 2).  In C++, the columns on
+    the hardware threads, each summed in a fixed order (the same on any thread count); strided
+    columns are read in place."""
     v = _strided(u)
     if v.ndim not in (1, 2):
         raise ValueError(f"'u' must have shape (N,) or (N, k), got {v.shape}")

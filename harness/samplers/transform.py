@@ -345,7 +345,10 @@ def cvm_sf(w2: float) -> float:
     and Darling's (1952) series in Bessel K_{1/4} (to about 1e-12), and where that leaves
     under 1e-8 the tail of the law's first eigenterm, sqrt(2) erfc(pi sqrt(w2 / 2))
     (W^2 = sum_k Z_k^2 / (k pi)^2, the product over k >= 2 of (1 - 1/k^2)^(-1/2) being
-    sqrt 2), within 2 % of the series there and decreasing: a p-value down to 1e-300."""
+    sqrt 2), within 2 % of the series there and decreasing: a p-value down to 1e-300.  NaN for
+    a NaN w2 (the check's Holm step counts a NaN p-value as a rejection)."""
+    if w2 != w2:
+        return math.nan
     if not w2 > 0:
         return 1.0
     tail = math.sqrt(2) * math.erfc(math.pi * math.sqrt(w2 / 2))
@@ -362,7 +365,7 @@ def cvm_sf(w2: float) -> float:
 
 
 def cramer_von_mises(u: np.ndarray, error: float) -> tuple[float, float]:
-    """(W^2, p) of the points u (N,) against the uniform law, every u allowed to be off by
+    """(N W^2, p) of the points u (N,) against the uniform law, every u allowed to be off by
     ``error`` from its exact value: by the triangle inequality in R^N the statistic's root
     part sqrt(N W^2 - 1/(12 N)) can then exceed the exact one by at most sqrt(N) * error, so
     that much is taken off before the p-value (conservative: the level holds).  N W^2 is the
@@ -386,7 +389,7 @@ def cramer_von_mises_from_sums(sums: np.ndarray, n: int, errors: list[float]) ->
     out = []
     for (upper, slack), error in zip(np.asarray(sums).reshape(-1, 2), errors):
         w2 = upper + 1 / (12 * n)
-        low = math.sqrt(max(upper - slack, 0.0)) if upper == upper else upper   # NaN stays NaN
+        low = math.sqrt(max(upper - slack, 0.0)) if upper == upper else math.nan
         reduced = max(low - math.sqrt(n) * error, 0.0) ** 2 + 1 / (12 * n)
         out.append((float(w2), cvm_sf(reduced)))
     return out

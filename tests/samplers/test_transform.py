@@ -13,7 +13,7 @@ import reference_estimators as rest
 
 from harness.samplers import SamplerTest, as_domain, zoo
 from harness.samplers.check import SAMPLE_CASE
-from harness.samplers.transform import STRIPS, Transform, cramer_von_mises, cvm_sf
+from harness.samplers.transform import STRIPS, Transform, cramer_von_mises, cramer_von_mises_from_sums, cvm_sf
 
 
 @pytest.mark.parametrize("w2, p", [(0.347, 0.10), (0.461, 0.05), (0.581, 0.025), (0.743, 0.01),
@@ -46,6 +46,18 @@ def test_cvm_holds_alpha_on_uniform_points_and_the_carried_error_only_raises_p()
         assert cramer_von_mises(u, 1e-3)[1] >= p
         rejected += p <= 0.01
     assert rejected <= stats.binom.isf(1e-3, 400, 0.01)
+
+
+def test_cvm_p_value_comes_from_the_brackets_lower_end():
+    """The core brackets the sum S (upper >= S >= upper - slack): the statistic is reported from
+    the upper end, the p-value from the lower one (conservative), and a NaN sum (a NaN u) gives
+    a NaN p-value, which the check's Holm step counts as a rejection."""
+    n = 10_000
+    (w2, p_exact), = cramer_von_mises_from_sums(np.array([[2.0, 0.0]]), n, [0.0])
+    (w2_wide, p_wide), = cramer_von_mises_from_sums(np.array([[2.0, 1.5]]), n, [0.0])
+    assert w2 == w2_wide == pytest.approx(2.0 + 1 / (12 * n))
+    assert p_wide == pytest.approx(cvm_sf(0.5 + 1 / (12 * n))) and p_wide > 100 * p_exact
+    assert math.isnan(cramer_von_mises_from_sums(np.array([[np.nan, np.nan]]), n, [0.0])[0][1])
 
 
 def test_tabulated_marginal_is_within_its_bound_of_the_exact_cdf():
