@@ -14,6 +14,7 @@ from . import _core
 __all__ = [
     "CHECK_DOMAINS", "domain_params", "domain_points", "cubature_nodes", "grid_histogram", "rosenblatt",
     "piecewise_linear_lookup", "transform_statistics", "cramer_von_mises_sum", "pdf_summary",
+    "all_float32", "dither_float32",
     "float32_unit_rows", "cap_to_world",
 ]
 
@@ -147,6 +148,23 @@ def cramer_von_mises_sum(u: Any) -> np.ndarray:
     if v.ndim not in (1, 2):
         raise ValueError(f"'u' must have shape (N,) or (N, k), got {v.shape}")
     return _core.cramer_von_mises_sum(v.reshape(v.shape[0], -1))
+
+
+def all_float32(v: Any) -> bool:
+    """Whether every finite non-zero value of v (any shape) is a float32 (rounds to itself
+    through float32), and there is one: a float32 renderer's numbers, whether returned as
+    float32 or float64.  One pass in C++, stopping at the first value that is not."""
+    return bool(_core.all_float32(np.ascontiguousarray(v, dtype=np.float64).reshape(-1)))
+
+
+def dither_float32(v: Any, u: Any) -> np.ndarray:
+    """v (any shape) with each value moved to below + (above - below) u, below and above half
+    way to its float32 neighbours (the value rounded to float32 first), u uniforms of v's
+    size; a value whose result is not finite (NaN, infinite, beyond float32's range or at its
+    end) is kept.  The same bits as numpy's (x + nextafter(x32, -inf)) / 2 etc.; one pass in
+    C++ on all threads.  Array of v's shape."""
+    a = np.ascontiguousarray(v, dtype=np.float64)
+    return _core.dither_float32(a.reshape(-1), np.ascontiguousarray(u, dtype=np.float64).reshape(-1)).reshape(a.shape)
 
 
 def pdf_summary(kind: str, measure: float, s: Any, inside: Any, p: Any,

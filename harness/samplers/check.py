@@ -32,7 +32,7 @@ import pandas as pd
 
 import reference_estimators as rest
 
-from harness.samplers.cubature import all_float32, cell_integrals, rounding_floor
+from harness.samplers.cubature import cell_integrals, rounding_floor
 from harness.samplers.domains import Domain, as_domain
 from harness.samplers.reported import reported_pdf_failure
 from harness.samplers.result import SamplerCheck
@@ -389,21 +389,18 @@ def _check_drawn(u: np.ndarray, x: np.ndarray, reported: np.ndarray | None,
 
 
 def _float32_points(x: np.ndarray) -> bool:
-    """Whether x's coordinates are float32 (:func:`~harness.samplers.cubature.all_float32`); a
-    float64 sampler's points are told from their first few thousand values, without a pass."""
-    return all_float32(x.reshape(-1)[:4096]) and all_float32(x)
+    """Whether x's coordinates are float32 (:func:`reference_estimators.all_float32`; a float64
+    sampler's points are told from their first few thousand values)."""
+    return rest.all_float32(x.reshape(-1)[:4096]) and rest.all_float32(x)
 
 
 def _dithered(x: np.ndarray, seed: int) -> np.ndarray:
     """x with each coordinate moved uniformly within its float32 rounding interval (half way to
-    each float32 neighbour), uniforms from stream ``seed``, DITHER_CASE; non-finite ones kept."""
-    x32 = x.astype(np.float32)
-    with np.errstate(invalid="ignore", over="ignore"):
-        below = (x + np.nextafter(x32, np.float32(-np.inf)).astype(float)) / 2
-        above = (x + np.nextafter(x32, np.float32(np.inf)).astype(float)) / 2
-        u = rest.points(x.shape[0], 1 if x.ndim == 1 else x.shape[1], seed=seed, case_id=DITHER_CASE)
-        d = below + (above - below) * u.reshape(x.shape)
-    return np.where(np.isfinite(d), d, x)
+    each float32 neighbour), uniforms from stream ``seed``, DITHER_CASE; non-finite ones kept
+    (:func:`reference_estimators.dither_float32`, one pass in the core: numpy's took 0.1 s a
+    million directions, more than the rest of the check)."""
+    u = rest.points(x.shape[0], 1 if x.ndim == 1 else x.shape[1], seed=seed, case_id=DITHER_CASE)
+    return rest.dither_float32(x, u)
 
 
 def _u_examples(u: np.ndarray, mask: np.ndarray, k: int = 5) -> list[dict[str, Any]]:

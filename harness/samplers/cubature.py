@@ -16,7 +16,7 @@ import numpy as np
 
 import reference_estimators as rest
 
-__all__ = ["all_float32", "box_integrals", "cell_integrals", "rounding_floor"]
+__all__ = ["box_integrals", "cell_integrals", "rounding_floor"]
 
 #: The relative change of a box's integral that a float32 density's own rounding can cause:
 #: Mitsuba's float32 pdfs move a box's rule by up to ~1e-6 of its value where they are
@@ -25,22 +25,15 @@ __all__ = ["all_float32", "box_integrals", "cell_integrals", "rounding_floor"]
 FLOAT32_FLOOR = 32 * 2.0**-24
 
 
-def all_float32(values: np.ndarray) -> bool:
-    """Whether every finite non-zero value is a float32 (and there is one): a float32
-    renderer's numbers, whether returned as float32 or float64."""
-    v = np.asarray(values, dtype=float)
-    v = v[np.isfinite(v) & (v != 0)]
-    return bool(v.size) and np.array_equal(v.astype(np.float32).astype(float), v)
-
-
 def rounding_floor(values: np.ndarray) -> float:
     """The relative floor below which a change of a box integral of a density with these
-    values is its own rounding: FLOAT32_FLOOR when the values are float32 (:func:`all_float32`),
+    values is its own rounding: FLOAT32_FLOOR when the values are float32
+    (:func:`reference_estimators.all_float32`),
     else 0.  Without it the cubature would chase float32 rounding noise to its depth and
     evaluation limits (78 million pdf calls for a Mitsuba BSDF at 1e6 samples, against 8
     million with it)."""
     v = np.asarray(values)
-    return FLOAT32_FLOOR if v.dtype == np.float32 or all_float32(v) else 0.0
+    return FLOAT32_FLOOR if v.dtype == np.float32 or rest.all_float32(v) else 0.0
 
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(4)

@@ -696,6 +696,24 @@ NB_MODULE(_core, m) {
         return sums;
     }, "u"_a, "For each column of u (N, k), (upper, slack) with upper >= S >= upper - slack, S = "
        "sum_i ((2 i - 1) / (2 N) - u_(i))^2 over its sorted values; NaN for a column holding a NaN.");
+    m.def("all_float32", [](InArray v) {
+        nb::gil_scoped_release g;
+        return all_float32(v.data(), v.size());
+    }, "v"_a, "Whether every finite non-zero value of v is a float32, and there is one.");
+    m.def("dither_float32", [](InArray v, InArray u) {
+        if (u.size() != v.size()) throw nb::value_error("'u' must have one uniform per value of 'v'");
+        double *out;
+        OutArray r = new_array(v.size(), 0, &out);
+        {
+            nb::gil_scoped_release g;
+            // each value depends on itself and its uniform alone: chunks on all threads
+            for_chunks(v.size(), kCheckChunk, [&](size_t, size_t a, size_t b, int) {
+                dither_float32(v.data() + a, u.data() + a, b - a, out + a);
+            });
+        }
+        return r;
+    }, "v"_a, "u"_a, "The values v (flattened) each moved to below + (above - below) u, below and above half "
+       "way to its float32 neighbours; v itself where that is not finite.");
     m.def("pdf_summary", [](int kind, double measure, InArray s, BoolArray inside, InArray p, double c) {
         const CheckDomain d = check_domain(kind);
         const size_t n = check_params(s, size_t(domain_param_dim(d)));

@@ -19,6 +19,8 @@ from hypothesis.extra.numpy import arrays
 import reference_estimators as rest
 
 N = 20_000
+# CHUNKS points: several of the core's fixed chunks (2^16), on every thread, merged in order
+CHUNKS = 300_001
 
 
 # --- references: the numpy code the kernels replace -----------------------------------------
@@ -194,6 +196,49 @@ def test_cap_to_world_matches_the_numpy_map_at_poles_horizons_and_nan():
         rest.cap_to_world(h, axis[:2], t, b, 0.8, 0.2)
 
 
+# --- float32 points: detection and dithering -----------------------------------------------
+def all_float32_reference(values: np.ndarray) -> bool:
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v) & (v != 0)]
+    with np.errstate(over="ignore"):
+        return bool(v.size) and np.array_equal(v.astype(np.float32).astype(float), v)
+
+
+def dither_reference(x: np.ndarray, u: np.ndarray) -> np.ndarray:
+    with np.errstate(invalid="ignore", over="ignore"):
+        x32 = x.astype(np.float32)
+        below = (x + np.nextafter(x32, np.float32(-np.inf)).astype(float)) / 2
+        above = (x + np.nextafter(x32, np.float32(np.inf)).astype(float)) / 2
+        d = below + (above - below) * u.reshape(x.shape)
+    return np.where(np.isfinite(d), d, x)
+
+
+F32_EDGES = [0.0, -0.0, 1.0, -1.0, 2.0**-149, -(2.0**-149), 2.0**-126, float(np.finfo(np.float32).max),
+             -float(np.finfo(np.float32).max), 3.5e38, 1e39, 1e300, np.inf, -np.inf, np.nan]
+
+
+@pytest.mark.parametrize("n", [N, CHUNKS])
+def test_dither_float32_matches_numpy(n):
+    rng = np.random.default_rng(12)
+    x = rng.normal(size=(n, 3)).astype(np.float32).astype(float)
+    x.reshape(-1)[:len(F32_EDGES)] = F32_EDGES
+    x[-1] = [0.1, 1e-7, 1 - 1e-9]                      # float64 values: dithered around their rounding
+    u = rng.random(x.shape)
+    u.reshape(-1)[:2] = [0.0, 1 - 2.0**-53]
+    got = rest.dither_float32(x, u)
+    assert got.shape == x.shape
+    np.testing.assert_array_equal(got, dither_reference(x, u))
+
+
+def test_all_float32_matches_numpy():
+    rng = np.random.default_rng(13)
+    x = rng.normal(size=5000).astype(np.float32).astype(float)
+    cases = [x, np.append(x, F32_EDGES), np.append(x, 0.1), np.append(x, 1e39), np.array([0.0, np.nan, np.inf]),
+             np.array([]), np.array([2.0**-149]), np.array([1.0 + 2.0**-30])]
+    for v in cases:
+        assert rest.all_float32(v) == all_float32_reference(v), v[-3:]
+
+
 # --- histogram -------------------------------------------------------------------------------
 def histogram_reference(s: np.ndarray, inside: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     s = np.clip(s[inside], 0, np.nextafter(1, 0))
@@ -201,10 +246,6 @@ def histogram_reference(s: np.ndarray, inside: np.ndarray, shape: tuple[int, ...
     for axis, m in enumerate(shape):
         idx = idx * m + np.minimum((s[:, axis] * m).astype(np.int64), m - 1)
     return np.bincount(idx, minlength=int(np.prod(shape))).astype(float).reshape(shape)
-
-
-# CHUNKS points: several of the core's fixed chunks (2^16), counted on every thread and merged
-CHUNKS = 300_001
 
 
 @pytest.mark.parametrize("n", [N, CHUNKS])
