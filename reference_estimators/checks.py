@@ -164,7 +164,8 @@ def dither_float32(v: Any, u: Any) -> np.ndarray:
     end) is kept.  The same bits as numpy's (x + nextafter(x32, -inf)) / 2 etc.; one pass in
     C++ on all threads.  Array of v's shape."""
     a = np.ascontiguousarray(v, dtype=np.float64)
-    return _core.dither_float32(a.reshape(-1), np.ascontiguousarray(u, dtype=np.float64).reshape(-1)).reshape(a.shape)
+    w = np.ascontiguousarray(u, dtype=np.float64)
+    return _core.dither_float32(a.reshape(-1), w.reshape(-1)).reshape(a.shape)
 
 
 def pdf_summary(kind: str, measure: float, s: Any, inside: Any, p: Any,

@@ -233,8 +233,8 @@ def test_dither_float32_matches_numpy(n):
 def test_all_float32_matches_numpy():
     rng = np.random.default_rng(13)
     x = rng.normal(size=5000).astype(np.float32).astype(float)
-    cases = [x, np.append(x, F32_EDGES), np.append(x, 0.1), np.append(x, 1e39), np.array([0.0, np.nan, np.inf]),
-             np.array([]), np.array([2.0**-149]), np.array([1.0 + 2.0**-30])]
+    cases = [x, np.append(x, F32_EDGES), np.append(x, 0.1), np.append(x, 1e39),
+             np.array([0.0, np.nan, np.inf]), np.array([]), np.array([2.0**-149]), np.array([1.0 + 2.0**-30])]
     for v in cases:
         assert rest.all_float32(v) == all_float32_reference(v), v[-3:]
 
