@@ -10,6 +10,8 @@
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/vector.h>
 
+#include <sys/mman.h>  // madvise: huge pages under big arrays
+
 #include <cmath>
 #include <memory>
 #include <sstream>
@@ -33,10 +35,22 @@ using OutArray = nb::ndarray<nb::numpy, double>;
 const char *kIssueNames[kIssueKinds] = {"nan",         "posinf",   "neginf",  "negative",
                                         "outside_domain", "zero_pdf", "bad_pdf", "bound_violation"};
 
+// Asks the kernel for transparent huge pages under a new array of `bytes` from 4 MiB (what
+// numpy does for its own arrays): a million 3-vectors are 24 MB, 6000 page faults of 4 KiB
+// without it, 11 ms of this VM's time a fresh array (as long as the computation filling
+// it), and 12 with it.  Only advice: where THP is off it changes nothing.
+void advise_huge_pages(void *p, size_t bytes) {
+    if (bytes < (size_t(1) << 22)) return;
+    const uintptr_t first = (reinterpret_cast<uintptr_t>(p) + 4095) & ~uintptr_t(4095);
+    const uintptr_t end = reinterpret_cast<uintptr_t>(p) + bytes;
+    if (end > first) madvise(reinterpret_cast<void *>(first), end - first, MADV_HUGEPAGE);
+}
+
 // A new numpy array that owns its memory: shape (rows,) when cols == 0, else (rows, cols).
 OutArray new_array(size_t rows, size_t cols, double **data) {
     size_t size = rows * (cols == 0 ? 1 : cols);
     double *p = new double[size > 0 ? size : 1];
+    advise_huge_pages(p, size * sizeof(double));
     nb::capsule owner(p, [](void *q) noexcept { delete[] static_cast<double *>(q); });
     *data = p;
     if (cols == 0) return OutArray(p, {rows}, owner);
@@ -59,6 +73,7 @@ size_t check_points(const InArray &x, int dim, const char *arg) {
 // A new numpy bool array of n values that owns its memory.
 nb::ndarray<nb::numpy, bool> new_bool_array(size_t n, bool **data) {
     bool *p = new bool[n > 0 ? n : 1];
+    advise_huge_pages(p, n);
     nb::capsule owner(p, [](void *q) noexcept { delete[] static_cast<bool *>(q); });
     *data = p;
     return nb::ndarray<nb::numpy, bool>(p, {n}, owner);
