@@ -313,24 +313,30 @@ inline void count_cells(const double *s, size_t a, size_t b, const bool *inside,
     }
 }
 
-// Counts of the points marked inside on the regular grid of m0 (x m1) cells over [0, 1]^k
-// (k = 1 when m1 == 0), C order: each coordinate clamped to [0, 1 - 2^-53] first, then cell
-// floor(s m) (at most m - 1).  Points outside, or with a NaN coordinate, are not counted.
-// Fixed chunks on all hardware threads, each thread counting into its own table: integer
-// counts, so the sum is the same whichever thread counted what.
-inline void grid_histogram(const double *s, size_t n, const bool *inside, int64_t m0, int64_t m1, double *counts) {
-    const size_t cells = size_t(m0) * size_t(m1 > 0 ? m1 : 1);
+// Integer counts in `cells` cells of n items, on all hardware threads: count(a, b, table) adds
+// the items a .. b - 1 of a fixed chunk to `table`, each thread's own; the tables' sums go to
+// counts (float64).  Integer sums: the same whichever thread counted what.
+template <class Count>
+void count_on_threads(size_t n, size_t cells, double *counts, Count count) {
     std::vector<std::vector<int64_t>> tables(size_t(ThreadPool::default_threads()));
     for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t b, int worker) {
-        std::vector<int64_t> &c = tables[size_t(worker)];
-        if (c.empty()) c.assign(cells, 0);
-        count_cells(s, a, b, inside, m0, m1, c.data());
+        std::vector<int64_t> &table = tables[size_t(worker)];
+        if (table.empty()) table.assign(cells, 0);
+        count(a, b, table.data());
     });
     for (size_t j = 0; j < cells; ++j) {
         int64_t total = 0;
-        for (const auto &c : tables) total += c.empty() ? 0 : c[j];
+        for (const auto &table : tables) total += table.empty() ? 0 : table[j];
         counts[j] = double(total);
     }
+}
+
+// Counts of the points marked inside on the regular grid of m0 (x m1) cells over [0, 1]^k
+// (k = 1 when m1 == 0), C order: each coordinate clamped to [0, 1 - 2^-53] first, then cell
+// floor(s m) (at most m - 1).  Points outside, or with a NaN coordinate, are not counted.
+inline void grid_histogram(const double *s, size_t n, const bool *inside, int64_t m0, int64_t m1, double *counts) {
+    count_on_threads(n, size_t(m0) * size_t(m1 > 0 ? m1 : 1), counts,
+                     [&](size_t a, size_t b, int64_t *table) { count_cells(s, a, b, inside, m0, m1, table); });
 }
 
 // Scratch buffer `which` (0 or 1) of this thread, at least n doubles, contents undefined:
@@ -420,22 +426,19 @@ inline CramerVonMisesSum cramer_von_mises_sum(const double *u, size_t stride, si
 // min(floor(v bins), bins - 1), v its u1 on the square and its u0 (strip 0) on an interval;
 // a NaN v counts nowhere).  u stays in this thread's scratch buffers instead of going to
 // Python with its strips: 24 MB of fresh arrays a check cost 8 ms of page faults, more than a
-// third of the transform.  Fixed chunks on all hardware threads, the columns' sums in
-// parallel, per-chunk integer counts summed: the same for any thread count.
+// third of the transform.  Fixed chunks on all hardware threads (count_on_threads), the
+// columns' sums in parallel: the same for any thread count.
 inline void transform_statistics(const PiecewiseLinearTable &marginal, const PiecewiseLinearTable *conditional,
                                  const double *edges, size_t nedges, const double *s, size_t k, size_t n,
                                  int64_t bins, CramerVonMisesSum *sums, double *counts) {
     const RosenblattTransform transform(marginal, conditional, edges, nedges);
     const int64_t strips = k == 2 ? int64_t(nedges) - 1 : 1;
     double *u[2] = {scratch(0, n), k == 2 ? scratch(1, n) : nullptr};
-    const size_t chunks = (n + kCheckChunk - 1) / kCheckChunk;
-    std::vector<int64_t> chunk_counts(chunks * size_t(strips * bins), 0);
-    for_chunks(n, kCheckChunk, [&](size_t c, size_t a, size_t b, int) {
+    count_on_threads(n, size_t(strips * bins), counts, [&](size_t a, size_t b, int64_t *cells) {
         thread_local std::vector<int64_t> strip;
         strip.resize(kCheckChunk);
         transform(s, k, a, b, u[0], u[1], 1, strip.data());
         const double *binned = u[k - 1];
-        int64_t *cells = &chunk_counts[c * size_t(strips * bins)];
         for (size_t j = a; j < b; ++j) {
             const double v = binned[j];
             if (v != v) continue;
@@ -444,11 +447,6 @@ inline void transform_statistics(const PiecewiseLinearTable &marginal, const Pie
             ++cells[size_t(strip[j - a] * bins + i)];
         }
     });
-    for (size_t c = 0; c < size_t(strips * bins); ++c) {
-        int64_t total = 0;
-        for (size_t h = 0; h < chunks; ++h) total += chunk_counts[h * size_t(strips * bins) + c];
-        counts[c] = double(total);
-    }
     ThreadPool::instance().run(k, ThreadPool::default_threads(),
                                [&](size_t c, int) { sums[c] = cramer_von_mises_sum(u[c], 1, n); });
 }

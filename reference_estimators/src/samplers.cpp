@@ -260,10 +260,13 @@ class Ggx final : public Directional<Ggx, true> {
 // [k bins ..]): one table for the 1-D sampler, a row's conditional each for the 2-D one,
 // whose points draw from their rows' tables in one batch (sample_many).
 struct PiecewiseTables {
-    size_t bins = 0;
-    double a = 0, b = 1;
+    size_t bins;
+    double a, b;
     std::vector<double> cdf, f, scale;
     std::vector<int64_t> below;   // below[k bins + o]: the last non-empty bin at or below o (or 0)
+
+    // No tables yet, each to have `bins` bins over [a, b].
+    explicit PiecewiseTables(size_t bins, double a = 0, double b = 1) : bins(bins), a(a), b(b) {}
 
     // Appends the table of the values f (bins of them, the same count for every table; not all
     // zero): table k = the count of tables before it.
@@ -303,6 +306,14 @@ struct PiecewiseTables {
     size_t bin_of_x(double x) const {
         double t = (x - a) / (b - a) * double(bins);
         return std::min(size_t(t), bins - 1);
+    }
+    // Table k's density and CDF at x in [a, b].
+    double density(size_t k, double x) const { return f[k * bins + bin_of_x(x)] * scale[k]; }
+    double cdf_at(size_t k, double x) const {
+        const size_t o = bin_of_x(x);
+        const double *c = &cdf[k * (bins + 1)];
+        const double s = (x - a) / (b - a) * double(bins) - double(o);
+        return c[o] + s * (c[o + 1] - c[o]);
     }
 
     // pbrt's sample: x in bin o of table k, its density back.
@@ -348,28 +359,19 @@ struct PiecewiseTables {
 // pbrt-v4's PiecewiseConstant1D over [a, b]: a CDF table, a halving search to sample.
 class PiecewiseConstant1D final : public Pointwise<PiecewiseConstant1D> {
   public:
-    PiecewiseConstant1D(const std::vector<double> &values, double a, double b) {
+    PiecewiseConstant1D(const std::vector<double> &values, double a, double b) : t_(values.size(), a, b) {
         name = "piecewise_constant_1d";
         params = {{"a", a}, {"b", b}, {"bins", double(values.size())}};
         domain = Domain::interval(a, b);
-        t_.bins = values.size();
-        t_.a = a;
-        t_.b = b;
         t_.add(values);
     }
     void sample(const double *u, double *x, double *p, size_t n) const override {
         t_.sample_many(nullptr, u, 1, n, x, 1, p);
     }
     double sample_one(const double *u, double *x) const { return t_.sample_one(0, u[0], x); }
-    double pdf_one(const double *x) const {
-        if (!(x[0] >= t_.a && x[0] <= t_.b)) return 0.0;
-        return t_.f[t_.bin_of_x(x[0])] * t_.scale[0];
-    }
+    double pdf_one(const double *x) const { return x[0] >= t_.a && x[0] <= t_.b ? t_.density(0, x[0]) : 0.0; }
     void invert_one(const double *x, double *u) const {
-        if (!(x[0] >= t_.a && x[0] <= t_.b)) { u[0] = kNaN; return; }
-        size_t o = t_.bin_of_x(x[0]);
-        double t = (x[0] - t_.a) / (t_.b - t_.a) * double(t_.bins) - double(o);
-        u[0] = t_.cdf[o] + t * (t_.cdf[o + 1] - t_.cdf[o]);
+        u[0] = x[0] >= t_.a && x[0] <= t_.b ? t_.cdf_at(0, x[0]) : kNaN;
     }
 
   private:
@@ -380,13 +382,13 @@ class PiecewiseConstant1D final : public Pointwise<PiecewiseConstant1D> {
 // per row over columns (x).  Table shape (rows, cols), row-major.
 class PiecewiseConstant2D final : public Pointwise<PiecewiseConstant2D> {
   public:
-    PiecewiseConstant2D(const std::vector<double> &values, size_t rows, size_t cols) : rows_(rows) {
+    PiecewiseConstant2D(const std::vector<double> &values, size_t rows, size_t cols)
+        : marginal_(rows), conditional_(cols) {
         name = "piecewise_constant_2d";
         params = {{"rows", double(rows)}, {"cols", double(cols)}};
         domain = Domain::box({0, 0}, {1, 1});
         udim = 2;
         std::vector<double> row_sums(rows);
-        conditional_.bins = cols;
         for (size_t r = 0; r < rows; ++r) {
             std::vector<double> row(values.begin() + r * cols, values.begin() + (r + 1) * cols);
             CompensatedSum s;
@@ -395,7 +397,6 @@ class PiecewiseConstant2D final : public Pointwise<PiecewiseConstant2D> {
             if (!(s.value() > 0)) row.assign(cols, 1.0);  // an empty row is never selected
             conditional_.add(row);
         }
-        marginal_.bins = rows;
         marginal_.add(row_sums);
     }
     // In blocks: the marginal's y and density for every point, then each point's row, then
@@ -407,7 +408,7 @@ class PiecewiseConstant2D final : public Pointwise<PiecewiseConstant2D> {
         for (size_t a = 0; a < n; a += kBlock) {
             const size_t m = std::min(kBlock, n - a);
             marginal_.sample_many(nullptr, u + 2 * a + 1, 2, m, x + 2 * a + 1, 2, p + a);
-            for (size_t j = 0; j < m; ++j) row[j] = int64_t(std::min(size_t(x[2 * (a + j) + 1] * double(rows_)), rows_ - 1));
+            for (size_t j = 0; j < m; ++j) row[j] = int64_t(marginal_.bin_of_x(x[2 * (a + j) + 1]));
             conditional_.sample_many(row, u + 2 * a, 2, m, x + 2 * a, 2, px);
             for (size_t j = 0; j < m; ++j) p[a + j] *= px[j];
         }
@@ -415,35 +416,23 @@ class PiecewiseConstant2D final : public Pointwise<PiecewiseConstant2D> {
     double sample_one(const double *u, double *x) const {
         double y;
         const double py = marginal_.sample_one(0, u[1], &y);
-        const size_t r = std::min(size_t(y * double(rows_)), rows_ - 1);
+        const size_t r = marginal_.bin_of_x(y);
         const double px = conditional_.sample_one(r, u[0], x);
         x[1] = y;
         return py * px;
     }
     double pdf_one(const double *x) const {
         if (!domain.contains(x)) return 0.0;
-        const size_t r = std::min(size_t(x[1] * double(rows_)), rows_ - 1);
-        return density(marginal_, 0, x[1]) * density(conditional_, r, x[0]);
+        return marginal_.density(0, x[1]) * conditional_.density(marginal_.bin_of_x(x[1]), x[0]);
     }
     void invert_one(const double *x, double *u) const {
         if (!domain.contains(x)) { u[0] = u[1] = kNaN; return; }
-        const size_t r = std::min(size_t(x[1] * double(rows_)), rows_ - 1);
-        u[0] = cdf_at(conditional_, r, x[0]);
-        u[1] = cdf_at(marginal_, 0, x[1]);
+        u[0] = conditional_.cdf_at(marginal_.bin_of_x(x[1]), x[0]);
+        u[1] = marginal_.cdf_at(0, x[1]);
     }
 
   private:
-    static double density(const PiecewiseTables &t, size_t k, double x) {
-        return t.f[k * t.bins + t.bin_of_x(x)] * t.scale[k];
-    }
-    static double cdf_at(const PiecewiseTables &t, size_t k, double x) {
-        const size_t o = t.bin_of_x(x);
-        const double *c = &t.cdf[k * (t.bins + 1)];
-        const double s = (x - t.a) / (t.b - t.a) * double(t.bins) - double(o);
-        return c[o] + s * (c[o + 1] - c[o]);
-    }
-    size_t rows_;
-    PiecewiseTables marginal_, conditional_;
+    PiecewiseTables marginal_, conditional_;   // rows over y; each row's columns over x
 };
 
 class Rejection final : public Sampler {
