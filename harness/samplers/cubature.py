@@ -40,10 +40,13 @@ _GL_X, _GL_W = np.polynomial.legendre.leggauss(4)
 _GL_X, _GL_W = (_GL_X + 1) / 2, _GL_W / 2  # on [0, 1]
 
 
-#: Nodes per call of q: a block's arrays (points, directions, values) stay below the size
-#: from which malloc maps fresh pages for every array (32 MiB), whose page faults had cost
-#: more than the domain map itself.
-_BLOCK_NODES = 2**19
+#: Nodes per call of q: a block's arrays (parameters 1 MiB, points 1.5 MiB, values) stay in
+#: the caches and in memory malloc reuses.  Blocks of 2^19 nodes (8 and 12 MiB) had the kernel
+#: zeroing fresh pages for a fifth of a tabulation's time and the block's passes missing the
+#: caches: a setup took 1.5-1.9x as long (the zoo's samplers, Mitsuba's BSDFs and envmaps,
+#: alternated in one session; 2^15 and 2^17 came close to 2^16).  The integrals do not depend
+#: on the block size: every box's nodes lie in one block.
+_BLOCK_NODES = 2**16
 
 
 def _rule(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
