@@ -12,7 +12,8 @@ import numpy as np
 from . import _core
 
 __all__ = [
-    "CHECK_DOMAINS", "domain_params", "domain_points", "cubature_nodes", "grid_histogram", "rosenblatt",
+    "CHECK_DOMAINS", "domain_params", "domain_points", "cubature_nodes", "cubature_points", "cubature_sums",
+    "grid_histogram", "rosenblatt",
     "piecewise_linear_lookup", "transform_statistics", "cramer_von_mises_sum", "pdf_summary",
     "all_float32", "dither_float32",
     "float32_unit_rows", "cap_to_world",
@@ -80,6 +81,26 @@ def cubature_nodes(lo: Any, hi: Any, nodes: Any) -> np.ndarray:
     (numpy's meshgrid "ij" order), each coordinate lo + (hi - lo) * node.  One pass in C++."""
     a, b = (np.ascontiguousarray(v, dtype=np.float64) for v in (lo, hi))
     return _core.cubature_nodes(a, b, np.ascontiguousarray(nodes, dtype=np.float64).reshape(-1))
+
+
+def cubature_points(kind: str, lo: Any, hi: Any, nodes: Any,
+                    interval: tuple[float, float] = (0.0, 1.0)) -> np.ndarray:
+    """The points on the sampler check's domain ``kind`` of the tensor rule's nodes on the
+    parameter boxes [lo, hi] (M, k): domain_points(kind, cubature_nodes(lo, hi, nodes)), the
+    same bits, without the parameter array; ``interval`` the interval's ends.  One pass in
+    C++ on all threads."""
+    a, b = (np.ascontiguousarray(v, dtype=np.float64) for v in (lo, hi))
+    return _core.cubature_points(_check_domain(kind), float(interval[0]), float(interval[1]), a, b,
+                                 np.ascontiguousarray(nodes, dtype=np.float64).reshape(-1))
+
+
+def cubature_sums(lo: Any, hi: Any, values: Any, weights: Any) -> np.ndarray:
+    """(M, m) integrals of the tensor rule on the boxes [lo, hi] (M, k): each box's volume
+    times the sum over its nodes, in order, of ``weights`` (g^k,) times ``values`` (M g^k,)
+    or (M g^k, m) at cubature_nodes' nodes.  One pass in C++."""
+    a, b = (np.ascontiguousarray(v, dtype=np.float64) for v in (lo, hi))
+    return _core.cubature_sums(a, b, np.ascontiguousarray(values, dtype=np.float64),
+                               np.ascontiguousarray(weights, dtype=np.float64).reshape(-1))
 
 
 def grid_histogram(s: Any, inside: Any, shape: tuple[int, ...]) -> np.ndarray:

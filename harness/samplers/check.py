@@ -33,7 +33,7 @@ import pandas as pd
 import reference_estimators as rest
 
 from harness.samplers.cubature import cell_integrals, rounding_floor
-from harness.samplers.domains import Domain, as_domain
+from harness.samplers.domains import Domain, ParamDensity, as_domain
 from harness.samplers.reported import reported_pdf_failure
 from harness.samplers.result import SamplerCheck
 from harness.samplers.transform import STRIPS, Transform, cramer_von_mises_from_sums
@@ -77,9 +77,8 @@ class SamplerTest:
                    .reshape(-1, dom.k) + 0.5) / np.array(pre_shape)
         self.floor = floor = rounding_floor(self.pdf(dom.to_points(centres)))
 
-        def squares(sp: np.ndarray) -> np.ndarray:
-            v = self.q(sp)
-            return np.column_stack([v, v * v])
+        density = ParamDensity(dom, self.pdf)
+        squares = dataclasses.replace(density, columns=lambda v: np.column_stack([v, v * v]))
 
         # the pre-pass sets only the moment test's constant c (any fixed c gives a valid test)
         # and the tolerances below (a few per cent would do): six halvings of a cell are
@@ -87,8 +86,7 @@ class SamplerTest:
         pre, _ = cell_integrals(squares, pre_shape, 1e-8, max_depth=6, floor=floor)
         self.c = c = float(pre[:, 1].sum() / max(pre[:, 0].sum(), 1e-300))  # E_q[q], in units of q
 
-        def moments(sp: np.ndarray) -> np.ndarray:
-            v = self.q(sp)
+        def moments(v: np.ndarray) -> np.ndarray:
             h = v / (v + c) if c > 0 else np.zeros_like(v)
             return np.column_stack([v, h * v, h * h * v])
 
@@ -104,17 +102,18 @@ class SamplerTest:
         # left is carried into the chi-square's variance (power lost on the edges' cells, never
         # level).  The zoo's samplers spend at most 8.2 million here (envmap 16x32), a bitmap
         # area light in Mitsuba's cap map spent 48 million
-        mass3, err3 = cell_integrals(moments, base, tol, floor=floor, max_evals=_MOMENT_EVALS)
+        mass3, err3 = cell_integrals(dataclasses.replace(density, columns=moments), base, tol, floor=floor,
+                                     max_evals=_MOMENT_EVALS)
         self.quadrature_faults = int((~np.all(np.isfinite(mass3), axis=1)).sum())
         mass3, err3 = np.nan_to_num(mass3), np.nan_to_num(err3)
         self.mass, self.err = mass3[:, 0].reshape(base), err3[:, 0].reshape(base)
         self.h_moments = (float(mass3[:, 1].sum()), float(mass3[:, 2].sum()), float(err3[:, 1].sum()))
         self.normalization = (float(self.mass.sum()), float(self.err.sum()))
-        self.transform = Transform.build(self.q, dom.k, n, floor=floor)
+        self.transform = Transform.build(density, dom.k, n, floor=floor)
 
     def q(self, sp: np.ndarray) -> np.ndarray:
         """The claimed density in parameter space: |D| pdf(x(s))."""
-        return self.pdf(self.dom.to_points(sp)) * self.dom.jacobian(sp)
+        return ParamDensity(self.dom, self.pdf)(sp)
 
     def for_total(self, total: float) -> SamplerTest:
         """This test for the density pdf / ``total``, without a new cubature: the integrals

@@ -50,16 +50,19 @@ _BLOCK_NODES = 2**16
 
 
 def _rule(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Tensor 4-point Gauss-Legendre integrals of q over boxes [lo, hi] (M, k): (M, m)."""
+    """Tensor 4-point Gauss-Legendre integrals of q over boxes [lo, hi] (M, k): (M, m).  A q
+    with ``at_nodes(lo, hi, nodes)`` (:class:`harness.samplers.domains.ParamDensity`) gives
+    its values at the rule's nodes itself, else q is called on the nodes."""
     m, k = lo.shape
     w = _GL_W if k == 1 else np.outer(_GL_W, _GL_W).reshape(-1)
+    at_nodes = getattr(q, "at_nodes", None)
     step = max(_BLOCK_NODES // w.size, 1)
     parts = []
     for b in range(0, m, step):
         blo, bhi = lo[b:b + step], hi[b:b + step]
-        vals = np.asarray(q(rest.cubature_nodes(blo, bhi, _GL_X)), dtype=float)
-        parts.append(np.einsum("mwc,w->mc", vals.reshape(len(blo), w.size, -1), w))
-    return np.concatenate(parts) * np.prod(hi - lo, axis=1)[:, None]
+        vals = at_nodes(blo, bhi, _GL_X) if at_nodes else q(rest.cubature_nodes(blo, bhi, _GL_X))
+        parts.append(rest.cubature_sums(blo, bhi, np.asarray(vals, dtype=float), w))
+    return np.concatenate(parts)
 
 
 def _halves(lo: np.ndarray, hi: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:

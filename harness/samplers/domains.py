@@ -16,13 +16,14 @@ on the half line), the density the cubature integrates and the histograms are co
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 import reference_estimators as rest
 
-__all__ = ["DOMAINS", "Domain", "as_domain"]
+__all__ = ["DOMAINS", "Domain", "ParamDensity", "as_domain"]
 
 DOMAINS = ("interval", "half_line", "square", "disk", "hemisphere", "sphere")
 
@@ -55,6 +56,17 @@ class Domain:
         """Measure of the domain per unit of parameter space at s (|D| where constant)."""
         if self.kind == "half_line":
             return 1.0 / (1.0 - s[:, 0]) ** 2
+        return self._measure()
+
+    def jacobian_at_points(self, x: np.ndarray) -> np.ndarray | float:
+        """:meth:`jacobian` at the parameters of domain points x: (1 + x)^2 on the half line
+        (1 / (1 - s)^2 with s = x / (1 + x)), else |D|."""
+        if self.kind == "half_line":
+            return (1.0 + x) ** 2
+        return self._measure()
+
+    def _measure(self) -> float:
+        """|D| of a domain with a constant Jacobian."""
         return {"interval": self.hi - self.lo, "square": 1.0, "disk": math.pi, "hemisphere": 2 * math.pi,
                 "sphere": 4 * math.pi}[self.kind]
 
@@ -68,6 +80,34 @@ class Domain:
         by 1e-5 in squared norm (float32 renderers).  One pass in the core
         (:func:`reference_estimators.domain_params`)."""
         return rest.domain_params(self.kind, x, self.lo, self.hi)
+
+
+@dataclass(frozen=True)
+class ParamDensity:
+    """A claimed density in its domain's parameter space, q(s) = pdf(x(s)) times the Jacobian
+    (:meth:`Domain.jacobian`), or columns made of it (``columns``: q's values (N,) to (N, m),
+    say q and q^2): called on parameter points s (N, k) like any integrand of
+    :mod:`harness.samplers.cubature`, and evaluated at a tensor rule's nodes by
+    :meth:`at_nodes` without the nodes' parameter array (the core maps them to domain points
+    directly: :func:`reference_estimators.cubature_points`)."""
+
+    dom: Domain
+    pdf: Callable[[np.ndarray], np.ndarray]
+    columns: Callable[[np.ndarray], np.ndarray] | None = None
+
+    def values(self, x: np.ndarray) -> np.ndarray:
+        """q (or its columns) at domain points x."""
+        v = np.asarray(self.pdf(x), dtype=float) * self.dom.jacobian_at_points(x)
+        return v if self.columns is None else self.columns(v)
+
+    def __call__(self, s: np.ndarray) -> np.ndarray:
+        return self.values(self.dom.to_points(s))
+
+    def at_nodes(self, lo: np.ndarray, hi: np.ndarray, nodes: np.ndarray) -> np.ndarray:
+        """q at the nodes of the tensor rule with points ``nodes`` per axis on the parameter
+        boxes [lo, hi] (M, k), box by box as :func:`reference_estimators.cubature_nodes`
+        orders them."""
+        return self.values(rest.cubature_points(self.dom.kind, lo, hi, nodes, (self.dom.lo, self.dom.hi)))
 
 
 def as_domain(d: str | tuple | Domain) -> Domain:

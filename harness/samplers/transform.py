@@ -86,6 +86,26 @@ class AxisCdf:
         return rest.piecewise_linear_lookup(*self.table, strip, x)
 
 
+class _Counted:
+    """q with a count of the points it was evaluated at (``evals``), called as q is: on
+    parameter points, or at a tensor rule's nodes (``at_nodes``, which the cubature uses
+    where q has it: :class:`harness.samplers.domains.ParamDensity`)."""
+
+    def __init__(self, q: Callable[[np.ndarray], np.ndarray]):
+        self.q, self.evals = q, 0
+
+    def __call__(self, sp: np.ndarray) -> np.ndarray:
+        self.evals += sp.shape[0]
+        return self.q(sp)
+
+    def at_nodes(self, lo: np.ndarray, hi: np.ndarray, nodes: np.ndarray) -> np.ndarray:
+        at_nodes = getattr(self.q, "at_nodes", None)
+        if at_nodes is None:
+            return self(rest.cubature_nodes(lo, hi, nodes))
+        self.evals += lo.shape[0] * nodes.size ** lo.shape[1]
+        return at_nodes(lo, hi, nodes)
+
+
 def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: np.ndarray, leaves: int,
               eps: float, max_share: float = 1.0, floor: float = 0.0, useless: float = math.inf) -> AxisCdf:
     """The CDF of q along ``axis`` within each strip: strip g spans all of [0, 1] along
@@ -109,12 +129,7 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
     a = np.tile(np.arange(leaves) / leaves, nstrip)
     b = np.tile((np.arange(leaves) + 1) / leaves, nstrip)
 
-    evals = 0
-
-    def counted(sp: np.ndarray) -> np.ndarray:
-        nonlocal evals
-        evals += sp.shape[0]
-        return q(sp)
+    counted = _Counted(q)
 
     def quarters(strip: np.ndarray, a: np.ndarray, b: np.ndarray, strip_tol: np.ndarray):
         """(L, 4) quarter integrals of leaves, their (L,) summed cubature error, and the
@@ -130,7 +145,7 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
         lo[:, axis], hi[:, axis] = np.repeat(qa, npiece), np.repeat(qb, npiece)
         if k == 2:
             lo[:, 1 - axis], hi[:, 1 - axis] = pieces[g, :, 0].reshape(-1), pieces[g, :, 1].reshape(-1)
-        budget = min(_MAX_EVALS, max(_MAX_TABLE_EVALS - evals, 0))
+        budget = min(_MAX_EVALS, max(_MAX_TABLE_EVALS - counted.evals, 0))
         val, err = np.zeros(lo.shape[0]), np.zeros(lo.shape[0])
         full = np.all(hi > lo, axis=1)          # the padding pieces of _cut_at_steps are empty
         v, e = box_integrals(counted, lo[full], hi[full], tol[full], max_depth=16 if k == 1 else 8,
@@ -154,7 +169,7 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
         gap = np.max(np.abs(cum - m[:, None] * np.array([0.25, 0.5, 0.75])), axis=1)
         bound = np.minimum(2 * gap, qs.max(axis=1))     # a quarter's mass bounds any CDF within it
         fine = (bound <= eps * strip_mass[strip]) & (qs.max(axis=1) <= max_share * strip_mass[strip])
-        spent_all = (spent > _MAX_BOXES) | (evals > _MAX_TABLE_EVALS)
+        spent_all = (spent > _MAX_BOXES) | (counted.evals > _MAX_TABLE_EVALS)
         hopeless = spent_err[strip] > useless * strip_mass[strip]
         ok = fine | (depth == _MAX_DEPTH) | (b - a < _MIN_WIDTH) | spent_all | hopeless
         done.append((strip[ok], a[ok], b[ok], qs[ok], bound[ok], errs[ok]))

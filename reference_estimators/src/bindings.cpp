@@ -95,6 +95,14 @@ size_t check_params(const InArray &s, size_t k) {
     return s.shape(0);
 }
 
+// Boxes [lo, hi]: both of shape (M, 1) or (M, 2); returns k.
+size_t check_boxes(const InArray &lo, const InArray &hi) {
+    if (lo.ndim() != 2 || hi.ndim() != 2 || lo.shape(0) != hi.shape(0) || lo.shape(1) != hi.shape(1) ||
+        (lo.shape(1) != 1 && lo.shape(1) != 2))
+        throw nb::value_error("'lo' and 'hi' must both have shape (M, 1) or (M, 2)");
+    return lo.shape(1);
+}
+
 // The shape a piecewise-linear table's arrays must have (one lo, hi, start and mass per leaf;
 // offsets from 0 to the leaves, not decreasing), or a ValueError saying what is wrong.
 template <class Offsets>
@@ -625,10 +633,7 @@ NB_MODULE(_core, m) {
        "(columns (3, N) float32, ok (N,)): rows x (N, 3) as float32 unit vectors (normalised first where their "
        "length is off 1 by more than `slack`); rows that are not finite non-zero vectors become +z, ok False.");
     m.def("cubature_nodes", [](InArray lo, InArray hi, InArray nodes) {
-        if (lo.ndim() != 2 || hi.ndim() != 2 || lo.shape(0) != hi.shape(0) || lo.shape(1) != hi.shape(1) ||
-            (lo.shape(1) != 1 && lo.shape(1) != 2))
-            throw nb::value_error("'lo' and 'hi' must both have shape (M, 1) or (M, 2)");
-        const size_t boxes = lo.shape(0), k = lo.shape(1), g = nodes.size();
+        const size_t k = check_boxes(lo, hi), boxes = lo.shape(0), g = nodes.size();
         const size_t per = k == 1 ? g : g * g;
         double *out;
         OutArray pts = new_array(boxes * per, k, &out);
@@ -642,6 +647,45 @@ NB_MODULE(_core, m) {
         return pts;
     }, "lo"_a, "hi"_a, "nodes"_a,
        "(M g^k, k) nodes of the tensor rule with points `nodes` per axis on the boxes [lo, hi] (M, k), box by box.");
+    m.def("cubature_points", [](int kind, double dlo, double dhi, InArray lo, InArray hi, InArray nodes) {
+        const CheckDomain d = check_domain(kind);
+        const size_t k = check_boxes(lo, hi), g = nodes.size(), per = k == 1 ? g : g * g;
+        if (size_t(domain_param_dim(d)) != k) throw nb::value_error("the boxes' dimension is not the domain's");
+        const int pdim = domain_point_dim(d);
+        const size_t boxes = lo.shape(0);
+        double *x;
+        OutArray xa = new_array(boxes * per, pdim == 1 ? 0 : size_t(pdim), &x);
+        {
+            nb::gil_scoped_release r;
+            // each box's points from that box alone: chunks of boxes on all threads (quarter
+            // chunks: a cubature's blocks of 2^16 nodes would otherwise run on one)
+            for_chunks(boxes, std::max<size_t>(kCheckChunk / 4 / per, 1), [&](size_t, size_t a, size_t b, int) {
+                thread_local std::vector<double> scratch;
+                cubature_points(d, dlo, dhi, lo.data() + a * k, hi.data() + a * k, b - a, k, nodes.data(), g,
+                                x + a * per * size_t(pdim), scratch);
+            });
+        }
+        return xa;
+    }, "kind"_a, "dlo"_a, "dhi"_a, "lo"_a, "hi"_a, "nodes"_a,
+       "Domain points of the tensor rule's nodes on the boxes [lo, hi] (M, k): domain_points(cubature_nodes(...)).");
+    m.def("cubature_sums", [](InArray lo, InArray hi, InArray values, InArray weights) {
+        const size_t k = check_boxes(lo, hi), boxes = lo.shape(0), per = weights.size();
+        const size_t cols = values.ndim() == 2 ? values.shape(1) : 1;
+        if ((values.ndim() != 1 && values.ndim() != 2) || values.shape(0) != boxes * per)
+            throw nb::value_error("'values' must have one row per node: shape (M g^k,) or (M g^k, m)");
+        double *out;
+        OutArray oa = new_array(boxes, cols, &out);
+        {
+            nb::gil_scoped_release r;
+            for_chunks(boxes, std::max<size_t>(kCheckChunk / per, 1), [&](size_t, size_t a, size_t b, int) {
+                cubature_sums(lo.data() + a * k, hi.data() + a * k, b - a, k, values.data() + a * per * cols, cols,
+                              weights.data(), per, out + a * cols);
+            });
+        }
+        return oa;
+    }, "lo"_a, "hi"_a, "values"_a, "weights"_a,
+       "(M, m) integrals of the tensor rule on the boxes [lo, hi] (M, k): volume times the weighted sum of "
+       "the values (M g^k, m) at their nodes.");
     m.def("grid_histogram", [](InArray s, BoolArray inside, const std::vector<int64_t> &shape) {
         if (shape.empty() || shape.size() > 2 || shape[0] < 1 || (shape.size() == 2 && shape[1] < 1))
             throw nb::value_error("'shape' must be one or two positive cell counts");

@@ -144,6 +144,63 @@ def test_domain_points_vector_lanes_equal_the_scalar_tail_and_numpy(kind):
     np.testing.assert_allclose(x, ref, rtol=0, atol=2e-15)
 
 
+# --- cubature rules --------------------------------------------------------------------------
+GL_X = (np.polynomial.legendre.leggauss(4)[0] + 1) / 2
+GL_W = np.polynomial.legendre.leggauss(4)[1] / 2
+
+
+def random_boxes(k: int, m: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    lo = rng.random((m, k)) * 0.9
+    hi = lo + rng.random((m, k)) * 0.1
+    lo[:2], hi[:2] = 0.0, 1.0                  # the whole square and an edge-to-edge box
+    return lo, hi
+
+
+@pytest.mark.parametrize("k", [1, 2])
+def test_cubature_nodes_are_the_meshgrid_of_each_box(k):
+    lo, hi = random_boxes(k, 500, np.random.default_rng(4))
+    axes = [lo[:, None, j] + (hi - lo)[:, None, j] * GL_X[None, :] for j in range(k)]   # (M, g) each
+    if k == 1:
+        ref = axes[0].reshape(-1, 1)
+    else:
+        ref = np.stack([np.repeat(axes[0], 4, axis=1), np.tile(axes[1], (1, 4))], axis=-1).reshape(-1, 2)
+    np.testing.assert_array_equal(rest.cubature_nodes(lo, hi, GL_X), ref)
+
+
+# boxes enough for several of cubature_points' chunks (a quarter of 2^16 nodes) on every thread
+@pytest.mark.parametrize("kind", rest.CHECK_DOMAINS)
+def test_cubature_points_are_the_domain_points_of_the_nodes(kind):
+    k = 1 if kind in ("interval", "half_line") else 2
+    lo, hi = random_boxes(k, 40_001 // 4**k * 4, np.random.default_rng(5))
+    ends = (-2.0, 3.0) if kind == "interval" else (0.0, 1.0)
+    got = rest.cubature_points(kind, lo, hi, GL_X, ends)
+    ref = rest.domain_points(kind, rest.cubature_nodes(lo, hi, GL_X), *ends)
+    np.testing.assert_array_equal(got.view(np.uint64), ref.view(np.uint64))
+
+
+@pytest.mark.parametrize("k, cols", [(1, 0), (2, 0), (2, 3)])
+def test_cubature_sums_are_each_boxes_weighted_sum_times_its_volume(k, cols):
+    rng = np.random.default_rng(6)
+    lo, hi = random_boxes(k, 9_001, rng)
+    w = GL_W if k == 1 else np.outer(GL_W, GL_W).reshape(-1)
+    shape = (lo.shape[0] * w.size,) + ((cols,) if cols else ())
+    v = rng.lognormal(0, 3, shape)
+    got = rest.cubature_sums(lo, hi, v, w)
+    ref = np.einsum("mwc,w->mc", v.reshape(lo.shape[0], w.size, -1), w) * np.prod(hi - lo, axis=1)[:, None]
+    assert got.shape == (lo.shape[0], max(cols, 1))
+    np.testing.assert_allclose(got, ref, rtol=1e-14, atol=0)
+
+
+def test_cubature_kernels_reject_mismatched_boxes_and_values():
+    lo, hi = np.zeros((3, 2)), np.ones((3, 2))
+    with pytest.raises(ValueError, match="shape"):
+        rest.cubature_nodes(lo, np.ones((3, 1)), GL_X)
+    with pytest.raises(ValueError, match="dimension"):
+        rest.cubature_points("interval", lo, hi, GL_X)
+    with pytest.raises(ValueError, match="one row per node"):
+        rest.cubature_sums(lo, hi, np.ones(47), np.ones(16))
+
+
 def test_float32_unit_rows_match_numpy_and_name_the_bad_rows():
     rng = np.random.default_rng(4)
     x = rng.normal(size=(N, 3))

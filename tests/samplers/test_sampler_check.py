@@ -14,6 +14,7 @@ from scipy import stats
 import reference_estimators as rest
 
 from harness.samplers import Domain, SamplerTest, as_domain, check_sampler, zoo
+from harness.samplers.domains import ParamDensity
 from harness.stats import ConfidenceInterval, Failure
 from harness.usercode import UserCodeError
 
@@ -132,6 +133,29 @@ def test_domains_by_name():
     back, inside = d.to_params(d.to_points(s))
     np.testing.assert_allclose(back, s)
     assert inside.all()
+
+
+@pytest.mark.parametrize("domain", [("interval", -1, 2), "half_line", "square", "disk", "hemisphere",
+                                    "sphere"])
+def test_a_densitys_values_at_rule_nodes_are_its_values_at_their_parameters(domain):
+    """ParamDensity.at_nodes (the core maps the rule's nodes to domain points directly) gives
+    q(s) = pdf(x(s)) |dx/ds| at the nodes, columns included; on the half line its Jacobian
+    (1 + x)^2 is 1 / (1 - s)^2 to rounding."""
+    dom = as_domain(domain)
+    rng = np.random.default_rng(8)
+    lo = rng.random((300, dom.k)) * 0.9
+    hi = lo + 0.05
+    nodes = np.array([0.1, 0.5, 0.8])
+
+    def pdf(x):
+        return 1.0 + np.sum(np.reshape(x, (x.shape[0], -1)) ** 2, axis=1)
+
+    q = ParamDensity(dom, pdf, columns=lambda v: np.column_stack([v, v * v]))
+    s = rest.cubature_nodes(lo, hi, nodes)
+    got = q.at_nodes(lo, hi, nodes)
+    np.testing.assert_allclose(got, q(s), rtol=1e-15)
+    ref = pdf(dom.to_points(s)) * dom.jacobian(s)
+    np.testing.assert_allclose(got, np.column_stack([ref, ref * ref]), rtol=4e-15)
 
 
 @pytest.mark.parametrize("kwargs, error, message", [
