@@ -94,13 +94,14 @@ def cubature_points(kind: str, lo: Any, hi: Any, nodes: Any,
                                  np.ascontiguousarray(nodes, dtype=np.float64).reshape(-1))
 
 
-def cubature_sums(lo: Any, hi: Any, values: Any, weights: Any) -> np.ndarray:
-    """(M, m) integrals of the tensor rule on the boxes [lo, hi] (M, k): each box's volume
-    times the sum over its nodes, in order, of ``weights`` (g^k,) times ``values`` (M g^k,)
-    or (M g^k, m) at cubature_nodes' nodes.  One pass in C++."""
+def cubature_sums(lo: Any, hi: Any, values: Any, weights: Any, scale: float = 1.0) -> np.ndarray:
+    """(M, m) integrals of the tensor rule on the boxes [lo, hi] (M, k): the sum over each
+    box's nodes, in order, of ``weights`` (g^k,) times ``values`` (M g^k,) or (M g^k, m) at
+    cubature_nodes' nodes, times the box's volume, times ``scale`` (a constant factor of
+    the integrand) unless it is 1.  One pass in C++."""
     a, b = (np.ascontiguousarray(v, dtype=np.float64) for v in (lo, hi))
     return _core.cubature_sums(a, b, np.ascontiguousarray(values, dtype=np.float64),
-                               np.ascontiguousarray(weights, dtype=np.float64).reshape(-1))
+                               np.ascontiguousarray(weights, dtype=np.float64).reshape(-1), float(scale))
 
 
 def grid_histogram(s: Any, inside: Any, shape: tuple[int, ...]) -> np.ndarray:

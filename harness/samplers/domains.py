@@ -87,9 +87,8 @@ class ParamDensity:
     """A claimed density in its domain's parameter space, q(s) = pdf(x(s)) times the Jacobian
     (:meth:`Domain.jacobian`), or columns made of it (``columns``: q's values (N,) to (N, m),
     say q and q^2): called on parameter points s (N, k) like any integrand of
-    :mod:`harness.samplers.cubature`, and evaluated at a tensor rule's nodes by
-    :meth:`at_nodes` without the nodes' parameter array (the core maps them to domain points
-    directly: :func:`reference_estimators.cubature_points`)."""
+    :mod:`harness.samplers.cubature`, and integrated over boxes by a tensor rule
+    (:meth:`rule_integrals`) without the nodes' parameter array."""
 
     dom: Domain
     pdf: Callable[[np.ndarray], np.ndarray]
@@ -103,11 +102,18 @@ class ParamDensity:
     def __call__(self, s: np.ndarray) -> np.ndarray:
         return self.values(self.dom.to_points(s))
 
-    def at_nodes(self, lo: np.ndarray, hi: np.ndarray, nodes: np.ndarray) -> np.ndarray:
-        """q at the nodes of the tensor rule with points ``nodes`` per axis on the parameter
-        boxes [lo, hi] (M, k), box by box as :func:`reference_estimators.cubature_nodes`
-        orders them."""
-        return self.values(rest.cubature_points(self.dom.kind, lo, hi, nodes, (self.dom.lo, self.dom.hi)))
+    def rule_integrals(self, lo: np.ndarray, hi: np.ndarray, nodes: np.ndarray,
+                       weights: np.ndarray) -> np.ndarray:
+        """(M, m) integrals of q over the parameter boxes [lo, hi] (M, k) by the tensor rule
+        with points ``nodes`` per axis and ``weights`` (g^k,)
+        (:func:`reference_estimators.cubature_sums`): the core maps the nodes to domain points
+        directly (:func:`reference_estimators.cubature_points`), and a constant Jacobian
+        multiplies each box's sum rather than every value (the same integrals to rounding)."""
+        x = rest.cubature_points(self.dom.kind, lo, hi, nodes, (self.dom.lo, self.dom.hi))
+        if self.columns is None and self.dom.kind != "half_line":
+            pdf = np.asarray(self.pdf(x), dtype=float)
+            return rest.cubature_sums(lo, hi, pdf, weights, self.dom.jacobian_at_points(x))
+        return rest.cubature_sums(lo, hi, self.values(x), weights)
 
 
 def as_domain(d: str | tuple | Domain) -> Domain:

@@ -36,7 +36,7 @@ from scipy import special
 
 import reference_estimators as rest
 
-from harness.samplers.cubature import box_integrals
+from harness.samplers.cubature import box_integrals, tensor_rule
 
 __all__ = ["AxisCdf", "Transform", "cramer_von_mises", "cramer_von_mises_columns",
            "cramer_von_mises_from_sums", "cvm_sf"]
@@ -88,8 +88,8 @@ class AxisCdf:
 
 class _Counted:
     """q with a count of the points it was evaluated at (``evals``), called as q is: on
-    parameter points, or at a tensor rule's nodes (``at_nodes``, which the cubature uses
-    where q has it: :class:`harness.samplers.domains.ParamDensity`)."""
+    parameter points, or integrating itself over boxes (``rule_integrals``, which the
+    cubature uses where q has it: :class:`harness.samplers.domains.ParamDensity`)."""
 
     def __init__(self, q: Callable[[np.ndarray], np.ndarray]):
         self.q, self.evals = q, 0
@@ -98,12 +98,10 @@ class _Counted:
         self.evals += sp.shape[0]
         return self.q(sp)
 
-    def at_nodes(self, lo: np.ndarray, hi: np.ndarray, nodes: np.ndarray) -> np.ndarray:
-        at_nodes = getattr(self.q, "at_nodes", None)
-        if at_nodes is None:
-            return self(rest.cubature_nodes(lo, hi, nodes))
-        self.evals += lo.shape[0] * nodes.size ** lo.shape[1]
-        return at_nodes(lo, hi, nodes)
+    def rule_integrals(self, lo: np.ndarray, hi: np.ndarray, nodes: np.ndarray,
+                       weights: np.ndarray) -> np.ndarray:
+        self.evals += weights.size * lo.shape[0]
+        return tensor_rule(self.q, lo, hi, nodes, weights)
 
 
 def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: np.ndarray, leaves: int,

@@ -668,7 +668,7 @@ NB_MODULE(_core, m) {
         return xa;
     }, "kind"_a, "dlo"_a, "dhi"_a, "lo"_a, "hi"_a, "nodes"_a,
        "Domain points of the tensor rule's nodes on the boxes [lo, hi] (M, k): domain_points(cubature_nodes(...)).");
-    m.def("cubature_sums", [](InArray lo, InArray hi, InArray values, InArray weights) {
+    m.def("cubature_sums", [](InArray lo, InArray hi, InArray values, InArray weights, double scale) {
         const size_t k = check_boxes(lo, hi), boxes = lo.shape(0), per = weights.size();
         const size_t cols = values.ndim() == 2 ? values.shape(1) : 1;
         if ((values.ndim() != 1 && values.ndim() != 2) || values.shape(0) != boxes * per)
@@ -679,13 +679,13 @@ NB_MODULE(_core, m) {
             nb::gil_scoped_release r;
             for_chunks(boxes, std::max<size_t>(kCheckChunk / per, 1), [&](size_t, size_t a, size_t b, int) {
                 cubature_sums(lo.data() + a * k, hi.data() + a * k, b - a, k, values.data() + a * per * cols, cols,
-                              weights.data(), per, out + a * cols);
+                              weights.data(), per, scale, out + a * cols);
             });
         }
         return oa;
-    }, "lo"_a, "hi"_a, "values"_a, "weights"_a,
-       "(M, m) integrals of the tensor rule on the boxes [lo, hi] (M, k): volume times the weighted sum of "
-       "the values (M g^k, m) at their nodes.");
+    }, "lo"_a, "hi"_a, "values"_a, "weights"_a, "scale"_a,
+       "(M, m) integrals of the tensor rule on the boxes [lo, hi] (M, k): the weighted sum of the values "
+       "(M g^k, m) at their nodes times the volume, times `scale`.");
     m.def("grid_histogram", [](InArray s, BoolArray inside, const std::vector<int64_t> &shape) {
         if (shape.empty() || shape.size() > 2 || shape[0] < 1 || (shape.size() == 2 && shape[1] < 1))
             throw nb::value_error("'shape' must be one or two positive cell counts");

@@ -193,6 +193,8 @@ def test_cubature_sums_are_each_boxes_weighted_sum_times_its_volume(k, cols):
     ref = np.einsum("mwc,w->mc", v.reshape(lo.shape[0], w.size, -1), w) * np.prod(hi - lo, axis=1)[:, None]
     assert got.shape == (lo.shape[0], max(cols, 1))
     np.testing.assert_allclose(got, ref, rtol=1e-14, atol=0)
+    scaled = rest.cubature_sums(lo, hi, v, w, 2 * math.pi)   # a constant factor, per box
+    np.testing.assert_array_equal(scaled, got * (2 * math.pi))
 
 
 def test_cubature_kernels_reject_mismatched_boxes_and_values():

@@ -137,25 +137,30 @@ def test_domains_by_name():
 
 @pytest.mark.parametrize("domain", [("interval", -1, 2), "half_line", "square", "disk", "hemisphere",
                                     "sphere"])
-def test_a_densitys_values_at_rule_nodes_are_its_values_at_their_parameters(domain):
-    """ParamDensity.at_nodes (the core maps the rule's nodes to domain points directly) gives
-    q(s) = pdf(x(s)) |dx/ds| at the nodes, columns included; on the half line its Jacobian
+def test_a_density_integrates_itself_as_the_rule_on_its_values_at_the_nodes(domain):
+    """ParamDensity.rule_integrals (the core maps the rule's nodes to domain points directly,
+    a constant Jacobian multiplies each box's sum) gives the tensor rule on q(s) = pdf(x(s))
+    |dx/ds| at the nodes, to rounding, columns included; on the half line its Jacobian
     (1 + x)^2 is 1 / (1 - s)^2 to rounding."""
     dom = as_domain(domain)
     rng = np.random.default_rng(8)
     lo = rng.random((300, dom.k)) * 0.9
     hi = lo + 0.05
     nodes = np.array([0.1, 0.5, 0.8])
+    w1 = np.array([0.3, 0.5, 0.2])
+    weights = w1 if dom.k == 1 else np.outer(w1, w1).reshape(-1)
 
     def pdf(x):
         return 1.0 + np.sum(np.reshape(x, (x.shape[0], -1)) ** 2, axis=1)
 
-    q = ParamDensity(dom, pdf, columns=lambda v: np.column_stack([v, v * v]))
     s = rest.cubature_nodes(lo, hi, nodes)
-    got = q.at_nodes(lo, hi, nodes)
-    np.testing.assert_allclose(got, q(s), rtol=1e-15)
-    ref = pdf(dom.to_points(s)) * dom.jacobian(s)
-    np.testing.assert_allclose(got, np.column_stack([ref, ref * ref]), rtol=4e-15)
+    q = pdf(dom.to_points(s)) * dom.jacobian(s)
+    squares = (lambda v: np.column_stack([v, v * v]), np.column_stack([q, q * q]))
+    for columns, ref in [(None, q[:, None]), squares]:
+        density = ParamDensity(dom, pdf, columns)
+        want = rest.cubature_sums(lo, hi, ref, weights)
+        np.testing.assert_allclose(density.rule_integrals(lo, hi, nodes, weights), want, rtol=4e-15)
+        np.testing.assert_allclose(density(s), ref[:, 0] if columns is None else ref, rtol=4e-15)
 
 
 @pytest.mark.parametrize("kwargs, error, message", [
