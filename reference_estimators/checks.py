@@ -98,7 +98,7 @@ def cubature_sums(lo: Any, hi: Any, values: Any, weights: Any, scale: float = 1.
     """(M, m) integrals of the tensor rule on the boxes [lo, hi] (M, k): the sum over each
     box's nodes, in order, of ``weights`` (g^k,) times ``values`` (M g^k,) or (M g^k, m) at
     cubature_nodes' nodes, times the box's volume, times ``scale`` (a constant factor of
-    the integrand) unless it is 1.  One pass in C++."""
+    the integrand).  One pass in C++."""
     a, b = (np.ascontiguousarray(v, dtype=np.float64) for v in (lo, hi))
     return _core.cubature_sums(a, b, np.ascontiguousarray(values, dtype=np.float64),
                                np.ascontiguousarray(weights, dtype=np.float64).reshape(-1), float(scale))

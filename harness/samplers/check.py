@@ -111,10 +111,6 @@ class SamplerTest:
         self.normalization = (float(self.mass.sum()), float(self.err.sum()))
         self.transform = Transform.build(density, dom.k, n, floor=floor)
 
-    def q(self, sp: np.ndarray) -> np.ndarray:
-        """The claimed density in parameter space: |D| pdf(x(s))."""
-        return ParamDensity(self.dom, self.pdf)(sp)
-
     def for_total(self, total: float) -> SamplerTest:
         """This test for the density pdf / ``total``, without a new cubature: the integrals
         are linear in the pdf, and the moment test's h(p) = p / (p + c) is invariant when p

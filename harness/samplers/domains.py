@@ -96,8 +96,10 @@ class ParamDensity:
 
     def values(self, x: np.ndarray) -> np.ndarray:
         """q (or its columns) at domain points x."""
-        v = np.asarray(self.pdf(x), dtype=float) * self.dom.jacobian_at_points(x)
-        return v if self.columns is None else self.columns(v)
+        return self._columns_of(np.asarray(self.pdf(x), dtype=float) * self.dom.jacobian_at_points(x))
+
+    def _columns_of(self, q: np.ndarray) -> np.ndarray:
+        return q if self.columns is None else self.columns(q)
 
     def __call__(self, s: np.ndarray) -> np.ndarray:
         return self.values(self.dom.to_points(s))
@@ -110,10 +112,11 @@ class ParamDensity:
         directly (:func:`reference_estimators.cubature_points`), and a constant Jacobian
         multiplies each box's sum rather than every value (the same integrals to rounding)."""
         x = rest.cubature_points(self.dom.kind, lo, hi, nodes, (self.dom.lo, self.dom.hi))
-        if self.columns is None and self.dom.kind != "half_line":
-            pdf = np.asarray(self.pdf(x), dtype=float)
-            return rest.cubature_sums(lo, hi, pdf, weights, self.dom.jacobian_at_points(x))
-        return rest.cubature_sums(lo, hi, self.values(x), weights)
+        pdf = np.asarray(self.pdf(x), dtype=float)
+        jacobian = self.dom.jacobian_at_points(x)
+        if self.columns is None and np.ndim(jacobian) == 0:
+            return rest.cubature_sums(lo, hi, pdf, weights, jacobian)
+        return rest.cubature_sums(lo, hi, self._columns_of(pdf * jacobian), weights)
 
 
 def as_domain(d: str | tuple | Domain) -> Domain:

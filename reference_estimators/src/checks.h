@@ -378,8 +378,8 @@ inline void cubature_points(CheckDomain d, double dlo, double dhi, const double 
 
 // The tensor rule's integrals out (boxes, cols): for box m and column c, the sum over its
 // `per` nodes, in order, of weights[node] v[m per + node, c] (v (boxes per, cols), the values
-// at cubature_nodes' nodes) times the box's volume prod (hi - lo), times `scale` unless it is
-// 1 (a constant factor of the integrand, say a Jacobian).  Summed in place: numpy's einsum
+// at cubature_nodes' nodes) times the box's volume prod (hi - lo), times `scale` (a constant
+// factor of the integrand, say a Jacobian; 1 changes no bit).  Summed in place: numpy's einsum
 // and product took a fifth of a sampler check's cubature.
 inline void cubature_sums(const double *lo, const double *hi, size_t boxes, size_t k, const double *v, size_t cols,
                           const double *weights, size_t per, double scale, double *out) {
@@ -390,7 +390,7 @@ inline void cubature_sums(const double *lo, const double *hi, size_t boxes, size
         for (size_t c = 0; c < cols; ++c) {
             double sum = 0.0;
             for (size_t i = 0; i < per; ++i) sum += weights[i] * vm[i * cols + c];
-            out[m * cols + c] = scale == 1.0 ? sum * vol : sum * vol * scale;
+            out[m * cols + c] = sum * vol * scale;
         }
     }
 }
