@@ -7,7 +7,6 @@ import os
 import signal
 import sys
 
-import pandas as pd
 from tqdm import tqdm
 
 import reference_estimators as rest
@@ -156,7 +155,8 @@ def _run(suite, db: str, threads: int | None, csv: str | None, dask: str | None,
     print(f"summary: {summary.cases - summary.failed - xfailed} passed, {summary.failed} failed"
           + (f", {xfailed} xfailed" if xfailed else ""))
     if csv:
-        frames = [o.frame.assign(kind=o.kind) for o in summary.outcomes if len(o.frame)]
+        import pandas as pd  # deferred, as in kind.Outcome.frame
+        frames = [o.frame.assign(kind=o.kind) for o in summary.outcomes if o.table]
         (pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()).to_csv(csv, index=False)
         print(f"table written to {csv}")
     return 1 if summary.failed else 0

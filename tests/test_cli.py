@@ -73,6 +73,26 @@ def test_csv_output(tmp_path):
     assert df.iloc[0]["efficiency_ratio"] == 1.0
 
 
+def test_a_resumed_run_prints_its_table_without_importing_pandas(tmp_path):
+    """A finished suite resumed as a command reads its units and prints the same table; pandas
+    (a third to a half of that command's time) is imported only for --csv and harness.load."""
+    suite = tmp_path / "bias.toml"
+    suite.write_text('[suite]\nsamples = 65536\nbatches = 8\nmeasurements = ["bias"]\n\n[[case]]\n'
+                     'integrand = "gaussian"\ntechniques = ["uniform", "importance:linear"]\n')
+    db = str(tmp_path / "bias.sqlite")
+    first = run("run", str(suite), "--db", db, "--threads", "1")
+    assert first.returncode == 0, first.stdout + first.stderr
+    code = ("import sys; from harness.cli import main; code = main(['run', sys.argv[1], '--db', sys.argv[2]]); "
+            "print('pandas imported:', 'pandas' in sys.modules); sys.exit(code)")
+    again = subprocess.run([sys.executable, "-c", code, str(suite), db], capture_output=True, text=True,
+                           timeout=300)
+    assert again.returncode == 0, again.stdout + again.stderr
+    assert "0 of 16 work units computed" in again.stdout, again.stdout
+    assert again.stdout.splitlines()[-1] == "pandas imported: False"
+    table = [line for line in first.stdout.splitlines() if line.startswith(("integrand", "gaussian"))]
+    assert len(table) == 3 and all(line in again.stdout.splitlines() for line in table)
+
+
 def test_list_shows_catalogue_and_samplers():
     r = run("list")
     assert r.returncode == 0

@@ -25,10 +25,9 @@ import copy
 import dataclasses
 import math
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 import reference_estimators as rest
 
@@ -40,6 +39,9 @@ from harness.samplers.transform import STRIPS, Transform, cramer_von_mises_from_
 from harness.stats import distributions, holm
 from harness.stats.results import Failure
 from harness.usercode import UserCodeError, array_result, call, callable_name
+
+if TYPE_CHECKING:
+    pass
 
 __all__ = ["SAMPLE_CASE", "SamplerTest", "check_sampler", "check_with_missing",
            "failure_pvalue", "histogram"]
@@ -211,6 +213,7 @@ class SamplerTest:
         tests.append(("pdf moment", z * z, 1, float(distributions.chi2_sf(z * z, 1)),
                       "density wrong where it is high or low"))
 
+        import pandas as pd  # deferred, as in harness.suite.kind.Outcome.frame
         table = pd.DataFrame(tests, columns=["test", "statistic", "df", "pvalue", "detects"])
         rejected, adjusted = holm(np.nan_to_num(table["pvalue"].to_numpy(), nan=0.0), self.alpha)
         table["adjusted"] = adjusted
@@ -334,6 +337,7 @@ def _check_drawn(u: np.ndarray, x: np.ndarray, reported: np.ndarray | None,
     produced = x[~failed].reshape((-1,) if dom.point_dim == 1 else (-1, dom.point_dim))
     m = produced.shape[0]
     if m < 1000:
+        import pandas as pd  # deferred, as in harness.suite.kind.Outcome.frame
         table = pd.DataFrame([("failed samples", float(failed.sum()), 0, 0.0,
                                "samples the sampler did not produce")],
                              columns=["test", "statistic", "df", "pvalue", "detects"])

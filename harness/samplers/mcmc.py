@@ -40,7 +40,6 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-import pandas as pd
 from scipy import special, stats
 
 import reference_estimators as rest
@@ -158,6 +157,7 @@ def mcmc_crosscheck(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.ndarr
     if bad_count[0]:
         failures.append(Failure("bad_pdf", bad_count[0], "pdf NaN or negative where the chain evaluated it"))
 
+    import pandas as pd  # deferred, as in harness.suite.kind.Outcome.frame
     if isinstance(draws, str):  # chain too short
         table = pd.DataFrame([], columns=COLUMNS + ["adjusted"])
         table.attrs.update(info)

@@ -6,12 +6,14 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["SamplerCheck"]
 

@@ -9,10 +9,9 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 import reference_estimators as rest
 
@@ -22,6 +21,9 @@ from harness.stats.merge import chan_merge
 from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
 from harness.stats.timing import clock_time, median_time, reference_clock
 from harness.stats.validate import count
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["Replicates", "replicate", "ConvergenceResult", "convergence_rate",
            "fit_convergence", "error_vs_time"]
@@ -331,6 +333,7 @@ def fit_convergence(reps: Sequence[Replicates], *, expected: float = -0.5, toler
     boot_sq = np.stack([np.mean(e[rng.integers(0, e.size, (bootstrap, e.size))] ** 2, axis=1)
                         for e in errors], axis=1)
     boot = slopes(boot_sq)
+    import pandas as pd  # deferred, as in harness.suite.kind.Outcome.frame
     rows = []
     for r in reps:
         lo, hi = r.rmse_interval(confidence_level)
@@ -370,4 +373,5 @@ def error_vs_time(integrand: Any, techniques: Sequence[Any], budgets: Sequence[i
             secs, secs_se = r.time
             rows.append({"technique": r.technique, "n": r.n, "rmse": r.rmse, "rmse_lo": lo, "rmse_hi": hi,
                          "seconds": secs, "seconds_se": secs_se, "replicas": r.replicas})
+    import pandas as pd  # deferred, as in harness.suite.kind.Outcome.frame
     return pd.DataFrame(rows)

@@ -20,10 +20,9 @@ import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 import reference_estimators as rest
 
@@ -47,6 +46,9 @@ from harness.suite.plan import (
 from harness.suite.store import Store
 from harness.suite.verdicts import family_rejections, mark_xfail
 from harness.usercode import load_attr
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["EstimateJob", "CaseResult", "EstimatorKind", "results_table", "format_table"]
 
@@ -211,8 +213,7 @@ class EstimatorKind:
             payloads = store.payloads(k)
             results.append(_measure(suite, c, payloads, self.looks.get(k, 0), self._tails(k, payloads)))
         table = results_table(results, suite.family_alpha)
-        verdicts = [{"bias": v, "convergence": cv} for v, cv in zip(table.get("verdict", ()),
-                                                                   table.get("convergence", ()))]
+        verdicts = [{"bias": row["verdict"], "convergence": row["convergence"]} for row in table]
         failures = [_failure(r, v, suite.family_alpha, len(results)) for r, v in zip(results, verdicts)]
         text = (format_table(table, suite.family_alpha) + "\nt: Student t of the estimate against the exact "
                 f"value (over all contributions; over {suite.batches} replicas for stratified and Sobol' "
@@ -228,7 +229,7 @@ class EstimatorKind:
                        tuple(failures),
                        tuple(mark_xfail(_rows(suite, results, table),
                                         {k: c.xfail for k, c in self.case_of.items()})),
-                       table, text,
+                       tuple(table), text,
                        tuple(c.xfail for c in suite.cases))
 
 
@@ -347,6 +348,7 @@ def _measure(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int = 0
         if "convergence" in wanted and len(reps_by_budget) >= 3 and top.rmse > 0:
             conv = stats.fit_convergence(list(reps_by_budget.values()), seed=suite.seed)
         if "error_vs_time" in wanted:
+            import pandas as pd  # deferred, as in kind.Outcome.frame
             evt = pd.DataFrame([{"n": r.n, "rmse": r.rmse, "rmse_lo": r.rmse_interval()[0],
                                  "rmse_hi": r.rmse_interval()[1], "seconds": r.time[0],
                                  "seconds_se": r.time[1], "replicas": r.replicas}
@@ -427,10 +429,10 @@ def _failure(r: CaseResult, verdicts: dict[str, str], alpha: float, family: int)
 
 
 # --- rows and tables --------------------------------------------------------------------------------
-def _rows(suite: Suite, results: list[CaseResult], table: pd.DataFrame) -> list[dict[str, Any]]:
+def _rows(suite: Suite, results: list[CaseResult], table: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """One row per case and measurement, for the store (and harness.load)."""
     rows = []
-    for r, row in zip(results, table.to_dict("records")):
+    for r, row in zip(results, table):
         base = {"case_key": r.key, "suite": suite.name, "integrand": r.case.integrand,
                 "technique": r.case.technique, "alpha": suite.family_alpha}
         if r.bias is not None:
@@ -487,7 +489,7 @@ def _rows(suite: Suite, results: list[CaseResult], table: pd.DataFrame) -> list[
     return rows
 
 
-def results_table(results: list[CaseResult], alpha: float) -> pd.DataFrame:
+def results_table(results: list[CaseResult], alpha: float) -> list[dict[str, Any]]:
     """One row per case: the figures with their uncertainty and n, and the verdicts."""
     # the baseline of a case: the one its ``baseline`` names; else, for catalogue cases, per
     # integrand: uniform MC where the suite has it, else the integrand's first case
@@ -532,7 +534,7 @@ def results_table(results: list[CaseResult], alpha: float) -> pd.DataFrame:
             "clock_ticks_per_estimate": k.seconds if k else nan,
             "notes": notes,
         })
-    return pd.DataFrame(rows)
+    return rows
 
 
 def _notes(r: CaseResult) -> str:
@@ -559,36 +561,36 @@ def _notes(r: CaseResult) -> str:
     return "; ".join(notes)
 
 
-def format_table(df: pd.DataFrame, alpha: float) -> str:
-    """The table as aligned text."""
+def format_table(table: list[dict[str, Any]], alpha: float) -> str:
+    """The table (:func:`results_table`) as aligned text."""
     def interval(v, lo, hi, fmt):
         if not math.isfinite(v):
             return "—"
         return f"{v:{fmt}} [{lo:{fmt}}, {hi:{fmt}}]" if math.isfinite(lo) else f"{v:{fmt}} (no interval)"
 
+    def slope(r):
+        slower = " slower!" if r["convergence"] == "slower than expected" else ""
+        return interval(r["slope"], r["slope_lo"], r["slope_hi"], "+.2f") + slower
+
     columns = {
-        "integrand": (df["integrand"], "<"),
-        "technique": (df["technique"], "<"),
-        "n": (df["n"].map(lambda n: f"{n:.0e}" if n >= 10**5 else str(n)), ">"),
-        "estimate ± stderr": ([f"{m:.9g} ± {s:.2g}" for m, s in zip(df["estimate"], df["stderr"])], ">"),
-        "exact": (df["exact"].map(lambda v: f"{v:.9g}"), ">"),
-        "t": (df["z"].map(lambda z: f"{z:+.2f}" if math.isfinite(z) else str(z)), ">"),
-        "p": (df["pvalue"].map(lambda p: f"{p:.2g}"), ">"),
-        f"bias (Holm, α={alpha:.3g})": (df["verdict"], "<"),
-        "RMSE slope [95% CI]": ([interval(v, lo, hi, "+.2f")
-                                 + (" slower!" if cv == "slower than expected" else "")
-                                 for v, lo, hi, cv in zip(df["slope"], df["slope_lo"], df["slope_hi"],
-                                                          df["convergence"])], "<"),
-        "1/(V·T) vs baseline [95% CI]": ([interval(v, lo, hi, ".3g") for v, lo, hi in
-                                         zip(df["efficiency_ratio"], df["ratio_lo"], df["ratio_hi"])], "<"),
-        "log10 1/(V·T_clock) [95% CI]": ([interval(v, lo, hi, ".3f") for v, lo, hi in
-                                          zip(df["log10_efficiency_clock"], df["clock_lo"], df["clock_hi"])],
-                                         "<"),
-        "notes": (df["notes"], "<"),
+        "integrand": (lambda r: r["integrand"], "<"),
+        "technique": (lambda r: r["technique"], "<"),
+        "n": (lambda r: f"{r['n']:.0e}" if r["n"] >= 10**5 else str(r["n"]), ">"),
+        "estimate ± stderr": (lambda r: f"{r['estimate']:.9g} ± {r['stderr']:.2g}", ">"),
+        "exact": (lambda r: f"{r['exact']:.9g}", ">"),
+        "t": (lambda r: f"{r['z']:+.2f}" if math.isfinite(r["z"]) else str(r["z"]), ">"),
+        "p": (lambda r: f"{r['pvalue']:.2g}", ">"),
+        f"bias (Holm, α={alpha:.3g})": (lambda r: r["verdict"], "<"),
+        "RMSE slope [95% CI]": (slope, "<"),
+        "1/(V·T) vs baseline [95% CI]": (
+            lambda r: interval(r["efficiency_ratio"], r["ratio_lo"], r["ratio_hi"], ".3g"), "<"),
+        "log10 1/(V·T_clock) [95% CI]": (
+            lambda r: interval(r["log10_efficiency_clock"], r["clock_lo"], r["clock_hi"], ".3f"), "<"),
+        "notes": (lambda r: r["notes"], "<"),
     }
-    cells = {k: [str(v) for v in vals] for k, (vals, _) in columns.items()}
+    cells = {k: [str(cell(r)) for r in table] for k, (cell, _) in columns.items()}
     width = {k: max(len(k), *(len(v) for v in cells[k])) for k in cells}
     lines = ["  ".join(f"{k:{a}{width[k]}}" for k, (_, a) in columns.items()).rstrip()]
-    for i in range(len(df)):
+    for i in range(len(table)):
         lines.append("  ".join(f"{cells[k][i]:{a}{width[k]}}" for k, (_, a) in columns.items()).rstrip())
     return "\n".join(lines)

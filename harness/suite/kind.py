@@ -10,12 +10,13 @@ stored.  Nothing else about a kind is known outside its module.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Protocol
-
-import pandas as pd
+from typing import TYPE_CHECKING, Any, Protocol
 
 from harness.suite.execute import Job
 from harness.suite.store import Store
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["CaseKind", "Outcome"]
 
@@ -28,9 +29,10 @@ class Outcome:
     ``names``: each case's name (pytest items, FAILED lines); ``results``: the kind's result
     per case; ``verdicts``: measurement -> verdict word per case (harness.suite.verdicts);
     ``failures``: why each case fails a CI run, "" where it passes; ``rows``: the measurement
-    rows for the store; ``frame``: the kind's table as a DataFrame (``--csv``); ``text``: the
-    table as aligned text with its heading (empty when the kind has no cases); ``xfail``: each
-    case's ``xfail`` reason, "" where none (a known finding: its failure is expected).
+    rows for the store; ``table``: the kind's table, one dict per case (:attr:`frame` as a
+    DataFrame, ``--csv``); ``text``: the table as aligned text with its heading (empty when the
+    kind has no cases); ``xfail``: each case's ``xfail`` reason, "" where none (a known finding:
+    its failure is expected).
 
     A case's :meth:`status` is "passed", "failed", "xfailed" (failed, as its xfail says) or
     "xpassed" (has an xfail reason but passed: strict, like pytest's ``xfail(strict=True)``,
@@ -44,9 +46,17 @@ class Outcome:
     verdicts: tuple[dict[str, str], ...]
     failures: tuple[str, ...]
     rows: tuple[dict[str, Any], ...]
-    frame: pd.DataFrame
+    table: tuple[dict[str, Any], ...]
     text: str
     xfail: tuple[str, ...] = ()
+
+    @property
+    def frame(self) -> pd.DataFrame:
+        """The kind's table as a DataFrame, one row per case."""
+        # pandas is imported here, not with the module: a run prints its tables without it,
+        # and its import is a third to a half of a resumed run's time as a command
+        import pandas as pd
+        return pd.DataFrame(list(self.table))
 
     def status(self, i: int) -> str:
         reason = self.xfail[i] if self.xfail else ""

@@ -8,11 +8,12 @@ import sqlite3
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
-
-import pandas as pd
+from typing import TYPE_CHECKING, Any
 
 from harness.suite.store import explain, same_unit
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["connect_read_only", "run_filter", "plan_progress", "reading", "load", "runs"]
 
@@ -96,6 +97,7 @@ def load(db: str | Path, suite: str | None = None, *, run: int | None = None,
     measured it.  By default each suite's latest finished run only (what the suite file
     measures now); ``run=`` one run, ``all_runs=True`` the whole history.  Opens the database
     read-only: it never changes it."""
+    import pandas as pd  # deferred, as in harness.suite.kind.Outcome.frame
     with reading(db) as con:
         where, params = run_filter(con, db, suite=suite, run=run, all_runs=all_runs)
         return pd.read_sql_query(f"SELECT * FROM measurements m{where} ORDER BY m.rowid", con, params=params)
@@ -105,6 +107,7 @@ def runs(db: str | Path) -> pd.DataFrame:
     """The runs a database has seen: number, suite, file, revision, harness, started and
     finished (UTC; finished empty for a run that was interrupted or still runs), units
     planned and computed, measurements stored.  Read-only."""
+    import pandas as pd  # deferred, as in harness.suite.kind.Outcome.frame
     with reading(db) as con:
         if con.execute("SELECT 1 FROM sqlite_master WHERE name = 'runs'").fetchone() is None:
             return pd.DataFrame()

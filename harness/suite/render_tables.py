@@ -11,7 +11,6 @@ import math
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 from harness import stats
 from harness.stats import images as ist
@@ -203,7 +202,7 @@ def render_rows(suite: Suite, results: list[RenderResult],
     return rows
 
 
-def render_table(results: list[RenderResult], verdicts: list[dict[str, str]]) -> pd.DataFrame:
+def render_table(results: list[RenderResult], verdicts: list[dict[str, str]]) -> list[dict[str, Any]]:
     """One row per render case: the figures with their uncertainty and the verdicts."""
     base = _baselines(results)
     equal = equal_time_relmse(results)
@@ -232,4 +231,4 @@ def render_table(results: list[RenderResult], verdicts: list[dict[str, str]]) ->
             t_star, e_star = equal[r.key]
             row["relMSE @ equal time"] = f"{e_star:.3g} @ {t_star * 1e3:.3g} ms"
         out.append(row)
-    return pd.DataFrame(out)
+    return out

@@ -24,10 +24,9 @@ import os
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 from harness import stats
 from harness.adapters import ImageFaults, Renderer, image_faults, renderer
@@ -49,6 +48,9 @@ from harness.suite.plan import (
 from harness.suite.render_tables import failures, judge, render_rows, render_table
 from harness.suite.store import Store, write_exr, write_npy
 from harness.suite.verdicts import mark_xfail
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["RenderJob", "RenderResult", "RenderKind", "ReferenceCache", "cached_renderer"]
 
@@ -230,20 +232,22 @@ class RenderKind:
                 results[-1].notes.extend(c.renderer.notes())
         alpha = self.suite.family_alpha
         verdicts = judge(results, alpha)
-        frame = render_table(results, verdicts)
+        table = render_table(results, verdicts)
         text = ""
         if results:
+            # pandas only here: a run without renders prints without it (kind.Outcome.frame)
+            import pandas as pd
             notes = [f"\n  {r.case.scene} {r.case.label}: {n}" for r in results for n in r.notes]
-            table = frame.to_string(index=False, float_format=lambda v: f"{v:.3g}")
+            aligned = pd.DataFrame(table).to_string(index=False, float_format=lambda v: f"{v:.3g}")
             text = (f"renders (multi-scale bias test, Holm over {len(results)} configurations at alpha "
                     f"{alpha:.3g}; relMSE = mean (x - ref)^2 / (ref^2 + 0.01); efficiency 1/(relMSE·T) "
                     "against the first configuration of the same scene and reference; relMSE at the longest "
-                    "time all of those reached):\n" + table + "".join(notes))
+                    "time all of those reached):\n" + aligned + "".join(notes))
         return Outcome(self.name, "render configurations", tuple(self.names()), tuple(results),
                        tuple(verdicts),
                        tuple(failures(results, verdicts, alpha)),
                        tuple(mark_xfail(render_rows(self.suite, results, verdicts),
-                                        {c.key: c.rc.xfail for c in self.cases})), frame, text,
+                                        {c.key: c.rc.xfail for c in self.cases})), tuple(table), text,
                        tuple(rc.xfail for rc in self.suite.renders))
 
 
@@ -337,6 +341,7 @@ def _measure(rc: RenderCase, key: str, store: Store, reference: ist.Reference,
                      "too noisy to measure this configuration's error; render it with more samples")
         reps = []
     if reps:
+        import pandas as pd  # deferred, as in kind.Outcome.frame
         errors = pd.DataFrame(rows)
         spp, err, seconds = reps[-1]
         eff = ist.image_efficiency(rc.label, spp, err, seconds)

@@ -13,8 +13,6 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
-import pandas as pd
-
 import reference_estimators as rest
 
 from harness.suite.execute import JobResult
@@ -112,16 +110,16 @@ class SamplerKind:
                    for k, sc in self.sampler_of.items()]
         verdicts, adjusted = _judge(results, suite.family_alpha)
         failures = [_failure(r, v, adj, suite.family_alpha) for r, v, adj in zip(results, verdicts, adjusted)]
-        frame = pd.DataFrame([{"sampler": r.case.label, "domain": r.case.domain, "n": r.case.samples,
-                               **{f"{m}_pvalue": c["pvalue"] for m, c in r.checks.items()},
-                               **{f"{m}_verdict": v[m] for m in r.checks}}
-                              for r, v in zip(results, verdicts)])
+        table = tuple({"sampler": r.case.label, "domain": r.case.domain, "n": r.case.samples,
+                       **{f"{m}_pvalue": c["pvalue"] for m, c in r.checks.items()},
+                       **{f"{m}_verdict": v[m] for m in r.checks}}
+                      for r, v in zip(results, verdicts))
         text = ("sampler checks (chi-square and friends; MCMC cross-check):\n"
                 + _format_table(results, verdicts, suite.family_alpha) if results else "")
         return Outcome(self.name, "sampler checks", tuple(self.names()), tuple(results), tuple(verdicts),
                        tuple(failures),
                        tuple(mark_xfail(_rows(suite, results, verdicts),
-                                        {k: sc.xfail for k, sc in self.sampler_of.items()})), frame, text,
+                                        {k: sc.xfail for k, sc in self.sampler_of.items()})), table, text,
                        tuple(sc.xfail for sc in suite.samplers))
 
 
