@@ -175,11 +175,40 @@ RE_INLINE void map(const double *x, double *y, size_t n, Fn fn) {
 
 // kWidth consecutive 3-vectors at x (coordinates interleaved, as directions are stored)
 // gathered into one vector per coordinate, and scattered back: stride-3 loops do not vectorise.
+// AVX-512: three whole-vector loads (stores) and a transposition in registers, two vpermt2pd
+// per coordinate.  GCC 12 compiles the 8-lane loops into an insert or extract per element, half
+// of importance sampling's time on directions (ggx_lobe: 107 -> 205 Msamples/s a thread); its
+// 4-lane AVX2 code for the loops is as fast as the same transposition by hand (measured), so
+// the loops stay there and below.
 RE_INLINE void load3(const double *x, f64v &a, f64v &b, f64v &c) {
+#if defined(__AVX512F__)
+    // v0 = a0 b0 c0 a1 b1 c1 a2 b2, v1 = c2 a3 b3 c3 a4 b4 c4 a5, v2 = b5 c5 a6 b6 c6 a7 b7 c7
+    const __m512d v0 = _mm512_loadu_pd(x), v1 = _mm512_loadu_pd(x + 8), v2 = _mm512_loadu_pd(x + 16);
+    const auto pick = [&](__m512i first, __m512i second) {
+        return (f64v)_mm512_permutex2var_pd(_mm512_permutex2var_pd(v0, first, v1), second, v2);
+    };
+    a = pick(_mm512_setr_epi64(0, 3, 6, 9, 12, 15, 0, 0), _mm512_setr_epi64(0, 1, 2, 3, 4, 5, 10, 13));
+    b = pick(_mm512_setr_epi64(1, 4, 7, 10, 13, 0, 0, 0), _mm512_setr_epi64(0, 1, 2, 3, 4, 8, 11, 14));
+    c = pick(_mm512_setr_epi64(2, 5, 8, 11, 14, 0, 0, 0), _mm512_setr_epi64(0, 1, 2, 3, 4, 9, 12, 15));
+#else
     for (size_t l = 0; l < kWidth; ++l) { a[l] = x[3 * l]; b[l] = x[3 * l + 1]; c[l] = x[3 * l + 2]; }
+#endif
 }
 RE_INLINE void store3(double *x, f64v a, f64v b, f64v c) {
+#if defined(__AVX512F__)
+    // each of load3's v0, v1, v2: a's and b's entries interleaved, then c's put in its lanes
+    const __m512d va = (__m512d)a, vb = (__m512d)b, vc = (__m512d)c;
+    const auto put = [&](__m512i first, __m512i second) {
+        return _mm512_permutex2var_pd(_mm512_permutex2var_pd(va, first, vb), second, vc);
+    };
+    _mm512_storeu_pd(x, put(_mm512_setr_epi64(0, 8, 0, 1, 9, 0, 2, 10), _mm512_setr_epi64(0, 1, 8, 3, 4, 9, 6, 7)));
+    _mm512_storeu_pd(x + 8, put(_mm512_setr_epi64(0, 3, 11, 0, 4, 12, 0, 5),
+                                _mm512_setr_epi64(10, 1, 2, 11, 4, 5, 12, 7)));
+    _mm512_storeu_pd(x + 16, put(_mm512_setr_epi64(13, 0, 6, 14, 0, 7, 15, 0),
+                                 _mm512_setr_epi64(0, 13, 2, 3, 14, 5, 6, 15)));
+#else
     for (size_t l = 0; l < kWidth; ++l) { x[3 * l] = a[l]; x[3 * l + 1] = b[l]; x[3 * l + 2] = c[l]; }
+#endif
 }
 
 // y[i] = fn(x[3 i], x[3 i + 1], x[3 i + 2]) for i < n (n 3-vectors in, one value each out), as map.
