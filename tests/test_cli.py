@@ -82,7 +82,8 @@ def test_a_resumed_run_prints_its_table_without_importing_pandas(tmp_path):
     db = str(tmp_path / "bias.sqlite")
     first = run("run", str(suite), "--db", db, "--threads", "1")
     assert first.returncode == 0, first.stdout + first.stderr
-    code = ("import sys; from harness.cli import main; code = main(['run', sys.argv[1], '--db', sys.argv[2]]); "
+    code = ("import sys; from harness.cli import main; "
+            "code = main(['run', sys.argv[1], '--db', sys.argv[2]]); "
             "print('pandas imported:', 'pandas' in sys.modules); sys.exit(code)")
     again = subprocess.run([sys.executable, "-c", code, str(suite), db], capture_output=True, text=True,
                            timeout=300)
