@@ -46,6 +46,7 @@ __all__ = ["AxisCdf", "Transform", "cramer_von_mises", "cramer_von_mises_columns
 STRIPS = 32
 SUBSTRIPS = 4
 _MARGINAL_PIECES = 32   # boxes across the square for the marginal of s0
+_COARSE_PIECES = 4      # and where those agree with these on the starting leaves, these
 _MAX_STEP_CUTS = 8      # cuts at density steps per strip of the conditional
 _POLE_GRADING = 2.0 ** -np.arange(1, 25)   # cuts of the first and last strips toward s0 = 0, 1
 _MAX_DEPTH = 40         # leaf halvings along the axis: leaves down to 2^-40 of the start
@@ -105,7 +106,8 @@ class _Counted:
 
 
 def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: np.ndarray, leaves: int,
-              eps: float, max_share: float = 1.0, floor: float = 0.0, useless: float = math.inf) -> AxisCdf:
+              eps: float, max_share: float = 1.0, floor: float = 0.0, useless: float = math.inf,
+              coarse: np.ndarray | None = None) -> AxisCdf:
     """The CDF of q along ``axis`` within each strip: strip g spans all of [0, 1] along
     ``axis`` (cut into ``leaves`` leaves to start) and, on the square, the pieces
     pieces[g, j] = (lo, hi) across it (arrays (S, P, 2); each leaf quarter is integrated as one
@@ -119,6 +121,12 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
     The table's bound counts only the leaves it keeps: their interpolation bound and their
     boxes' cubature error (a refined-away leaf's integral is not in the table, nor its error).
     The cubature stops at q's rounding ``floor`` (relative).
+    ``coarse``: fewer pieces (S, P', 2) to refine with instead, where on the starting leaves
+    they give every quarter's integral within the refinement's tolerance (or q's rounding) of
+    ``pieces``' (and their cubature error within it too): a density smooth across the pieces (an azimuth that
+    does not matter, a lobe at the pole) needs no more, and the refinement's pdf calls fall by
+    P / P'; a density with structure across them (a lobe off the pole, a texel table) keeps
+    ``pieces``.
     A box whose integral is not finite counts as mass 0 with error 1 (the bound then covers
     the whole strip: its tests lose their power, never their level)."""
     nstrip, npiece = pieces.shape[:2]
@@ -160,6 +168,16 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
     strip_mass = np.bincount(strip, qs.sum(axis=1), minlength=nstrip)
     strip_tol = 0.1 * eps * np.maximum(strip_mass, 1e-300)   # cubature error: a tenth of eps
     spent_err = np.bincount(strip, errs, minlength=nstrip)
+    if coarse is not None:
+        fine = pieces, used, npiece
+        pieces, npiece = coarse, coarse.shape[1]
+        used = np.maximum(np.sum(coarse[:, :, 1] > coarse[:, :, 0], axis=1), 1)
+        coarse_qs, coarse_errs, boxes = quarters(strip, a, b, strip_tol)
+        spent += boxes
+        # a quarter's tolerance, as the cubature's: its share of the strip's, or q's rounding
+        allowed = np.maximum((strip_tol[strip] * np.maximum((b - a) / 4, 1 / 4096))[:, None], floor * qs)
+        if not (np.all(np.abs(coarse_qs - qs) <= allowed) and np.all(coarse_errs <= allowed.sum(axis=1))):
+            pieces, used, npiece = fine
     done: list[tuple[np.ndarray, ...]] = []
     for depth in range(_MAX_DEPTH + 1):
         m = qs.sum(axis=1)
@@ -308,9 +326,13 @@ class Transform:
             eps /= 10
             marginal = _tabulate(q, 1, 0, np.zeros((1, 1, 2)), 1024, eps, floor=floor, useless=useless)
             return cls(marginal, None, np.array([0.0, 1.0]), np.ones(1), marginal.error)
-        cuts = np.arange(_MARGINAL_PIECES + 1) / _MARGINAL_PIECES
-        marginal = _tabulate(q, 2, 0, np.stack([cuts[:-1], cuts[1:]], axis=1)[None], 128, eps / 8,
-                             max_share=1 / (4 * STRIPS * SUBSTRIPS), floor=floor, useless=useless)
+        def across(count: int) -> np.ndarray:
+            cuts = np.arange(count + 1) / count
+            return np.stack([cuts[:-1], cuts[1:]], axis=1)[None]
+
+        marginal = _tabulate(q, 2, 0, across(_MARGINAL_PIECES), 128, eps / 8,
+                             max_share=1 / (4 * STRIPS * SUBSTRIPS), floor=floor, useless=useless,
+                             coarse=across(_COARSE_PIECES))
         levels, cdf = _snapped_levels(marginal, STRIPS * SUBSTRIPS)
         pieces = _cut_at_steps(levels[::SUBSTRIPS], levels, marginal)
         conditional = _tabulate(q, 2, 1, pieces, 64, eps, floor=floor, useless=useless)
