@@ -37,7 +37,7 @@ from harness.adapters.mitsuba.samplers import (
 )
 from harness.stats import holm
 
-__all__ = ["ALPHAS", "BLEND", "CHECKS", "FINDINGS", "MASK", "PHASE_THETAS", "REFS", "THETAS",
+__all__ = ["ALPHAS", "BLEND", "CHANCE", "CHECKS", "FINDINGS", "MASK", "PHASE_THETAS", "REFS", "THETAS",
            "TWOSIDED_THETAS", "CatalogueEntry", "catalogue", "emitter_entries", "failing_checks",
            "layered_bsdfs",
            "phase_functions", "run_catalogue", "wrong_catalogue"]
@@ -54,7 +54,10 @@ class CatalogueEntry:
     :data:`CHECKS` that must fail: for a planted fault the check that catches its kind; for
     a real plugin the checks a Mitsuba finding fails (``finding`` says what and the measured
     numbers), else none; ``fails_from``: the sample count from which the finding shows
-    (a rare float32 event, about one sample in 1e6, does not show at 1e5)."""
+    (a rare float32 event, about one sample in 1e6, does not show at 1e5); ``may_fail``:
+    checks such a rare event may fail as well, from ``fails_from`` on: whether one of its
+    samples lands in that check's draw depends on the float32 rounding of the machine's
+    vector ISA, not only on the seed (:data:`CHANCE`)."""
 
     plugin: str
     theta: float | None
@@ -64,10 +67,17 @@ class CatalogueEntry:
     fails: tuple[str, ...] = ()
     finding: str = ""
     fails_from: int = 0
+    may_fail: tuple[str, ...] = ()
 
     def expected_failures(self, sample_count: int) -> set[str]:
         """The checks that must fail at ``sample_count`` samples."""
         return set(self.fails) if sample_count >= self.fails_from else set()
+
+    def documented(self, failing: set[str], sample_count: int) -> bool:
+        """Whether the checks ``failing`` at ``sample_count`` samples are what is documented: every
+        check that must fail, and besides them only checks that may."""
+        return _documented_failures(failing, set(self.fails), set(self.may_fail), sample_count,
+                                    self.fails_from)
 
     @property
     def label(self) -> str:
@@ -252,10 +262,26 @@ FINDINGS: dict[str, tuple[tuple[str, ...], str, int]] = {
 }
 
 
+#: Findings whose rare event may fail further checks: label -> those checks.  From the axis,
+#: a silhouette sample lands in the chi-square's draw (seed 0, 1e6 samples) on an AVX-512 CPU
+#: but not on an AVX2 one (Mitsuba's float32 code differs): it fails the weight check on both.
+CHANCE: dict[str, tuple[str, ...]] = {"area sphere constant from (0, 0, 0)": ("chi2",)}
+
+
 def _documented(e: CatalogueEntry) -> CatalogueEntry:
-    """``e`` with its Mitsuba finding (:data:`FINDINGS`), if it has one."""
+    """``e`` with its Mitsuba finding (:data:`FINDINGS`, :data:`CHANCE`), if it has one."""
     fails, finding, fails_from = FINDINGS.get(e.label, ((), "", 0))
-    return dataclasses.replace(e, fails=fails, finding=finding, fails_from=fails_from)
+    return dataclasses.replace(e, fails=fails, finding=finding, fails_from=fails_from,
+                               may_fail=CHANCE.get(e.label, ()))
+
+
+def _documented_failures(failing: set[str], must: set[str], may: set[str], sample_count: int,
+                         fails_from: int) -> bool:
+    """Every check that must fail failed, and besides them only checks that may (none of
+    either below ``fails_from`` samples)."""
+    if sample_count < fails_from:
+        must, may = set(), set()
+    return must <= failing <= must | may
 
 
 def wrong_catalogue(*, variant: str = "llvm_ad_rgb") -> list[CatalogueEntry]:
@@ -420,7 +446,8 @@ def run_catalogue(entries: Sequence[CatalogueEntry], *, sample_count: int = 1_00
                "weight": ("pass" if w.passed else "FAIL") if has_weight else "n/a",
                "weight_mismatches": w.mismatches, "bad_weights": w.bad_weights,
                "weight_max_rel": w.max_rel_error, "seconds_chi2": mid - start, "seconds_weight": end - mid,
-               "fails": ",".join(e.fails), "fails_from": e.fails_from, "finding": e.finding}
+               "fails": ",".join(e.fails), "may_fail": ",".join(e.may_fail), "fails_from": e.fails_from,
+               "finding": e.finding}
         rows.append(row)
         checks.append((r, w))
         if progress is not None:
@@ -442,9 +469,14 @@ def failing_checks(row: Any) -> set[str]:
 
 
 def _as_expected(row: Any) -> str:
-    """'yes' where a planted fault's check failed, or a real plugin failed exactly the
-    checks its finding fails at the row's sample count; else 'NO'."""
-    want = set(filter(None, str(row["fails"]).split(","))) if row["n"] >= row["fails_from"] else set()
+    """'yes' where a planted fault's check failed, or a real plugin failed the checks its
+    finding fails at the row's sample count and besides them only those it may; else 'NO'."""
+    def checks(column: str) -> set[str]:
+        return set(filter(None, str(row[column]).split(",")))
+
     got = failing_checks(row)
-    ok = want <= got if row["fault"] else want == got
+    if row["fault"]:
+        ok = (checks("fails") if row["n"] >= row["fails_from"] else set()) <= got
+    else:
+        ok = _documented_failures(got, checks("fails"), checks("may_fail"), row["n"], row["fails_from"])
     return "yes" if ok else "NO"
