@@ -25,7 +25,7 @@ import copy
 import dataclasses
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -39,9 +39,6 @@ from harness.samplers.transform import STRIPS, Transform, cramer_von_mises_from_
 from harness.stats import distributions, holm
 from harness.stats.results import Failure
 from harness.usercode import UserCodeError, array_result, call, callable_name
-
-if TYPE_CHECKING:
-    pass
 
 __all__ = ["SAMPLE_CASE", "SamplerTest", "check_sampler", "check_with_missing",
            "failure_pvalue", "histogram"]

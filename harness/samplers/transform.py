@@ -46,7 +46,7 @@ __all__ = ["AxisCdf", "Transform", "cramer_von_mises", "cramer_von_mises_columns
 STRIPS = 32
 SUBSTRIPS = 4
 _MARGINAL_PIECES = 32   # boxes across the square for the marginal of s0
-_COARSE_PIECES = 4      # and where those agree with these on the starting leaves, these
+_COARSE_PIECES = 4      # its refinement's, where they agree with those on the starting leaves
 _MAX_STEP_CUTS = 8      # cuts at density steps per strip of the conditional
 _POLE_GRADING = 2.0 ** -np.arange(1, 25)   # cuts of the first and last strips toward s0 = 0, 1
 _MAX_DEPTH = 40         # leaf halvings along the axis: leaves down to 2^-40 of the start
@@ -123,10 +123,10 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
     The cubature stops at q's rounding ``floor`` (relative).
     ``coarse``: fewer pieces (S, P', 2) to refine with instead, where on the starting leaves
     they give every quarter's integral within the refinement's tolerance (or q's rounding) of
-    ``pieces``' (and their cubature error within it too): a density smooth across the pieces (an azimuth that
-    does not matter, a lobe at the pole) needs no more, and the refinement's pdf calls fall by
-    P / P'; a density with structure across them (a lobe off the pole, a texel table) keeps
-    ``pieces``.
+    ``pieces``' (and their cubature error within it too): a density smooth across the pieces
+    (an azimuth that does not matter, a lobe at the pole) needs no more, and the refinement's
+    pdf calls fall by P / P'; a density with structure across them (a step, a texel table, a
+    singular pole) keeps ``pieces``.
     A box whose integral is not finite counts as mass 0 with error 1 (the bound then covers
     the whole strip: its tests lose their power, never their level)."""
     nstrip, npiece = pieces.shape[:2]
