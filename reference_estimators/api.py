@@ -54,7 +54,8 @@ class Sampler:
     invertible = property(lambda self: self._core.invertible)
 
     def sample(self, u: Any) -> tuple[np.ndarray, np.ndarray]:
-        """Points and their pdf values from canonical uniforms u of shape (N, udim)."""
+        """Points and their pdf values from canonical uniforms u in [0, 1] of shape (N, udim)
+        (ValueError, with the count and examples, for values outside it or NaN)."""
         return self._core.sample(_points(u, self.udim, "u"))
 
     def pdf(self, x: Any) -> np.ndarray:

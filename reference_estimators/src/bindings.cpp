@@ -70,6 +70,27 @@ size_t check_points(const InArray &x, int dim, const char *arg) {
     return x.shape(0);
 }
 
+// Canonical uniforms must lie in [0, 1]: the samplers' maps assume it (outside it a table
+// sampler's search has no bin to land in).  A ValueError with the count and the first examples.
+void check_uniforms(const InArray &u) {
+    const double *v = u.data();
+    const size_t total = u.size(), cols = u.ndim() == 2 ? u.shape(1) : 1;
+    size_t bad = 0;
+    std::ostringstream examples;
+    examples.precision(17);
+    for (size_t i = 0; i < total; ++i) {
+        if (v[i] >= 0.0 && v[i] <= 1.0) continue;
+        if (bad < 3) examples << (bad ? ", " : "") << "u[" << i / cols << "] = " << v[i];
+        ++bad;
+    }
+    if (bad) {
+        std::ostringstream s;
+        s << "'u' must hold canonical uniforms in [0, 1]; " << bad << " of " << total << " values are not ("
+          << examples.str() << (bad > 3 ? ", ..." : "") << ")";
+        throw nb::value_error(s.str().c_str());
+    }
+}
+
 // A new numpy bool array of n values that owns its memory.
 nb::ndarray<nb::numpy, bool> new_bool_array(size_t n, bool **data) {
     bool *p = new bool[n > 0 ? n : 1];
@@ -372,6 +393,7 @@ NB_MODULE(_core, m) {
         .def("describe", &Sampler::describe)
         .def("sample", [](const Sampler &s, InArray u) {
             size_t n = check_points(u, s.udim, "u");
+            check_uniforms(u);
             double *x, *p;
             OutArray xs = new_array(n, s.domain.dim == 1 ? 0 : s.domain.dim, &x);
             OutArray ps = new_array(n, 0, &p);

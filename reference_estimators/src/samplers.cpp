@@ -345,14 +345,31 @@ struct PiecewiseTables {
         double t = (double(o) + du) / double(bins);
         double xs = std::min(a + t * (b - a), b);
         // Rounding can put x on the edge of a neighbouring bin (then pdf(x) would report that
-        // bin's density, possibly 0): step to the nearest double inside bin o.  (One bin_of_x,
-        // a division, where x is inside: the loops' two tests were the sampler's critical path.)
+        // bin's density, possibly 0): move to the nearest double inside bin o (if bin o holds
+        // none, the first above it).  (One bin_of_x, a division, where x is inside: that is
+        // the common case.)
         if (bin_of_x(xs) != o) {
-            while (bin_of_x(xs) > o) xs = std::nextafter(xs, -INFINITY);
-            while (bin_of_x(xs) < o) xs = std::nextafter(xs, INFINITY);
+            if (bin_of_x(xs) > o) xs = std::nextafter(first_above(a, xs, o), -INFINITY);
+            if (bin_of_x(xs) < o) xs = first_above(xs, b, o - 1);
         }
         x[0] = xs;
         return f[k * bins + o] * scale[k];
+    }
+
+    // The smallest double x in (lo, hi] with bin_of_x(x) > o, for bin_of_x(lo) <= o <
+    // bin_of_x(hi): bin_of_x never decreases as x grows, so a bisection over the doubles in
+    // their order (sign-adjusted bits as integers) finds it in at most 64 steps.  (Stepping one
+    // ulp at a time, as before, never ended where a bin's edge lies near 0: the ulps there are
+    // as small as the subnormals.)
+    double first_above(double lo, double hi, size_t o) const {
+        const auto key = [](double d) { const uint64_t u = simd::bits(d); return u >> 63 ? ~u : u | (1ull << 63); };
+        const auto value = [](uint64_t q) { return simd::from_bits(q >> 63 ? q & ~(1ull << 63) : ~q); };
+        uint64_t below = key(lo), above = key(hi);
+        while (above - below > 1) {
+            const uint64_t mid = below + (above - below) / 2;
+            (bin_of_x(value(mid)) > o ? above : below) = mid;
+        }
+        return value(above);
     }
 };
 

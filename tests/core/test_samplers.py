@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import math
 import re
+import subprocess
+import sys
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -415,6 +417,44 @@ def test_points_near_table_breakpoints_stay_in_their_bin(case):
     bad = (p != q) | (p <= 0)
     assert not bad.any(), f"{case}: (u, x, sample pdf, pdf(x)):\n  {fmt(u[bad], x[bad], p[bad], q[bad])}"
     np.testing.assert_allclose(s.invert(x), u, atol=1e-9)
+
+
+def test_a_bin_edge_near_zero_ends_the_move_into_the_bin():
+    """Over [-0.3, 1.1] in 14 bins, u = 3/14 puts x at -2.8e-17 + rounding, just above bin 3's
+    edge near 0 in x but in bin 2 by bin_of_x; the sampler moves x into bin 3.  Stepping one ulp
+    at a time, it took ~10^15 steps there (the ulps near 0 are tiny): sample() never returned.
+    Run in a subprocess so that a regression fails in a minute instead of hanging the suite."""
+    code = ("import numpy as np, reference_estimators as rest\n"
+            "a = -3 * 0.1\n"
+            "s = rest.sampler('piecewise_constant_1d', table=np.ones(14), a=a, b=a + 14 * 0.1)\n"
+            "x, p = s.sample(np.array([3 / 14]))\n"
+            "print(repr(float(x[0])))\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    x = float(r.stdout)
+    a, b = -3 * 0.1, -3 * 0.1 + 14 * 0.1
+
+    def bin_of_x(v):   # the sampler's bin_of_x, the same double operations
+        return min(int((v - a) / (b - a) * 14), 13)
+
+    # the first double of bin 3: the nearest to where rounding left x
+    assert bin_of_x(x) == 3 and bin_of_x(np.nextafter(x, -1.0)) == 2, x
+    assert abs(x) < 1e-15
+
+
+@pytest.mark.parametrize("u", [np.nan, -0.25, 1.5, np.inf])
+@pytest.mark.parametrize("name", ["piecewise_constant_1d", "piecewise_constant_2d", "ggx", "linear"])
+def test_sample_refuses_uniforms_outside_the_unit_interval(name, u):
+    """Canonical uniforms outside [0, 1] (or NaN) are refused with the count and an example
+    (a table sampler's search has no bin for them: it used to hang)."""
+    s = rest.sampler(name, table=np.ones((3, 4)) if name.endswith("2d") else np.ones(4)) \
+        if name.startswith("piecewise") else rest.sampler(name)
+    us = np.full((5, s.udim), 0.5)
+    us[3, -1] = u
+    with pytest.raises(ValueError, match=r"canonical uniforms in \[0, 1\]; 1 of \d+ values are not \(u\[3\] = "):
+        s.sample(us if s.udim > 1 else us[:, 0])
+    x, p = s.sample(np.zeros((2, s.udim)) if s.udim > 1 else np.array([0.0, 1.0]))   # the ends are valid
+    assert np.all(np.isfinite(p))
 
 
 @pytest.mark.parametrize("case", [c for c in CASES if c.table is not None and 0 in np.ravel(c.table)],
