@@ -264,9 +264,19 @@ struct PiecewiseTables {
     double a, b;
     std::vector<double> cdf, f, scale;
     std::vector<int64_t> below;   // below[k bins + o]: the last non-empty bin at or below o (or 0)
+    // edge[o]: the least double x with bin_of_x(x) >= o (edge[0] = -inf, edge[bins] = inf), so
+    // bin_of_x(x) == o exactly where edge[o] <= x < edge[o + 1]: two comparisons in place of
+    // bin_of_x's division where a sampled point is checked to lie in its bin.
+    std::vector<double> edge;
+    double inv_bins;   // 1 / bins where bins is a power of 2 (dividing by it is multiplying by that, exactly), else 0
 
     // No tables yet, each to have `bins` bins over [a, b].
-    explicit PiecewiseTables(size_t bins, double a = 0, double b = 1) : bins(bins), a(a), b(b) {}
+    explicit PiecewiseTables(size_t bins, double a = 0, double b = 1)
+        : bins(bins), a(a), b(b), edge(bins + 1), inv_bins((bins & (bins - 1)) == 0 ? 1.0 / double(bins) : 0.0) {
+        edge[0] = -INFINITY;
+        for (size_t o = 1; o < bins; ++o) edge[o] = first_above(a, b, o - 1);
+        edge[bins] = INFINITY;
+    }
 
     // Appends the table of the values f (bins of them, the same count for every table; not all
     // zero): table k = the count of tables before it.
@@ -307,6 +317,7 @@ struct PiecewiseTables {
         double t = (x - a) / (b - a) * double(bins);
         return std::min(size_t(t), bins - 1);
     }
+    bool in_bin(double x, size_t o) const { return x >= edge[o] && x < edge[o + 1]; }
     // Table k's density and CDF at x in [a, b].
     double density(size_t k, double x) const { return f[k * bins + bin_of_x(x)] * scale[k]; }
     double cdf_at(size_t k, double x) const {
@@ -320,13 +331,13 @@ struct PiecewiseTables {
     double sample_one(size_t k, double u, double *x) const { return point_in(k, bin_of_u(k, u), u, x); }
 
     // sample_one for n points, point j from table k[j] (table 0 when k is null) with the
-    // uniform u[j * ustride], its x to x[j * xstride] and its density to p[j]: the bins of a
-    // block of points found in one pass, their points in a second, so that the out-of-order
-    // core overlaps many points' dependent searches (one point at a time, each waited on its
-    // own; vector lanes with gathers were slower still on AMD's gathers).  The same bits as
-    // sample_one.
+    // uniform u[j * ustride], its x to x[j * xstride] and its density to p[j]; the bin x lies
+    // in to landed[j] if asked: the bins of a block of points found in one pass, their points
+    // in a second, so that the out-of-order core overlaps many points' dependent searches (one
+    // point at a time, each waited on its own; vector lanes with gathers were slower still, on
+    // AMD's Zen 3 and Zen 4 alike).  The same bits as sample_one.
     void sample_many(const int64_t *k, const double *u, size_t ustride, size_t n, double *x, size_t xstride,
-                     double *p) const {
+                     double *p, int64_t *landed = nullptr) const {
         constexpr size_t kBlock = 256;
         uint32_t bin[kBlock];
         for (size_t a0 = 0; a0 < n; a0 += kBlock) {
@@ -334,6 +345,11 @@ struct PiecewiseTables {
             for (size_t j = 0; j < m; ++j) bin[j] = uint32_t(bin_of_u(k ? size_t(k[a0 + j]) : 0, u[(a0 + j) * ustride]));
             for (size_t j = 0; j < m; ++j)
                 p[a0 + j] = point_in(k ? size_t(k[a0 + j]) : 0, bin[j], u[(a0 + j) * ustride], x + (a0 + j) * xstride);
+            if (landed)   // bin[j], unless bin j holds no double (point_in then went past it)
+                for (size_t j = 0; j < m; ++j) {
+                    const double xj = x[(a0 + j) * xstride];
+                    landed[a0 + j] = int64_t(in_bin(xj, bin[j]) ? bin[j] : bin_of_x(xj));
+                }
         }
     }
 
@@ -342,13 +358,12 @@ struct PiecewiseTables {
     double point_in(size_t k, size_t o, double u, double *x) const {
         const double *c = &cdf[k * (bins + 1)];
         double du = (u - c[o]) / (c[o + 1] - c[o]);
-        double t = (double(o) + du) / double(bins);
+        double t = inv_bins > 0 ? (double(o) + du) * inv_bins : (double(o) + du) / double(bins);
         double xs = std::min(a + t * (b - a), b);
         // Rounding can put x on the edge of a neighbouring bin (then pdf(x) would report that
         // bin's density, possibly 0): move to the nearest double inside bin o (if bin o holds
-        // none, the first above it).  (One bin_of_x, a division, where x is inside: that is
-        // the common case.)
-        if (bin_of_x(xs) != o) {
+        // none, the first above it).
+        if (!in_bin(xs, o)) {
             if (bin_of_x(xs) > o) xs = std::nextafter(first_above(a, xs, o), -INFINITY);
             if (bin_of_x(xs) < o) xs = first_above(xs, b, o - 1);
         }
@@ -424,8 +439,7 @@ class PiecewiseConstant2D final : public Pointwise<PiecewiseConstant2D> {
         double px[kBlock];
         for (size_t a = 0; a < n; a += kBlock) {
             const size_t m = std::min(kBlock, n - a);
-            marginal_.sample_many(nullptr, u + 2 * a + 1, 2, m, x + 2 * a + 1, 2, p + a);
-            for (size_t j = 0; j < m; ++j) row[j] = int64_t(marginal_.bin_of_x(x[2 * (a + j) + 1]));
+            marginal_.sample_many(nullptr, u + 2 * a + 1, 2, m, x + 2 * a + 1, 2, p + a, row);
             conditional_.sample_many(row, u + 2 * a, 2, m, x + 2 * a, 2, px);
             for (size_t j = 0; j < m; ++j) p[a + j] *= px[j];
         }
