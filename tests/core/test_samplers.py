@@ -451,7 +451,8 @@ def test_sample_refuses_uniforms_outside_the_unit_interval(name, u):
         if name.startswith("piecewise") else rest.sampler(name)
     us = np.full((5, s.udim), 0.5)
     us[3, -1] = u
-    with pytest.raises(ValueError, match=r"canonical uniforms in \[0, 1\]; 1 of \d+ values are not \(u\[3\] = "):
+    refusal = r"canonical uniforms in \[0, 1\]; 1 of \d+ values are not \(u\[3\] = "
+    with pytest.raises(ValueError, match=refusal):
         s.sample(us if s.udim > 1 else us[:, 0])
     x, p = s.sample(np.zeros((2, s.udim)) if s.udim > 1 else np.array([0.0, 1.0]))   # the ends are valid
     assert np.all(np.isfinite(p))
