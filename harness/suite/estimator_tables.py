@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 from harness import stats
 from harness.suite.parse import Suite
-from harness.suite.verdicts import family_rejections
+from harness.suite.verdicts import family_rejections, slope_row, variance_row
 
 if TYPE_CHECKING:
     from harness.suite.estimators import CaseResult
@@ -113,17 +113,10 @@ def store_rows(suite: Suite, results: list[CaseResult], table: list[dict[str, An
                          "verdict": "reached" if hw <= r.case.target else "not reached",
                          "detail": {"target": r.case.target, "look": r.look + 1, "looks": r.case.looks}})
         if r.variance is not None:
-            v, se, n = r.variance
-            rows.append({**base, "measurement": "variance", "value": v, "lo": v - 1.96 * se,
-                         "hi": v + 1.96 * se, "n": n})
+            rows.append(variance_row(base, r.variance))
         if r.convergence is not None:
-            c = r.convergence
-            lo, hi = c.confidence_interval()
-            rows.append({**base, "measurement": "convergence_slope", "value": c.slope, "lo": lo, "hi": hi,
-                         "n": c.n, "pvalue": c.pvalue,
-                         "verdict": row["convergence"],
-                         "detail": {"expected": c.expected, "bound": c.expected + c.tolerance,
-                                    "z": c.statistic, "table": c.table.to_dict("list")}})
+            rows.append(slope_row(base, "convergence_slope", r.convergence, row["convergence"],
+                                  {"table": r.convergence.table.to_dict("list")}))
         if r.efficiency is not None:
             e = r.efficiency
             z = e.log10_half_width(0.95)

@@ -15,7 +15,7 @@ import numpy as np
 from harness import stats
 from harness.stats import images as ist
 from harness.suite.parse import Suite
-from harness.suite.verdicts import family_rejections
+from harness.suite.verdicts import family_rejections, slope_row, variance_row
 
 if TYPE_CHECKING:
     from harness.suite.renders import RenderResult
@@ -162,22 +162,12 @@ def render_rows(suite: Suite, results: list[RenderResult],
                                     "replicas": b.replicas, "spp": b.spp, "reference": r.reference,
                                     "faults": r.faults.to_dict(), "notes": r.notes}})
         if r.variance is not None:
-            var, se, n = r.variance
-            rows.append({**common, "measurement": "variance", "value": var, "lo": var - 1.96 * se,
-                         "hi": var + 1.96 * se, "n": n,
-                         "detail": {"per": "sample, mean over pixels and channels"}})
+            rows.append(variance_row(common, r.variance, {"per": "sample, mean over pixels and channels"}))
         if r.convergence is not None:
             c = r.convergence
-            lo, hi = c.confidence_interval()
-            rows.append({**common, "measurement": "convergence", "value": c.slope, "lo": lo, "hi": hi,
-                         "n": c.n, "pvalue": c.pvalue,
-                         "verdict": v["convergence"],
-                         "detail": {"expected": c.expected, "bound": c.expected + c.tolerance,
-                                    "z": c.statistic, "budgets": c.table["n"].tolist(),
-                                    "rmse": c.table["rmse"].tolist(), "rmse_lo": c.table["rmse_lo"].tolist(),
-                                    "rmse_hi": c.table["rmse_hi"].tolist(),
-                                    "seconds": c.table["seconds"].tolist(),
-                                    "error": "sqrt(relMSE)"}})
+            columns = {k: c.table[k].tolist() for k in ("rmse", "rmse_lo", "rmse_hi", "seconds")}
+            rows.append(slope_row(common, "convergence", c, v["convergence"],
+                                  {"budgets": c.table["n"].tolist(), **columns, "error": "sqrt(relMSE)"}))
         if r.efficiency is not None:
             e = r.efficiency
             b0, ratio, lo, hi = _ratio(r, base)

@@ -18,10 +18,11 @@ suite's family-wise alpha (:func:`family_rejections`).
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 from harness.stats import holm
 
-__all__ = ["FAILING", "PASSING", "family_rejections", "mark_xfail"]
+__all__ = ["FAILING", "PASSING", "family_rejections", "mark_xfail", "variance_row", "slope_row"]
 
 FAILING = frozenset({"biased", "bias missed", "invalid", "slower than expected", "failed"})
 PASSING = frozenset({"unbiased", "biased (expected)", "consistent", "as expected", "passed", "reached"})
@@ -51,3 +52,22 @@ def family_rejections(pvalues: Sequence[float | None], alpha: float) -> tuple[li
         for i, r, a in zip(tested, rej, adj):
             rejected[i], adjusted[i] = bool(r), float(a)
     return rejected, adjusted
+
+
+def variance_row(base: dict, variance: tuple[float, float, int], detail: dict | None = None) -> dict:
+    """The stored row of a per-sample variance (value, its standard error, n) with its 95 %
+    normal interval; ``base`` the case's keys, ``detail`` what the kind adds."""
+    v, se, n = variance
+    row = {**base, "measurement": "variance", "value": v, "lo": v - 1.96 * se, "hi": v + 1.96 * se, "n": n}
+    return {**row, "detail": detail} if detail else row
+
+
+def slope_row(base: dict, measurement: str, fit: Any, verdict: str, detail: dict) -> dict:
+    """The stored row of a convergence fit (harness.stats.ConvergenceResult): the slope with its
+    95 % interval, n, p and the verdict; its detail the expected slope, the bound and z, and
+    what the kind adds."""
+    lo, hi = fit.confidence_interval()
+    return {**base, "measurement": measurement, "value": fit.slope, "lo": lo, "hi": hi, "n": fit.n,
+            "pvalue": fit.pvalue, "verdict": verdict,
+            "detail": {"expected": fit.expected, "bound": fit.expected + fit.tolerance, "z": fit.statistic,
+                       **detail}}
