@@ -297,9 +297,11 @@ struct PiecewiseTables {
         }
     }
 
-    // Bin o of table k for uniform u: the last with cdf[o] <= u (counted by a branch-free
-    // halving search: a mispredicted branch a step cost more than the rest), moved down past
-    // empty bins.
+    // Bin o of table k for uniform u: the last with cdf[o] <= u (found by a branch-free
+    // halving search: a mispredicted branch a step cost more than the rest; u below cdf[0] = 0
+    // or NaN gives 0, u = 1 the last bin), moved down past empty bins.  (The search moves lo
+    // only onto values <= u, so lo is that bin or 0 already: recounting cdf[lo] <= u after it,
+    // as before, gave the same o for one more dependent load.)
     size_t bin_of_u(size_t k, double u) const {
         const double *c = &cdf[k * (bins + 1)];
         size_t lo = 0, len = bins + 1;
@@ -308,10 +310,7 @@ struct PiecewiseTables {
             lo = c[lo + half] <= u ? lo + half : lo;
             len -= half;
         }
-        size_t o = lo + (c[lo] <= u);   // the count of cdf values <= u (NaN u: 0)
-        o = o == 0 ? 0 : o - 1;
-        o = std::min(o, bins - 1);
-        return size_t(below[k * bins + o]);
+        return size_t(below[k * bins + std::min(lo, bins - 1)]);
     }
     size_t bin_of_x(double x) const {
         double t = (x - a) / (b - a) * double(bins);
