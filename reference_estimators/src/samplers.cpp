@@ -360,11 +360,11 @@ struct PiecewiseTables {
         double t = inv_bins > 0 ? (double(o) + du) * inv_bins : (double(o) + du) / double(bins);
         double xs = std::min(a + t * (b - a), b);
         // Rounding can put x on the edge of a neighbouring bin (then pdf(x) would report that
-        // bin's density, possibly 0): move to the nearest double inside bin o (if bin o holds
-        // none, the first above it).
+        // bin's density, possibly 0): move to the nearest double inside bin o, the last below
+        // its upper edge or its lower edge itself (if bin o holds no double, that edge).
         if (!in_bin(xs, o)) {
-            if (bin_of_x(xs) > o) xs = std::nextafter(first_above(a, xs, o), -INFINITY);
-            if (bin_of_x(xs) < o) xs = first_above(xs, b, o - 1);
+            if (xs >= edge[o + 1]) xs = std::nextafter(edge[o + 1], -INFINITY);
+            if (xs < edge[o]) xs = edge[o];
         }
         x[0] = xs;
         return f[k * bins + o] * scale[k];
@@ -372,9 +372,9 @@ struct PiecewiseTables {
 
     // The smallest double x in (lo, hi] with bin_of_x(x) > o, for bin_of_x(lo) <= o <
     // bin_of_x(hi): bin_of_x never decreases as x grows, so a bisection over the doubles in
-    // their order (sign-adjusted bits as integers) finds it in at most 64 steps.  (Stepping one
-    // ulp at a time, as before, never ended where a bin's edge lies near 0: the ulps there are
-    // as small as the subnormals.)
+    // their order (sign-adjusted bits as integers) finds it in at most 64 steps (the edges;
+    // point_in once stepped to them one ulp at a time, which never ended where an edge lies
+    // near 0: the ulps there are as small as the subnormals).
     double first_above(double lo, double hi, size_t o) const {
         const auto key = [](double d) { const uint64_t u = simd::bits(d); return u >> 63 ? ~u : u | (1ull << 63); };
         const auto value = [](uint64_t q) { return simd::from_bits(q >> 63 ? q & ~(1ull << 63) : ~q); };
