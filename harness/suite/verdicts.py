@@ -18,9 +18,12 @@ suite's family-wise alpha (:func:`family_rejections`).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING
 
 from harness.stats import holm
+
+if TYPE_CHECKING:
+    from harness.stats import ConvergenceResult
 
 __all__ = ["FAILING", "PASSING", "family_rejections", "mark_xfail", "variance_row", "slope_row"]
 
@@ -62,8 +65,8 @@ def variance_row(base: dict, variance: tuple[float, float, int], detail: dict | 
     return {**row, "detail": detail} if detail else row
 
 
-def slope_row(base: dict, measurement: str, fit: Any, verdict: str, detail: dict) -> dict:
-    """The stored row of a convergence fit (harness.stats.ConvergenceResult): the slope with its
+def slope_row(base: dict, measurement: str, fit: ConvergenceResult, verdict: str, detail: dict) -> dict:
+    """The stored row of a convergence fit: the slope with its
     95 % interval, n, p and the verdict; its detail the expected slope, the bound and z, and
     what the kind adds."""
     lo, hi = fit.confidence_interval()
