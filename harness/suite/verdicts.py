@@ -66,9 +66,8 @@ def variance_row(base: dict, variance: tuple[float, float, int], detail: dict | 
 
 
 def slope_row(base: dict, measurement: str, fit: ConvergenceResult, verdict: str, detail: dict) -> dict:
-    """The stored row of a convergence fit: the slope with its
-    95 % interval, n, p and the verdict; its detail the expected slope, the bound and z, and
-    what the kind adds."""
+    """The stored row of a convergence fit: the slope with its 95 % interval, n, p and the
+    verdict; its detail the expected slope, the bound and z, and what the kind adds."""
     lo, hi = fit.confidence_interval()
     return {**base, "measurement": measurement, "value": fit.slope, "lo": lo, "hi": hi, "n": fit.n,
             "pvalue": fit.pvalue, "verdict": verdict,
