@@ -50,6 +50,14 @@ independently scrambled replicas of the core, its samples being dependent), then
 drjit means from their last timed run; they agree within a few standard errors.
 Timings: best of `--repeat` runs after a warm-up (drjit's kernel compilation excluded).
 
+Last, a stage profile of each row in ns per sample and thread, at 1 and 2 threads: the core's
+stages are differences of its pipeline's prefixes (reference_estimators.profile_stages: the
+uniforms; the samplers' points and pdfs; their screening; for MIS every technique's pdf at
+every point; the integrand and the estimator's arithmetic; the contributions' screening and
+accumulation), each prefix timed alone, so a stage near 0 can come out slightly negative on
+a noisy machine; drjit's are its uniforms (a kernel that draws and sums them) and the rest of
+its whole kernel.
+
     .venv/bin/python benchmarks/hot_paths.py [--samples 2e7] [--repeat 3] [--no-drjit]
 """
 from __future__ import annotations
@@ -59,7 +67,7 @@ import math
 import os
 import sys
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from typing import Any, Callable
 
@@ -552,6 +560,62 @@ def print_checks(rest: Any, table: PiecewiseConstant2D, peers: dict[str, tuple[A
                       "off the reference: its timing below is of a wrong estimator !!!")
 
 
+# The core's pipeline prefixes (reference_estimators.profile_stages) and the stage each adds.
+STAGES = (("points", "points"), ("sampled", "sampling"), ("screened", "screening"),
+          ("weighted", "MIS weights"), ("contributions", "integrand"), ("full", "accumulation"))
+
+
+def core_stages(rest: Any, row: Row, n: int, threads: int, repeat: int) -> dict[str, float | None]:
+    """Best seconds of each prefix of the core's pipeline on one row (None: no such stage)."""
+    best: dict[str, float | None] = {}
+    for _ in range(repeat + 1):   # the first run is the warm-up, as in best_of
+        d = rest.profile_stages(row.integrand, row.technique, n, threads=threads)
+        best = {k: None if d[k] is None else min(d[k], best.get(k) or math.inf) for k, _ in STAGES}
+    return best
+
+
+def uniforms_only(ops: Any, table: PiecewiseConstant2D, u: Any) -> Any:
+    """The sum of a sample's uniforms: a kernel that draws them and nothing else."""
+    total = u[0]
+    for v in u[1:]:
+        total = total + v
+    return total
+
+
+def print_stages(rest: Any, n: int, repeat: int, drjit: DrjitPeer | None, table: PiecewiseConstant2D) -> None:
+    """Where each row's time goes, in ns per sample and thread: the core's stages (differences of
+    its pipeline's prefixes, each timed alone) and drjit's uniforms (a kernel summing them)
+    against its whole kernel."""
+    print(f"\nstage profile, ns per sample and thread (best of {repeat}; a stage = the difference of two "
+          "prefixes of the pipeline, each timed alone):")
+    print("  core: points = the uniforms (PCG32 or Sobol'); sampling = the samplers' points and pdfs; "
+          "screening = the points'\n  domain and pdf checks; MIS weights = every technique's pdf at every "
+          "point; integrand = f and the\n  estimator's arithmetic; accumulation = the contributions' "
+          "screening, compensated sum and M2..M4")
+    print("  drjit: uniforms = PCG32.next_float64 (or the Sobol' points) summed; rest = its whole kernel "
+          "less that")
+    print(f"{'':58s}" + "".join(f"{label:>13s}" for _, label in STAGES) + f"{'core all':>10s}"
+          + f"{'drjit unif.':>12s}{'drjit rest':>11s}{'drjit all':>10s}")
+    for row in ROWS:
+        uniforms = replace(row, contribution=uniforms_only)
+        for k in (1, 2):
+            ns = {key: None if v is None else v * 1e9 * k / n
+                  for key, v in core_stages(rest, row, n, k, repeat).items()}
+            cells, last = [ns["points"]], ns["points"]
+            for key, _ in STAGES[1:]:
+                cells.append(None if ns[key] is None else ns[key] - last)
+                last = last if ns[key] is None else ns[key]
+            dj: list[float | None] = [None, None, None]
+            if drjit is not None:
+                drjit.threads(k)
+                unif = best_of(repeat, lambda: drjit.estimate(uniforms, table, n))
+                full = best_of(repeat, lambda: drjit.estimate(row, table, n))
+                dj = [unif * 1e9 * k / n, (full - unif) * 1e9 * k / n, full * 1e9 * k / n]
+            print(f"{row.integrand:10s} {row.technique:44s} {k}t"
+                  + "".join(column(c, ".2f", 13) for c in cells) + column(ns["full"], ".2f", 10)
+                  + column(dj[0], ".2f", 12) + column(dj[1], ".2f", 11) + column(dj[2], ".2f", 10))
+
+
 def main() -> None:
     rest = load_core(ARGS.core)
 
@@ -576,6 +640,7 @@ def main() -> None:
         seconds[row], results[row] = time_row(rest, row, table, n, repeat, drjit)
     print_throughput(n, seconds)
     print_estimates(rest, n, results)
+    print_stages(rest, n, repeat, drjit, table)
 
 
 if __name__ == "__main__":

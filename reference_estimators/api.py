@@ -368,14 +368,21 @@ def build_info() -> dict[str, Any]:
 def profile_stages(f: str | Integrand, t: str | Technique, n: int, *, seed: int = 0,
                    threads: int | None = None) -> dict[str, Any]:
     """Wall seconds of each prefix of ``integrate``'s pipeline on the same chunks and threads:
-    ``points`` (the point set alone; 0 for rejection samplers, which draw inside the sampler),
-    ``contributions`` (points, sampling, integrand, estimator arithmetic) and ``full`` (the
-    whole estimate: screening and accumulation too), with ``estimate``, the full run's
-    Estimate (its ``busy`` seconds per thread).  Differences give each stage's cost."""
+    ``points`` (the point set alone; 0 for rejection samplers, which draw inside the sampler);
+    for techniques that draw points from samplers (importance, uniform on a sphere or
+    hemisphere, MIS) ``sampled`` (the points also drawn, with their pdfs), ``screened`` (also
+    checked for the sampler's domain and bad pdfs) and, for MIS, ``weighted`` (also every
+    technique's pdf at every point), each None where the technique has no such stage;
+    ``contributions`` (the integrand and the estimator's arithmetic too) and ``full`` (the
+    whole estimate: the contributions' screening and accumulation too), with ``estimate``,
+    the full run's Estimate (its ``busy`` seconds per thread).  Differences of consecutive
+    prefixes give each stage's cost."""
     fi = integrand(f)
     d = _core.profile_stages(fi, technique(fi, t), _count(n, "n"), _seed(seed), _threads(threads))
     est = Estimate.from_core(d["estimate"])
-    return {"points": d["points"], "contributions": d["contributions"], "full": est.seconds, "estimate": est}
+    stages = {k: None if math.isnan(d[k]) else d[k] for k in ("sampled", "screened", "weighted")}
+    return {"points": d["points"], **stages, "contributions": d["contributions"], "full": est.seconds,
+            "estimate": est}
 
 
 def side_extremes(values: Any, center: float, *, upper: bool, keep: int) -> tuple[float, int, np.ndarray]:

@@ -836,11 +836,15 @@ NB_MODULE(_core, m) {
         }
         nb::dict d;
         d["points"] = st.points;
+        d["sampled"] = st.sampled;
+        d["screened"] = st.screened;
+        d["weighted"] = st.weighted;
         d["contributions"] = st.contributions;
         d["estimate"] = estimate_dict(st.estimate);
         return d;
     }, "integrand"_a, "technique"_a, "n"_a, "seed"_a = 0, "threads"_a = 0,
-       "Seconds of the pipeline's prefixes (points; contributions; the whole estimate) on the same chunks.");
+       "Seconds of the pipeline's prefixes (points; sampled, screened, weighted (NaN where the technique "
+       "has no such stage); contributions; the whole estimate) on the same chunks.");
     m.def("integrate_chunks", [check_pair](const Integrand &f, const Technique &t, int64_t n, uint64_t seed,
                                            uint64_t case_id, uint64_t replica, uint64_t chunk_begin, uint64_t chunk_end,
                                            int threads, int64_t tail_keep, bool tail_median) {

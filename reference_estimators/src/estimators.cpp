@@ -127,10 +127,15 @@ void add_power(const double *p, double beta, double *acc, size_t m) {
     }
 }
 
+// The stages of block_contributions, in order: profile_stages stops after each in turn.
+enum class Stage { Sampled, Screened, Weighted, Contributions };
+
 // Fills s.y[0..m) with the contributions of samples first..first+m of this chunk; samples
 // the estimator cannot use are recorded in diag and flagged in s.drop (returns their count).
+// With `last` before Contributions, a technique that draws points from samplers stops after
+// that stage (s.y is then not filled; MIS goes on to its next technique).
 size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uint64_t first, Scratch &s,
-                           Diagnostics &diag) {
+                           Diagnostics &diag, Stage last = Stage::Contributions) {
     const Integrand &f = k.f;
     const Technique &t = k.t;
     const Sampler &smp = *t.sampler;
@@ -168,7 +173,9 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
         } else {
             smp.sample(s.u.data(), s.x.data(), s.p.data(), m);
         }
+        if (last == Stage::Sampled) return 0;
         dropped = check_samples(smp.domain, s.x.data(), s.p.data(), m, first, diag, s.drop.data());
+        if (last < Stage::Contributions) return dropped;
         f.eval(s.x.data(), s.f.data(), m);
         for (size_t i = 0; i < m; ++i) s.y[i] = s.f[i] / s.p[i];
         break;
@@ -257,8 +264,10 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
             take_columns(s.u.data(), m, ud, col, sa.udim, s.cols.data());
             col += sa.udim;
             sa.sample(s.cols.data(), xi_pts, s.p.data(), m);
+            if (last == Stage::Sampled) continue;
             for (size_t i = 0; i < m; ++i) s.sub_drop[i] = 0;
             size_t bad = check_samples(sa.domain, xi_pts, s.p.data(), m, first, diag, s.sub_drop.data());
+            if (last == Stage::Screened) continue;
             // denominator: sum over all techniques of p_j(X_a)^beta
             for (size_t i = 0; i < m; ++i) s.w[i] = 0;
             for (size_t b = 0; b < t.mis.size(); ++b) {
@@ -268,6 +277,7 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
             // w_a f / p_a = p_a^(beta-1) f / sum_j p_j^beta
             std::fill(s.q.begin(), s.q.begin() + m, 0.0);
             add_power(s.p.data(), beta - 1, s.q.data(), m);
+            if (last == Stage::Weighted) continue;
             f.eval(xi_pts, s.f.data(), m);
             // in explicit vector lanes with a select (GCC kept the scalar loop, branching on f)
             simd::map4(s.q.data(), s.f.data(), s.w.data(), s.y.data(), m, [](auto q, auto fv, auto w, auto y) {
@@ -427,16 +437,19 @@ StageTimes profile_stages(const Integrand &f, const Technique &t, uint64_t n, co
     check_technique(f, t);
     const Kernel k(f, t, n, opt.key);
     const bool rejection = t.sampler->method == SamplingMethod::Rejection;
-    // One pass stopping after the points or after the contributions; each chunk keeps one of
-    // its values (sink), so nothing computed can be optimised away.
-    auto pass = [&](bool with_contributions) {
+    const bool mis = t.kind == TechniqueKind::Mis;
+    const bool samples = mis || t.kind == TechniqueKind::Importance ||
+                         (t.kind == TechniqueKind::Uniform && f.domain.kind != DomainKind::Box);
+    // One pass stopping after the points, or after the stage `last` of the contributions; each
+    // chunk keeps one of its values (sink), so nothing computed can be optimised away.
+    auto pass = [&](std::optional<Stage> last) {
         std::vector<double> sink(chunk_count(n), 0.0);
         auto t0 = std::chrono::steady_clock::now();
         for_each_kernel_block(k, n, opt, [&](UniformStream &stream, Scratch &s, Diagnostics &diag, size_t c,
                                              uint64_t first, size_t m) {
-            if (with_contributions) {
-                block_contributions(k, stream, m, first, s, diag);
-                sink[c] += s.y[m - 1];
+            if (last) {
+                block_contributions(k, stream, m, first, s, diag, *last);
+                sink[c] += *last == Stage::Contributions ? s.y[m - 1] : s.p[m - 1];
             } else if (!rejection) {
                 fill_points(k.points, stream, first, m, k.ud, s.u.data());
                 sink[c] += s.u[m * size_t(k.ud) - 1];
@@ -445,8 +458,13 @@ StageTimes profile_stages(const Integrand &f, const Technique &t, uint64_t n, co
         return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     };
     StageTimes r;
-    r.points = rejection ? 0.0 : pass(false);
-    r.contributions = pass(true);
+    r.points = rejection ? 0.0 : pass(std::nullopt);
+    if (samples) {
+        r.sampled = pass(Stage::Sampled);
+        r.screened = pass(Stage::Screened);
+        if (mis) r.weighted = pass(Stage::Weighted);
+    }
+    r.contributions = pass(Stage::Contributions);
     r.estimate = integrate(f, t, n, opt);
     return r;
 }

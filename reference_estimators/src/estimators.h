@@ -3,6 +3,7 @@
 // thread pool and merges their accumulator states in chunk order.
 #pragma once
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include "accumulator.h"
@@ -42,10 +43,15 @@ struct RunOptions {
 
 // Wall seconds of each prefix of integrate()'s pipeline, each run over the same chunks on the
 // same threads: the point set alone (0 for rejection samplers, which draw inside the
-// sampler), the contributions (points, sampling, integrand, estimator arithmetic), and the
-// whole estimate (screening and accumulation too).  Differences give each stage's cost.
+// sampler); for the techniques that draw points from samplers (importance, uniform on a
+// sphere or hemisphere, MIS) the points also drawn (`sampled`), then screened for the domain
+// and bad pdfs (`screened`), and for MIS also weighted (every technique's pdf at every point:
+// `weighted`), NaN where the technique has no such stage; the contributions (the integrand
+// and the estimator's arithmetic too), and the whole estimate (the contributions' screening
+// and accumulation too).  Differences give each stage's cost.
 struct StageTimes {
-    double points = 0, contributions = 0;
+    static constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
+    double points = 0, sampled = kNone, screened = kNone, weighted = kNone, contributions = 0;
     Estimate estimate;  // the whole pipeline: its seconds and per-thread busy time
 };
 StageTimes profile_stages(const Integrand &f, const Technique &t, uint64_t n, const RunOptions &opt);
