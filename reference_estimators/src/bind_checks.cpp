@@ -1,0 +1,335 @@
+// Bindings of the sampler check's batch kernels (checks.h, tables.h): domain maps, cubature
+// nodes and sums, histograms, the Rosenblatt transform and its statistics, pdf summaries and
+// float32 helpers.  Arrays are validated here (shape, table layout), so no call can read out
+// of bounds.
+#include <nanobind/stl/pair.h>
+#include <nanobind/stl/vector.h>
+
+#include <memory>
+
+#include "bind_common.h"
+#include "checks.h"
+#include "tables.h"
+
+namespace re::py {
+namespace {
+
+using namespace nb::literals;
+
+CheckDomain check_domain(int kind) {
+    if (kind < 0 || kind > 5) throw nb::value_error("'kind' must be a domain code 0 .. 5");
+    return CheckDomain(kind);
+}
+
+// Parameter points s: shape (n, k), or (n,) when k == 1.
+size_t check_params(const InArray &s, size_t k) {
+    if (!((s.ndim() == 2 && s.shape(1) == k) || (k == 1 && s.ndim() == 1)))
+        throw nb::value_error(k == 1 ? "'s' must have shape (N, 1) or (N,)" : "'s' must have shape (N, 2)");
+    return s.shape(0);
+}
+
+// Boxes [lo, hi]: both of shape (M, 1) or (M, 2); returns k.
+size_t check_boxes(const InArray &lo, const InArray &hi) {
+    if (lo.ndim() != 2 || hi.ndim() != 2 || lo.shape(0) != hi.shape(0) || lo.shape(1) != hi.shape(1) ||
+        (lo.shape(1) != 1 && lo.shape(1) != 2))
+        throw nb::value_error("'lo' and 'hi' must both have shape (M, 1) or (M, 2)");
+    return lo.shape(1);
+}
+
+// The shape a piecewise-linear table's arrays must have (one lo, hi, start and mass per leaf;
+// offsets from 0 to the leaves, not decreasing), or a ValueError saying what is wrong.
+template <class Offsets>
+void check_table(const InArray &lo, const InArray &hi, const InArray &start, const InArray &mass,
+                        const Offsets &offsets) {
+    const size_t leaves = lo.size();
+    if (hi.size() != leaves || start.size() != leaves || mass.size() != leaves)
+        throw nb::value_error("'lo', 'hi', 'start' and 'mass' must have one value per leaf");
+    if (leaves >= (size_t(1) << 31)) throw nb::value_error("a table must have fewer than 2^31 leaves");
+    if (offsets.size() < 1 || offsets.data()[0] != 0 || size_t(offsets.data()[offsets.size() - 1]) != leaves)
+        throw nb::value_error("'offsets' must run from 0 to the number of leaves");
+    for (size_t g = 1; g < offsets.size(); ++g)
+        if (offsets.data()[g] < offsets.data()[g - 1]) throw nb::value_error("'offsets' must not decrease");
+}
+
+// A piecewise-linear table given as (lo, hi, start, mass, offsets), validated, with its
+// bucket index; the arrays are kept alive (and unchanged) by the caller's tuple.
+struct BoundTable {
+    InArray lo, hi, start, mass;
+    I64Array offsets;
+    std::unique_ptr<PiecewiseLinearTable> table;
+
+    explicit BoundTable(nb::handle t) {
+        nb::tuple parts = nb::cast<nb::tuple>(t);
+        if (parts.size() != 5) throw nb::value_error("a table must be (lo, hi, start, mass, offsets)");
+        lo = nb::cast<InArray>(parts[0]);
+        hi = nb::cast<InArray>(parts[1]);
+        start = nb::cast<InArray>(parts[2]);
+        mass = nb::cast<InArray>(parts[3]);
+        offsets = nb::cast<I64Array>(parts[4]);
+        check_table(lo, hi, start, mass, offsets);
+        table = std::make_unique<PiecewiseLinearTable>(lo.data(), hi.data(), start.data(), mass.data(),
+                                                       offsets.data(), int64_t(offsets.size()) - 1);
+    }
+};
+
+// A Rosenblatt transform's tables as Python passes them: the marginal and, on the square (a
+// conditional given), the conditional, whose strips `edges` bound (one more edge than strips).
+struct BoundTransform {
+    BoundTable marginal;
+    std::unique_ptr<BoundTable> conditional;
+    size_t k;
+
+    BoundTransform(nb::handle m, nb::handle c, const InArray &edges) : marginal(m), k(c.is_none() ? 1 : 2) {
+        if (k == 1) return;
+        conditional = std::make_unique<BoundTable>(c);
+        if (edges.size() != conditional->offsets.size())
+            throw nb::value_error("'edges' must hold one more value than the conditional has strips");
+    }
+    const PiecewiseLinearTable *conditional_table() const { return conditional ? conditional->table.get() : nullptr; }
+};
+
+}  // namespace
+
+void bind_checks(nb::module_ &m) {
+    m.def("domain_params", [](int kind, double lo, double hi, InArray x) {
+        const CheckDomain d = check_domain(kind);
+        const int pdim = domain_point_dim(d), k = domain_param_dim(d);
+        const size_t n = check_points(x, pdim, "x");
+        double *s;
+        bool *inside;
+        OutArray sa = new_array(n, size_t(k), &s);
+        auto ia = new_bool_array(n, &inside);
+        {
+            nb::gil_scoped_release g;
+            // each point's parameters depend on that point alone (the azimuths' vector and
+            // scalar paths give the same bits): chunks on all threads
+            for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t b, int) {
+                domain_params(d, lo, hi, x.data() + a * size_t(pdim), b - a, s + a * size_t(k), inside + a);
+            });
+        }
+        return nb::make_tuple(sa, ia);
+    }, "kind"_a, "lo"_a, "hi"_a, "x"_a,
+       "(s (N, k), inside (N,)): the equal-measure parameters of points x on domain `kind` "
+       "(0 interval [lo, hi], 1 half line, 2 square, 3 disk, 4 hemisphere, 5 sphere).");
+    m.def("domain_points", [](int kind, double lo, double hi, InArray s) {
+        const CheckDomain d = check_domain(kind);
+        const int pdim = domain_point_dim(d), k = domain_param_dim(d);
+        const size_t n = check_params(s, size_t(k));
+        double *x;
+        OutArray xa = new_array(n, pdim == 1 ? 0 : size_t(pdim), &x);
+        {
+            nb::gil_scoped_release g;
+            // each point depends on its parameters alone (the vector and scalar maps give the
+            // same bits): chunks on all threads
+            for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t b, int) {
+                domain_points(d, lo, hi, s.data() + a * size_t(k), b - a, x + a * size_t(pdim));
+            });
+        }
+        return xa;
+    }, "kind"_a, "lo"_a, "hi"_a, "s"_a, "Points x(s) (N,) or (N, point_dim) of parameters s (N, k) on domain `kind`.");
+    m.def("cap_to_world", [](InArray h, InArray axis, InArray t, InArray b, double cos_alpha, double scale) {
+        const size_t n = check_points(h, 3, "h");
+        if (axis.size() != 3 || t.size() != 3 || b.size() != 3)
+            throw nb::value_error("'axis', 't' and 'b' must be 3-vectors");
+        double *out;
+        OutArray wa = new_array(n, 3, &out);
+        {
+            nb::gil_scoped_release g;
+            // each row from that row alone: chunks on all threads
+            for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t e, int) {
+                cap_to_world(h.data() + 3 * a, e - a, axis.data(), t.data(), b.data(), cos_alpha, scale, out + 3 * a);
+            });
+        }
+        return wa;
+    }, "h"_a, "axis"_a, "t"_a, "b"_a, "cos_alpha"_a, "scale"_a,
+       "World directions (N, 3) of hemisphere points h (N, 3) through the equal-area map of the cap about `axis` "
+       "(frame t, b, axis) with cosine `cos_alpha`, scale = 1 - cos_alpha.");
+    m.def("float32_unit_rows", [](InArray x, double slack) {
+        const size_t n = check_points(x, 3, "x");
+        float *cols = new float[n > 0 ? 3 * n : 1];
+        nb::capsule owner(cols, [](void *q) noexcept { delete[] static_cast<float *>(q); });
+        nb::ndarray<nb::numpy, float> ca(cols, {size_t(3), n}, owner);
+        bool *ok;
+        auto oa = new_bool_array(n, &ok);
+        {
+            nb::gil_scoped_release g;
+            float32_unit_rows(x.data(), n, slack, cols, ok);
+        }
+        return nb::make_tuple(ca, oa);
+    }, "x"_a, "slack"_a,
+       "(columns (3, N) float32, ok (N,)): rows x (N, 3) as float32 unit vectors (normalised first where their "
+       "length is off 1 by more than `slack`); rows that are not finite non-zero vectors become +z, ok False.");
+    m.def("cubature_nodes", [](InArray lo, InArray hi, InArray nodes) {
+        const size_t k = check_boxes(lo, hi), boxes = lo.shape(0), g = nodes.size();
+        const size_t per = k == 1 ? g : g * g;
+        double *out;
+        OutArray pts = new_array(boxes * per, k, &out);
+        {
+            nb::gil_scoped_release r;
+            // box by box, each box's nodes from that box alone: chunks of boxes on all threads
+            for_chunks(boxes, std::max<size_t>(kCheckChunk / per, 1), [&](size_t, size_t a, size_t b, int) {
+                cubature_nodes(lo.data() + a * k, hi.data() + a * k, b - a, k, nodes.data(), g, out + a * per * k);
+            });
+        }
+        return pts;
+    }, "lo"_a, "hi"_a, "nodes"_a,
+       "(M g^k, k) nodes of the tensor rule with points `nodes` per axis on the boxes [lo, hi] (M, k), box by box.");
+    m.def("cubature_points", [](int kind, double dlo, double dhi, InArray lo, InArray hi, InArray nodes) {
+        const CheckDomain d = check_domain(kind);
+        const size_t k = check_boxes(lo, hi), g = nodes.size(), per = k == 1 ? g : g * g;
+        if (size_t(domain_param_dim(d)) != k) throw nb::value_error("the boxes' dimension is not the domain's");
+        const int pdim = domain_point_dim(d);
+        const size_t boxes = lo.shape(0);
+        double *x;
+        OutArray xa = new_array(boxes * per, pdim == 1 ? 0 : size_t(pdim), &x);
+        {
+            nb::gil_scoped_release r;
+            // each box's points from that box alone: chunks of boxes on all threads (quarter
+            // chunks: a cubature's blocks of 2^16 nodes would otherwise run on one)
+            for_chunks(boxes, std::max<size_t>(kCheckChunk / 4 / per, 1), [&](size_t, size_t a, size_t b, int) {
+                thread_local std::vector<double> scratch;
+                cubature_points(d, dlo, dhi, lo.data() + a * k, hi.data() + a * k, b - a, k, nodes.data(), g,
+                                x + a * per * size_t(pdim), scratch);
+            });
+        }
+        return xa;
+    }, "kind"_a, "dlo"_a, "dhi"_a, "lo"_a, "hi"_a, "nodes"_a,
+       "Domain points of the tensor rule's nodes on the boxes [lo, hi] (M, k): domain_points(cubature_nodes(...)).");
+    m.def("cubature_sums", [](InArray lo, InArray hi, InArray values, InArray weights, double scale) {
+        const size_t k = check_boxes(lo, hi), boxes = lo.shape(0), per = weights.size();
+        const size_t cols = values.ndim() == 2 ? values.shape(1) : 1;
+        if ((values.ndim() != 1 && values.ndim() != 2) || values.shape(0) != boxes * per)
+            throw nb::value_error("'values' must have one row per node: shape (M g^k,) or (M g^k, m)");
+        double *out;
+        OutArray oa = new_array(boxes, cols, &out);
+        {
+            nb::gil_scoped_release r;
+            for_chunks(boxes, std::max<size_t>(kCheckChunk / per, 1), [&](size_t, size_t a, size_t b, int) {
+                cubature_sums(lo.data() + a * k, hi.data() + a * k, b - a, k, values.data() + a * per * cols, cols,
+                              weights.data(), per, scale, out + a * cols);
+            });
+        }
+        return oa;
+    }, "lo"_a, "hi"_a, "values"_a, "weights"_a, "scale"_a,
+       "(M, m) integrals of the tensor rule on the boxes [lo, hi] (M, k): the weighted sum of the values "
+       "(M g^k, m) at their nodes times the volume, times `scale`.");
+    m.def("grid_histogram", [](InArray s, BoolArray inside, const std::vector<int64_t> &shape) {
+        if (shape.empty() || shape.size() > 2 || shape[0] < 1 || (shape.size() == 2 && shape[1] < 1))
+            throw nb::value_error("'shape' must be one or two positive cell counts");
+        const size_t n = check_params(s, shape.size());
+        if (inside.size() != n) throw nb::value_error("'inside' must have one flag per point");
+        double *c;
+        OutArray counts = new_array(size_t(shape[0]), shape.size() == 2 ? size_t(shape[1]) : 0, &c);
+        {
+            nb::gil_scoped_release g;
+            grid_histogram(s.data(), n, inside.data(), shape[0], shape.size() == 2 ? shape[1] : 0, c);
+        }
+        return counts;
+    }, "s"_a, "inside"_a, "shape"_a,
+       "Counts of the inside points s (N, k) in [0, 1]^k on the regular grid `shape`, coordinates clamped "
+       "to [0, 1).");
+    m.def("rosenblatt", [](nb::handle marginal, nb::handle conditional, InArray edges, InArray s) {
+        const BoundTransform t(marginal, conditional, edges);
+        const size_t k = t.k, n = check_params(s, k);
+        double *u;
+        OutArray ua = new_array(n, k, &u);
+        int64_t *g = new int64_t[n > 0 ? n : 1];
+        nb::capsule owner(g, [](void *q) noexcept { delete[] static_cast<int64_t *>(q); });
+        nb::ndarray<nb::numpy, int64_t> strip(g, {n}, owner);
+        {
+            nb::gil_scoped_release r;
+            rosenblatt(*t.marginal.table, t.conditional_table(), edges.data(), edges.size(), s.data(), k, n, u, g);
+        }
+        return nb::make_tuple(ua, strip);
+    }, "marginal"_a, "conditional"_a.none(), "edges"_a, "s"_a,
+       "(u (N, k), strip (N,)): the Rosenblatt transform of parameter points s through the marginal table "
+       "and, on the square, the conditional one given the strip of s0 among `edges`; tables are "
+       "(lo, hi, start, mass, offsets).");
+    m.def("transform_statistics", [](nb::handle marginal, nb::handle conditional, InArray edges, InArray s,
+                                     int64_t bins) {
+        const BoundTransform t(marginal, conditional, edges);
+        const size_t k = t.k, n = check_params(s, k);
+        if (bins < 1) throw nb::value_error("'bins' must be positive");
+        double *r, *c;
+        OutArray sums = new_array(k, 2, &r);
+        OutArray counts = new_array(size_t((k == 2 ? int64_t(edges.size()) - 1 : 1) * bins), 0, &c);
+        {
+            nb::gil_scoped_release g;
+            CramerVonMisesSum found[2];
+            transform_statistics(*t.marginal.table, t.conditional_table(), edges.data(), edges.size(), s.data(), k,
+                                 n, bins, found, c);
+            for (size_t j = 0; j < k; ++j) r[2 * j] = found[j].upper, r[2 * j + 1] = found[j].slack;
+        }
+        return nb::make_tuple(sums, counts);
+    }, "marginal"_a, "conditional"_a.none(), "edges"_a, "s"_a, "bins"_a,
+       "(sums (k, 2), counts (strips * bins,)) of the Rosenblatt transform u of parameter points s (as rosenblatt): "
+       "the Cramer-von Mises sum of each column of u (as cramer_von_mises_sum) and the counts of strips x bins "
+       "of u1 on the square, of bins of u0 on an interval (cell strip * bins + min(floor(u bins), bins - 1); "
+       "NaN u nowhere), without returning u.");
+    m.def("cramer_von_mises_sum", [](nb::ndarray<const double, nb::ndim<2>, nb::device::cpu> u) {
+        const size_t n = u.shape(0), k = u.shape(1);
+        double *r;
+        OutArray sums = new_array(k, 2, &r);
+        {
+            nb::gil_scoped_release g;
+            // a column on each thread: the sums do not depend on which thread computed them
+            ThreadPool::instance().run(k, ThreadPool::default_threads(), [&](size_t c, int) {
+                const CramerVonMisesSum s =
+                    cramer_von_mises_sum(u.data() + c * size_t(u.stride(1)), size_t(u.stride(0)), n);
+                r[2 * c] = s.upper, r[2 * c + 1] = s.slack;
+            });
+        }
+        return sums;
+    }, "u"_a, "For each column of u (N, k), (upper, slack) with upper >= S >= upper - slack, S = "
+       "sum_i ((2 i - 1) / (2 N) - u_(i))^2 over its sorted values; NaN for a column holding a NaN.");
+    m.def("all_float32", [](InArray v) {
+        nb::gil_scoped_release g;
+        return all_float32(v.data(), v.size());
+    }, "v"_a, "Whether every finite non-zero value of v is a float32, and there is one.");
+    m.def("dither_float32", [](InArray v, InArray u) {
+        if (u.size() != v.size()) throw nb::value_error("'u' must have one uniform per value of 'v'");
+        double *out;
+        OutArray r = new_array(v.size(), 0, &out);
+        {
+            nb::gil_scoped_release g;
+            // each value depends on itself and its uniform alone: chunks on all threads
+            for_chunks(v.size(), kCheckChunk, [&](size_t, size_t a, size_t b, int) {
+                dither_float32(v.data() + a, u.data() + a, b - a, out + a);
+            });
+        }
+        return r;
+    }, "v"_a, "u"_a, "The values v (flattened) each moved to below + (above - below) u, below and above half "
+       "way to its float32 neighbours; v itself where that is not finite.");
+    m.def("pdf_summary", [](int kind, double measure, InArray s, BoolArray inside, InArray p, double c) {
+        const CheckDomain d = check_domain(kind);
+        const size_t n = check_params(s, size_t(domain_param_dim(d)));
+        if (inside.size() != n || p.size() != n) throw nb::value_error("'inside' and 'p' must have one value per point");
+        PdfSummary r;
+        {
+            nb::gil_scoped_release g;
+            r = pdf_summary(d, measure, s.data(), inside.data(), p.data(), n, c);
+        }
+        return nb::make_tuple(r.bad, r.zero, r.used, r.h_sum);
+    }, "kind"_a, "measure"_a, "s"_a, "inside"_a, "p"_a, "c"_a,
+       "(bad, zero, used, h_sum): pdf values NaN/infinite/negative, zero at inside points, good inside ones, "
+       "and the sum of h = p J / (p J + c) over those.");
+    m.def("piecewise_linear_lookup", [](InArray lo, InArray hi, InArray start, InArray mass,
+                                        nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu> offsets,
+                                        nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu> strip,
+                                        InArray x) {
+        check_table(lo, hi, start, mass, offsets);
+        if (strip.size() != x.size()) throw nb::value_error("'strip' and 'x' must have one value per point");
+        double *out;
+        OutArray u = new_array(x.size(), 0, &out);
+        {
+            nb::gil_scoped_release g;
+            piecewise_linear_lookup(lo.data(), hi.data(), start.data(), mass.data(), offsets.data(),
+                                    int64_t(offsets.size()) - 1, strip.data(), x.data(), x.size(), out);
+        }
+        return u;
+    }, "lo"_a, "hi"_a, "start"_a, "mass"_a, "offsets"_a, "strip"_a, "x"_a,
+       "u = start[i] + mass[i] * clamp((x - lo[i]) / (hi[i] - lo[i]), 0, 1) for the leaf i of the point's strip "
+       "(leaves offsets[g] .. offsets[g+1]-1, sorted by lo) with the largest lo <= x; NaN for a strip out of range.");
+}
+
+}  // namespace re::py
