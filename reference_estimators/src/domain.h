@@ -82,6 +82,15 @@ struct Domain {
                     for (size_t i = 0; i < n; ++i) out += !((x[i] >= a) & (x[i] <= b));
                     return out;
                 }
+                if (dim == 2) {  // the square's points (table samplers): a call of contains() a
+                                 // point had been an eighth of importance sampling's time
+                    const double a0 = lo[0], b0 = hi[0], a1 = lo[1], b1 = hi[1];
+                    for (size_t i = 0; i < n; ++i) {
+                        const double u = x[2 * i], v = x[2 * i + 1];
+                        out += !((u >= a0) & (u <= b0) & (v >= a1) & (v <= b1));
+                    }
+                    return out;
+                }
                 for (size_t i = 0; i < n; ++i) out += !contains(x + i * size_t(dim));
                 return out;
             case DomainKind::HalfLine:

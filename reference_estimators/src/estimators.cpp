@@ -82,22 +82,11 @@ void take_columns(const double *__restrict u, size_t m, int ud, int from, int co
     }
 }
 
-// Checks sampled points against the sampler's domain and pdf values for NaN / Inf / <= 0;
-// records what fails and marks it in `drop`.  Returns the number marked.
-size_t check_samples(const Domain &dom, const double *x, const double *p, size_t m, uint64_t first,
-                     Diagnostics &diag, unsigned char *drop) {
-    // pdfs not in (0, kMax] (NaN included), in vector lanes (GCC's loop compared one at a time)
-    size_t badp = 0, i = 0;
-    simd::i64v bad = {};
-    for (; i + simd::kWidth <= m; i += simd::kWidth) {
-        const simd::f64v v = simd::load(p + i);
-        bad += (v > 0.0) & (v <= kMax) ? simd::i64v{} : simd::i64v{} + 1;
-    }
-    for (size_t l = 0; l < simd::kWidth; ++l) badp += size_t(bad[l]);
-    for (; i < m; ++i) badp += !(p[i] > 0 && p[i] <= kMax);
-    const size_t outside = dom.count_outside(x, m);
+// Records the sampled points outside the sampler's domain and the pdf values NaN / Inf / <= 0
+// in diag and marks them in `drop` (every entry set); returns the number marked.
+size_t mark_invalid_samples(const Domain &dom, const double *x, const double *p, size_t m, uint64_t first,
+                            Diagnostics &diag, unsigned char *drop) {
     const int d = dom.dim;
-    if (badp == 0 && outside == 0) return 0;
     size_t marked = 0;
     for (size_t i = 0; i < m; ++i) {
         const double *xi = x + i * d;
@@ -110,6 +99,23 @@ size_t check_samples(const Domain &dom, const double *x, const double *p, size_t
         ++marked;
     }
     return marked;
+}
+
+// Checks sampled points against the sampler's domain and pdf values for NaN / Inf / <= 0;
+// records what fails and marks it in `drop` (untouched when nothing fails).  Returns the
+// number marked.
+size_t check_samples(const Domain &dom, const double *x, const double *p, size_t m, uint64_t first,
+                     Diagnostics &diag, unsigned char *drop) {
+    if (count_invalid_pdfs(p, m) == 0 && dom.count_outside(x, m) == 0) return 0;
+    return mark_invalid_samples(dom, x, p, m, first, diag, drop);
+}
+
+// The sampler's points and pdfs for the uniforms u, checked as check_samples checks them, in
+// the sampler's own pass where it has one (Sampler::sample_valid).
+size_t sample_and_check(const Sampler &smp, const double *u, double *x, double *p, size_t m, uint64_t first,
+                        Diagnostics &diag, unsigned char *drop) {
+    if (smp.sample_valid(u, x, p, m)) return 0;
+    return mark_invalid_samples(smp.domain, x, p, m, first, diag, drop);
 }
 
 // acc[i] += p[i]^beta: multiplications for the exponents the heuristics use (0, 1, 2; the
@@ -170,11 +176,14 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
         if (rejection) {
             diag.candidates -= m;
             smp.draw(stream, s.x.data(), s.p.data(), m, first, diag);
-        } else {
+            if (last == Stage::Sampled) return 0;
+            dropped = check_samples(smp.domain, s.x.data(), s.p.data(), m, first, diag, s.drop.data());
+        } else if (last == Stage::Sampled) {  // the profile's prefix: the points alone, unchecked
             smp.sample(s.u.data(), s.x.data(), s.p.data(), m);
+            return 0;
+        } else {
+            dropped = sample_and_check(smp, s.u.data(), s.x.data(), s.p.data(), m, first, diag, s.drop.data());
         }
-        if (last == Stage::Sampled) return 0;
-        dropped = check_samples(smp.domain, s.x.data(), s.p.data(), m, first, diag, s.drop.data());
         if (last < Stage::Contributions) return dropped;
         f.eval(s.x.data(), s.f.data(), m);
         for (size_t i = 0; i < m; ++i) s.y[i] = s.f[i] / s.p[i];
@@ -184,8 +193,7 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
         const int sd = smp.udim;
         take_columns(s.u.data(), m, ud, 0, sd, s.cols.data());
         take_columns(s.u.data(), m, ud, sd, 1, s.xi.data());
-        smp.sample(s.cols.data(), s.x.data(), s.p.data(), m);
-        dropped = check_samples(smp.domain, s.x.data(), s.p.data(), m, first, diag, s.drop.data());
+        dropped = sample_and_check(smp, s.cols.data(), s.x.data(), s.p.data(), m, first, diag, s.drop.data());
         f.eval(s.x.data(), s.f.data(), m);
         const double c = t.bound;
         size_t viol = 0;
@@ -218,9 +226,7 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
         }
         const size_t L = s.live.size();
         double *lx = s.x.data() + m * xd;  // survivors' points, after the block's
-        smp.sample(s.cols.data(), lx, s.p.data(), L);
-        for (size_t a = 0; a < L; ++a) s.sub_drop[a] = 0;
-        size_t bad = check_samples(smp.domain, lx, s.p.data(), L, first, diag, s.sub_drop.data());
+        size_t bad = sample_and_check(smp, s.cols.data(), lx, s.p.data(), L, first, diag, s.sub_drop.data());
         f.eval(lx, s.f.data(), L);
         for (size_t a = 0; a < L; ++a) {
             size_t i = s.live[a];
@@ -258,15 +264,18 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
         std::fill(s.y.begin(), s.y.begin() + m, 0.0);
         std::fill(s.drop.begin(), s.drop.begin() + m, 0);
         int col = 0;
-        double *xi_pts = s.x.data() + m * xd;
         for (size_t a = 0; a < t.mis.size(); ++a) {
             const Sampler &sa = *t.mis[a];
+            // the first technique's points stand for the sample (examples name them): drawn
+            // straight into the block's points, the others' after them
+            double *xi_pts = s.x.data() + (a == 0 ? 0 : m * xd);
             take_columns(s.u.data(), m, ud, col, sa.udim, s.cols.data());
             col += sa.udim;
-            sa.sample(s.cols.data(), xi_pts, s.p.data(), m);
-            if (last == Stage::Sampled) continue;
-            for (size_t i = 0; i < m; ++i) s.sub_drop[i] = 0;
-            size_t bad = check_samples(sa.domain, xi_pts, s.p.data(), m, first, diag, s.sub_drop.data());
+            if (last == Stage::Sampled) {  // the profile's prefix: the points alone, unchecked
+                sa.sample(s.cols.data(), xi_pts, s.p.data(), m);
+                continue;
+            }
+            size_t bad = sample_and_check(sa, s.cols.data(), xi_pts, s.p.data(), m, first, diag, s.sub_drop.data());
             if (last == Stage::Screened) continue;
             // denominator: sum over all techniques of p_j(X_a)^beta
             for (size_t i = 0; i < m; ++i) s.w[i] = 0;
@@ -274,20 +283,29 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
                 if (b != a) t.mis[b]->pdf(xi_pts, s.q.data(), m);
                 add_power(b == a ? s.p.data() : s.q.data(), beta, s.w.data(), m);
             }
-            // w_a f / p_a = p_a^(beta-1) f / sum_j p_j^beta
-            std::fill(s.q.begin(), s.q.begin() + m, 0.0);
-            add_power(s.p.data(), beta - 1, s.q.data(), m);
+            // w_a f / p_a = p_a^(beta-1) f / sum_j p_j^beta; the balance heuristic's p_a^0 = 1
+            // is left out (1 * f is f: the same bits, a pass fewer)
+            const bool balance = beta == 1;
+            if (!balance) {
+                std::fill(s.q.begin(), s.q.begin() + m, 0.0);
+                add_power(s.p.data(), beta - 1, s.q.data(), m);
+            }
             if (last == Stage::Weighted) continue;
             f.eval(xi_pts, s.f.data(), m);
             // in explicit vector lanes with a select (GCC kept the scalar loop, branching on f)
-            simd::map4(s.q.data(), s.f.data(), s.w.data(), s.y.data(), m, [](auto q, auto fv, auto w, auto y) {
-                using V = decltype(q);
-                return y + (fv == V{} ? V{} : q * fv / w);
-            });
+            if (balance)
+                simd::update(s.f.data(), s.w.data(), s.y.data(), m, [](auto fv, auto w, auto y) {
+                    using V = decltype(fv);
+                    return y + (fv == V{} ? V{} : fv / w);
+                });
+            else
+                simd::map4(s.q.data(), s.f.data(), s.w.data(), s.y.data(), m, [](auto q, auto fv, auto w, auto y) {
+                    using V = decltype(q);
+                    return y + (fv == V{} ? V{} : q * fv / w);
+                });
             if (bad)
                 for (size_t i = 0; i < m; ++i)
                     if (s.sub_drop[i] && !s.drop[i]) { s.drop[i] = 1; ++dropped; }
-            if (a == 0) std::copy(xi_pts, xi_pts + m * xd, s.x.begin());
         }
         break;
     }
@@ -295,10 +313,9 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
         // Y = |D| sum_b f/p / sum_b 1{X in D}/p over the batch.
         const int B = t.batch;
         const double vol = f.domain.measure();
-        smp.sample(s.u.data(), s.x.data(), s.p.data(), m * B);
         std::fill(s.drop.begin(), s.drop.begin() + m, 0);
-        for (size_t i = 0; i < m * B; ++i) s.sub_drop[i] = 0;
-        size_t bad = check_samples(smp.domain, s.x.data(), s.p.data(), m * B, first * B, diag, s.sub_drop.data());
+        size_t bad = sample_and_check(smp, s.u.data(), s.x.data(), s.p.data(), m * B, first * B, diag,
+                                      s.sub_drop.data());
         f.eval(s.x.data(), s.f.data(), m * B);
         for (size_t i = 0; i < m; ++i) {
             double num = 0, den = 0;

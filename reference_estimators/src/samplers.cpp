@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
 
 #include "integrands.h"
@@ -12,6 +13,25 @@ namespace re {
 void Sampler::invert(const double *, double *, size_t) const {
     throw std::invalid_argument("sampler '" + name + "' has no inverse (" +
                                 (method == SamplingMethod::Rejection ? "rejection sampler" : "not invertible") + ")");
+}
+
+size_t count_invalid_pdfs(const double *p, size_t n) {
+    // in vector lanes (GCC's loop compared one at a time)
+    constexpr double kMax = std::numeric_limits<double>::max();
+    size_t bad = 0, i = 0;
+    simd::i64v lanes = {};
+    for (; i + simd::kWidth <= n; i += simd::kWidth) {
+        const simd::f64v v = simd::load(p + i);
+        lanes += (v > 0.0) & (v <= kMax) ? simd::i64v{} : simd::i64v{} + 1;
+    }
+    for (size_t l = 0; l < simd::kWidth; ++l) bad += size_t(lanes[l]);
+    for (; i < n; ++i) bad += !(p[i] > 0 && p[i] <= kMax);
+    return bad;
+}
+
+bool Sampler::sample_valid(const double *u, double *x, double *p, size_t n) const {
+    sample(u, x, p, n);
+    return count_invalid_pdfs(p, n) == 0 && domain.count_outside(x, n) == 0;
 }
 
 void Sampler::draw(UniformStream &stream, double *x, double *pdf, size_t n, uint64_t, Diagnostics &diag) const {
@@ -82,22 +102,45 @@ class Directional : public Pointwise<D> {
     }
     double sample_one(const double *u, double *w) const { return sample_v(u[0], u[1], w[0], w[1], w[2]); }
     double pdf_one(const double *w) const { return pdf_v(w[0], w[1], w[2]); }
-    void sample(const double *u, double *x, double *p, size_t n) const override {
-        constexpr size_t W = simd::kWidth;
-        size_t i = 0;
-        for (; i + W <= n; i += W) {
-            simd::f64v u0, u1, w0, w1, w2;
-            for (size_t l = 0; l < W; ++l) { u0[l] = u[2 * (i + l)]; u1[l] = u[2 * (i + l) + 1]; }
-            simd::store(p + i, sample_v(u0, u1, w0, w1, w2));
-            simd::store3(x + 3 * i, w0, w1, w2);
-        }
-        for (; i < n; ++i) p[i] = sample_one(u + 2 * i, x + 3 * i);
+    void sample(const double *u, double *x, double *p, size_t n) const override { sample_lanes<false>(u, x, p, n); }
+    bool sample_valid(const double *u, double *x, double *p, size_t n) const override {
+        return sample_lanes<true>(u, x, p, n) == 0;
     }
     void pdf(const double *x, double *p, size_t n) const override {
         simd::map3(x, p, n, [this](auto w0, auto w1, auto w2) { return pdf_v(w0, w1, w2); });
     }
   private:
     const D &self() const { return static_cast<const D &>(*this); }
+    // sample(), kWidth directions at a time; with `screen`, also the number of them off the
+    // domain or with a pdf not in (0, max double], counted in the lanes before they are
+    // stored (the tests of Domain::count_outside and count_invalid_pdfs: a separate pass
+    // reloading and transposing the block was 15 % of an importance estimate's time).
+    template <bool screen>
+    size_t sample_lanes(const double *u, double *x, double *p, size_t n) const {
+        constexpr size_t W = simd::kWidth;
+        constexpr double kMax = std::numeric_limits<double>::max();
+        simd::i64v bad = {};
+        size_t i = 0;
+        for (; i + W <= n; i += W) {
+            simd::f64v u0, u1, w0, w1, w2;
+            for (size_t l = 0; l < W; ++l) { u0[l] = u[2 * (i + l)]; u1[l] = u[2 * (i + l) + 1]; }
+            const simd::f64v pv = sample_v(u0, u1, w0, w1, w2);
+            simd::store(p + i, pv);
+            simd::store3(x + 3 * i, w0, w1, w2);
+            if (screen) {
+                auto ok = on_sphere_v(w0, w1, w2) & (pv > 0.0) & (pv <= kMax);
+                if (hemisphere) ok &= w2 >= 0.0;
+                bad += ok ? simd::i64v{} : simd::i64v{} + 1;
+            }
+        }
+        size_t count = 0;
+        for (size_t l = 0; l < W; ++l) count += size_t(bad[l]);
+        for (; i < n; ++i) {
+            p[i] = sample_one(u + 2 * i, x + 3 * i);
+            if (screen) count += !(this->domain.contains(x + 3 * i) && p[i] > 0 && p[i] <= kMax);
+        }
+        return count;
+    }
 };
 
 class UniformBox final : public Pointwise<UniformBox> {

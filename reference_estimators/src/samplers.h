@@ -31,6 +31,11 @@ class Sampler {
 
     // x[n * domain.dim] and pdf[n] from u[n * udim].  Inversion samplers only.
     virtual void sample(const double *u, double *x, double *pdf, size_t n) const = 0;
+    // sample(), and whether every point lies in `domain` with a pdf in (0, max double]: the
+    // estimators' screening of every sampled block (they look at single points only when
+    // not), in the same pass where a sampler can (the direction samplers test their vector
+    // lanes before storing them).  Inversion samplers only.
+    virtual bool sample_valid(const double *u, double *x, double *pdf, size_t n) const;
     virtual void pdf(const double *x, double *p, size_t n) const = 0;
     // u[n * udim] from x; NaN rows for points outside the support.
     virtual void invert(const double *x, double *u, size_t n) const;
@@ -41,6 +46,9 @@ class Sampler {
 };
 
 using SamplerPtr = std::shared_ptr<const Sampler>;
+
+// How many of the pdf values p[0..n) are not in (0, max double] (NaN included), in vector lanes.
+size_t count_invalid_pdfs(const double *p, size_t n);
 
 // Registry: names, parameter names with defaults, and what each sampler is.
 struct SamplerInfo {

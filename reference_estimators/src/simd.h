@@ -223,6 +223,14 @@ RE_INLINE void map3(const double *x, double *y, size_t n, Fn fn) {
     for (; i < n; ++i) y[i] = fn(x[3 * i], x[3 * i + 1], x[3 * i + 2]);
 }
 
+// y[i] = fn(a[i], b[i], y[i]) for i < n, as map.
+template <class Fn>
+RE_INLINE void update(const double *a, const double *b, double *y, size_t n, Fn fn) {
+    size_t i = 0;
+    for (; i + kWidth <= n; i += kWidth) store(y + i, fn(load(a + i), load(b + i), load(y + i)));
+    for (; i < n; ++i) y[i] = fn(a[i], b[i], y[i]);
+}
+
 // y[i] = fn(a[i], b[i], c[i], y[i]) for i < n, as map.
 template <class Fn>
 RE_INLINE void map4(const double *a, const double *b, const double *c, double *y, size_t n, Fn fn) {

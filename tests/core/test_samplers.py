@@ -870,3 +870,17 @@ def test_directions_off_the_sphere_are_counted_in_vector_bodies_and_tails(integr
         on = (np.abs(r2 - 1) <= 1e-5) & ((w[:, 2] >= 0) | (not hemisphere))
     est = rest.estimate_from_samples(integrand, w, p)
     assert est.counts["outside_domain"] == int((~on).sum()) == (12 if hemisphere else 9)
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_direction_samplers_screen_their_points_in_their_own_pass(threads):
+    """The direction samplers count bad pdfs and points off their domain in the vector lanes
+    that draw them (Sampler::sample_valid); what they find is reported exactly as the separate
+    screening of given points reports it: the same counts, the same examples."""
+    s = rest.sampler("ggx", alpha=1e-155)   # alpha^2 is subnormal: D's pdf overflows at every z = 1
+    n = 3 * 2048 + 5                         # whole vectors and a scalar tail
+    est = rest.integrate("ggx_lobe", rest.importance(s), n, threads=threads)
+    x, p = s.sample(rest.points(n, 2))
+    ref = rest.estimate_from_samples("ggx_lobe", x, p, sampler=s)
+    assert est.issues == ref.issues == {"bad_pdf": n}
+    assert est.examples == ref.examples and est.n == 0
