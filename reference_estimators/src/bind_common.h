@@ -14,6 +14,7 @@
 #include <sstream>
 #include <string>
 
+#include "buffer_cache.h"
 #include "estimators.h"
 
 namespace re::py {
@@ -34,12 +35,27 @@ inline void advise_huge_pages(void *p, size_t bytes) {
     if (end > first) madvise(reinterpret_cast<void *>(first), end - first, MADV_HUGEPAGE);
 }
 
+// Memory for `count` values of an output array, from the BufferCache, and the capsule that
+// gives it back when numpy frees the array: the buffer's capacity sits in a header of
+// kBufferHeader bytes before the values.
+inline constexpr size_t kBufferHeader = 64;
+template <class T>
+T *output_buffer(size_t count, nb::capsule &owner) {
+    size_t capacity;
+    char *base = static_cast<char *>(BufferCache::instance().take(kBufferHeader + count * sizeof(T), capacity));
+    *reinterpret_cast<size_t *>(base) = capacity;
+    advise_huge_pages(base, capacity);
+    owner = nb::capsule(base + kBufferHeader, [](void *q) noexcept {
+        char *b = static_cast<char *>(q) - kBufferHeader;
+        BufferCache::instance().give(b, *reinterpret_cast<size_t *>(b));
+    });
+    return reinterpret_cast<T *>(base + kBufferHeader);
+}
+
 // A new numpy array that owns its memory: shape (rows,) when cols == 0, else (rows, cols).
 inline OutArray new_array(size_t rows, size_t cols, double **data) {
-    size_t size = rows * (cols == 0 ? 1 : cols);
-    double *p = new double[size > 0 ? size : 1];
-    advise_huge_pages(p, size * sizeof(double));
-    nb::capsule owner(p, [](void *q) noexcept { delete[] static_cast<double *>(q); });
+    nb::capsule owner;
+    double *p = output_buffer<double>(rows * (cols == 0 ? 1 : cols), owner);
     *data = p;
     if (cols == 0) return OutArray(p, {rows}, owner);
     return OutArray(p, {rows, cols}, owner);
@@ -81,9 +97,8 @@ inline void check_uniforms(const InArray &u) {
 
 // A new numpy bool array of n values that owns its memory.
 inline nb::ndarray<nb::numpy, bool> new_bool_array(size_t n, bool **data) {
-    bool *p = new bool[n > 0 ? n : 1];
-    advise_huge_pages(p, n);
-    nb::capsule owner(p, [](void *q) noexcept { delete[] static_cast<bool *>(q); });
+    nb::capsule owner;
+    bool *p = output_buffer<bool>(n, owner);
     *data = p;
     return nb::ndarray<nb::numpy, bool>(p, {n}, owner);
 }

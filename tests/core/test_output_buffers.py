@@ -1,0 +1,37 @@
+"""The bindings' output arrays reuse the memory of freed ones (src/buffer_cache.h): a freed
+array of 1 MiB or more serves the next array of a size it fits, and a live array's memory is
+never handed out again."""
+from __future__ import annotations
+
+import numpy as np
+
+import reference_estimators as rest
+
+N = 1 << 17   # (N, 2) float64 points: 2 MiB
+
+
+def test_a_freed_arrays_memory_serves_the_next_array_of_its_size():
+    rows = 3 * N + 17   # a size no other test uses: the cache's best fit for it is its own buffer
+    a = rest.points(rows, 2, seed=1)
+    address = a.ctypes.data
+    del a
+    b = rest.points(rows, 2, seed=2)
+    assert b.ctypes.data == address
+    np.testing.assert_array_equal(b, rest.points(rows, 2, seed=2))   # written whole: no stale values
+
+
+def test_live_arrays_never_share_memory():
+    arrays = [rest.points(N, 2, seed=s) for s in range(12)]   # more than the cache holds
+    for i, a in enumerate(arrays):
+        for b in arrays[i + 1:]:
+            assert not np.shares_memory(a, b)
+    for s, a in enumerate(arrays):
+        np.testing.assert_array_equal(a, rest.points(N, 2, seed=s))
+
+
+def test_small_and_bool_arrays_are_served_too():
+    x = rest.points(N, 3)
+    s, inside = rest.domain_params("sphere", x / np.linalg.norm(x, axis=1, keepdims=True))
+    assert s.shape == (N, 2) and inside.dtype == bool and inside.all()
+    small = rest.points(10, 2)
+    assert small.shape == (10, 2) and np.all((small > 0) & (small < 1))
