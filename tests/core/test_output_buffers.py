@@ -3,6 +3,8 @@ array of 1 MiB or more serves the next array of a size it fits, and a live array
 never handed out again."""
 from __future__ import annotations
 
+import gc
+
 import numpy as np
 
 import reference_estimators as rest
@@ -11,13 +13,20 @@ N = 1 << 17   # (N, 2) float64 points: 2 MiB
 
 
 def test_a_freed_arrays_memory_serves_the_next_array_of_its_size():
-    rows = 3 * N + 17   # a size no other test uses: the cache's best fit for it is its own buffer
-    a = rest.points(rows, 2, seed=1)
-    address = a.ctypes.data
-    del a
-    b = rest.points(rows, 2, seed=2)
-    assert b.ctypes.data == address
-    np.testing.assert_array_equal(b, rest.points(rows, 2, seed=2))   # written whole: no stale values
+    # The cache's best fit for the second array is the first one's buffer unless some other
+    # array is freed in between: the garbage collector is kept from freeing earlier tests'
+    # arrays meanwhile.
+    gc.collect()
+    gc.disable()
+    try:
+        a = rest.points(3 * N, 2, seed=1)
+        address = a.ctypes.data
+        del a
+        b = rest.points(3 * N, 2, seed=2)
+        assert b.ctypes.data == address
+    finally:
+        gc.enable()
+    np.testing.assert_array_equal(b, rest.points(3 * N, 2, seed=2))   # written whole: no stale values
 
 
 def test_live_arrays_never_share_memory():
