@@ -210,9 +210,7 @@ NB_MODULE(_core, m) {
     m.def("check_technique", &check_technique, "integrand"_a, "technique"_a);
     m.def("set_sobol_directions", [](nb::ndarray<const uint32_t, nb::ndim<2>, nb::c_contig, nb::device::cpu> v) {
         if (v.shape(1) != 32) throw nb::value_error("Sobol' direction numbers must have shape (dims, 32)");
-        SobolDirections &d = sobol_directions();
-        d.v.assign(v.data(), v.data() + v.size());
-        d.dims = int(v.shape(0));
+        sobol_directions().set(v.data(), int(v.shape(0)));
     }, "directions"_a, "Direction numbers v[d, k] (bit k of the index, 32-bit), set once at import.");
     m.def("points", [](int64_t n, int dim, const std::string &kind, uint64_t seed, uint64_t case_id, uint64_t replica,
                        int threads, uint64_t chunk_begin, uint64_t chunk_end) {

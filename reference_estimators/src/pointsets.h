@@ -32,10 +32,26 @@ inline const char *point_set_name(PointSetKind k) {
     return "?";
 }
 
-// Direction numbers v[d * 32 + k] (bit k of the index -> 32-bit direction), set once.
+// Direction numbers v[d * 32 + k] (bit k of the index -> 32-bit direction), set once, and
+// the unscrambled points of the first kSobolLow indices of every dimension, low[d * kSobolLow
+// + l]: Sobol' points are linear over XOR in the index bits, x(i) = x(i's high bits) ^ x(i's
+// low bits), so a point is one XOR with an entry of that table.  Built here once (2 MB for 256
+// dimensions): built per block of points, its chain of dependent loads had cost as much as
+// the points themselves.
+inline constexpr uint32_t kSobolLowBits = 11, kSobolLow = 1u << kSobolLowBits;
 struct SobolDirections {
-    std::vector<uint32_t> v;
+    std::vector<uint32_t> v, low;
     int dims = 0;
+
+    void set(const uint32_t *directions, int count) {
+        v.assign(directions, directions + size_t(count) * 32);
+        dims = count;
+        low.assign(size_t(count) * kSobolLow, 0);
+        for (int d = 0; d < count; ++d) {
+            uint32_t *t = low.data() + size_t(d) * kSobolLow;
+            for (uint32_t l = 1; l < kSobolLow; ++l) t[l] = t[l & (l - 1)] ^ v[size_t(d) * 32 + __builtin_ctz(l)];
+        }
+    }
 };
 SobolDirections &sobol_directions();
 
@@ -116,15 +132,10 @@ inline void fill_points(const PointSetContext &ctx, UniformStream &stream, uint6
             if (ud > dirs.dims)
                 throw std::invalid_argument("Sobol' points need " + std::to_string(ud) +
                                             " dimensions; direction numbers are loaded for " + std::to_string(dirs.dims));
-            // Sobol' points are linear over XOR in the index bits: x(i) = x(hi) ^ x(lo) with
-            // lo the low 11 bits.  A 2048-entry table of x(lo) per dimension (each entry one
-            // XOR from an earlier one) leaves one XOR per point.
-            constexpr uint32_t kLowBits = 11, kLow = 1u << kLowBits;
-            uint32_t low[kLow];
+            // x(i) = x(hi) ^ x(lo), lo the low kSobolLowBits bits (SobolDirections::low)
+            constexpr uint32_t kLowBits = kSobolLowBits, kLow = kSobolLow;
             for (int j = 0; j < ud; ++j) {
-                const uint32_t *v = dirs.v.data() + size_t(j) * 32;
-                low[0] = 0;
-                for (uint32_t l = 1; l < kLow; ++l) low[l] = low[l & (l - 1)] ^ v[__builtin_ctz(l)];
+                const uint32_t *low = dirs.low.data() + size_t(j) * kLow;
                 StreamKey dk = ctx.key;
                 dk.chunk = 0x50b01ULL + uint64_t(j);
                 uint32_t seed = uint32_t(splitmix64(dk.seed ^ splitmix64(dk.case_id ^ splitmix64(dk.replica ^ splitmix64(dk.chunk)))));
