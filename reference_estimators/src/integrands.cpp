@@ -237,13 +237,15 @@ class Gaussian2D final : public Integrand {
         description = "exp(-|x - (0.3, 0.6)|^2 / (2 * 0.08^2)) on [0,1]^2: an environment-map-like bump";
     }
     void eval(const double *x, double *f, size_t n) const override {
-        const double h = -0.5 / (s_ * s_);
-        for (size_t i = 0; i < n; ++i) {  // the exponent (-inf outside the box), then exp in place
-            double dx = x[2 * i] - mx_, dy = x[2 * i + 1] - my_;
-            bool in = in_unit(x[2 * i]) && in_unit(x[2 * i + 1]);
-            f[i] = in ? h * (dx * dx + dy * dy) : -std::numeric_limits<double>::infinity();
-        }
-        simd::map(f, f, n, [](auto a) { return fm::exp(a); });
+        // in vector lanes, 0 outside the box (GCC had compiled the scalar loop of the exponents
+        // with a branch per coordinate test and the centre reloaded a point, behind the exp
+        // pass: 2.1 ns a point, three times the 1-D Gaussian's; the same bits)
+        const double h = -0.5 / (s_ * s_), mx = mx_, my = my_;
+        simd::map2(x, f, n, [h, mx, my](auto a, auto b) {
+            using D = decltype(a);
+            const D dx = a - mx, dy = b - my;
+            return on_unit(a, on_unit(b, fm::exp(h * (dx * dx + dy * dy))));
+        });
     }
     double value(double x, double y) const { double f, p[2] = {x, y}; eval(p, &f, 1); return f; }
   private:

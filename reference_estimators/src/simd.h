@@ -211,6 +211,19 @@ RE_INLINE void store3(double *x, f64v a, f64v b, f64v c) {
 #endif
 }
 
+// y[i] = fn(x[2 i], x[2 i + 1]) for i < n (n 2-vectors in, one value each out), as map; the
+// element loop compiles to two permutes a vector.
+template <class Fn>
+RE_INLINE void map2(const double *x, double *y, size_t n, Fn fn) {
+    size_t i = 0;
+    for (; i + kWidth <= n; i += kWidth) {
+        f64v a, b;
+        for (size_t l = 0; l < kWidth; ++l) { a[l] = x[2 * (i + l)]; b[l] = x[2 * (i + l) + 1]; }
+        store(y + i, fn(a, b));
+    }
+    for (; i < n; ++i) y[i] = fn(x[2 * i], x[2 * i + 1]);
+}
+
 // y[i] = fn(x[3 i], x[3 i + 1], x[3 i + 2]) for i < n (n 3-vectors in, one value each out), as map.
 template <class Fn>
 RE_INLINE void map3(const double *x, double *y, size_t n, Fn fn) {
