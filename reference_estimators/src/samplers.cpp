@@ -159,6 +159,27 @@ class UniformBox final : public Pointwise<UniformBox> {
         bool in = domain.contains(x);
         for (int j = 0; j < domain.dim; ++j) u[j] = in ? (x[j] - domain.lo[j]) / (domain.hi[j] - domain.lo[j]) : kNaN;
     }
+    // The square's batches with its corners in locals and the membership test branch-free (the
+    // generic loops reloaded the corners a coordinate and called contains() a point: an eighth
+    // of an MIS estimate with a table sampler); the same bits.  Other boxes: Pointwise's loops.
+    void sample(const double *u, double *x, double *p, size_t n) const override {
+        if (domain.dim != 2) return Pointwise::sample(u, x, p, n);
+        const double a0 = domain.lo[0], w0 = domain.hi[0] - a0, a1 = domain.lo[1], w1 = domain.hi[1] - a1;
+        const double q = inv_measure_;
+        for (size_t i = 0; i < n; ++i) {
+            x[2 * i] = a0 + w0 * u[2 * i];
+            x[2 * i + 1] = a1 + w1 * u[2 * i + 1];
+            p[i] = q;
+        }
+    }
+    void pdf(const double *x, double *p, size_t n) const override {
+        if (domain.dim != 2) return Pointwise::pdf(x, p, n);
+        const double a0 = domain.lo[0], b0 = domain.hi[0], a1 = domain.lo[1], b1 = domain.hi[1], q = inv_measure_;
+        for (size_t i = 0; i < n; ++i) {
+            const double s = x[2 * i], t = x[2 * i + 1];
+            p[i] = (s >= a0) & (s <= b0) & (t >= a1) & (t <= b1) ? q : 0.0;
+        }
+    }
 
   private:
     double inv_measure_;
@@ -312,10 +333,12 @@ struct PiecewiseTables {
     // bin_of_x's division where a sampled point is checked to lie in its bin.
     std::vector<double> edge;
     double inv_bins;   // 1 / bins where bins is a power of 2 (dividing by it is multiplying by that, exactly), else 0
+    double inv_width;  // 1 / (b - a) where b - a is a power of 2 (the unit interval's 1: likewise exact), else 0
 
     // No tables yet, each to have `bins` bins over [a, b].
     explicit PiecewiseTables(size_t bins, double a = 0, double b = 1)
-        : bins(bins), a(a), b(b), edge(bins + 1), inv_bins((bins & (bins - 1)) == 0 ? 1.0 / double(bins) : 0.0) {
+        : bins(bins), a(a), b(b), edge(bins + 1), inv_bins((bins & (bins - 1)) == 0 ? 1.0 / double(bins) : 0.0),
+          inv_width(exact_reciprocal(b - a)) {
         edge[0] = -INFINITY;
         for (size_t o = 1; o < bins; ++o) edge[o] = first_above(a, b, o - 1);
         edge[bins] = INFINITY;
@@ -356,7 +379,7 @@ struct PiecewiseTables {
         return size_t(below[k * bins + std::min(lo, bins - 1)]);
     }
     size_t bin_of_x(double x) const {
-        double t = (x - a) / (b - a) * double(bins);
+        double t = (inv_width > 0 ? (x - a) * inv_width : (x - a) / (b - a)) * double(bins);
         return std::min(size_t(t), bins - 1);
     }
     bool in_bin(double x, size_t o) const { return x >= edge[o] && x < edge[o + 1]; }
@@ -365,7 +388,7 @@ struct PiecewiseTables {
     double cdf_at(size_t k, double x) const {
         const size_t o = bin_of_x(x);
         const double *c = &cdf[k * (bins + 1)];
-        const double s = (x - a) / (b - a) * double(bins) - double(o);
+        const double s = (inv_width > 0 ? (x - a) * inv_width : (x - a) / (b - a)) * double(bins) - double(o);
         return c[o] + s * (c[o + 1] - c[o]);
     }
 
@@ -396,6 +419,15 @@ struct PiecewiseTables {
     }
 
   private:
+    // 1 / w where w is a power of 2 and 1 / w a normal double (then v / w == v * (1 / w) for
+    // every v, subnormal results included), else 0.
+    static double exact_reciprocal(double w) {
+        int e;
+        const bool power_of_two = w > 0 && std::frexp(w, &e) == 0.5;
+        const double r = 1.0 / w;
+        return power_of_two && std::isnormal(r) ? r : 0.0;
+    }
+
     // x in bin o of table k for uniform u, and its density.
     double point_in(size_t k, size_t o, double u, double *x) const {
         const double *c = &cdf[k * (bins + 1)];
@@ -495,8 +527,9 @@ class PiecewiseConstant2D final : public Pointwise<PiecewiseConstant2D> {
         return py * px;
     }
     double pdf_one(const double *x) const {
-        if (!domain.contains(x)) return 0.0;
-        return marginal_.density(0, x[1]) * conditional_.density(marginal_.bin_of_x(x[1]), x[0]);
+        if (!((x[0] >= 0) & (x[0] <= 1) & (x[1] >= 0) & (x[1] <= 1))) return 0.0;   // domain.contains, inline
+        const size_t row = marginal_.bin_of_x(x[1]);   // marginal_.density's bin too
+        return marginal_.f[row] * marginal_.scale[0] * conditional_.density(row, x[0]);
     }
     void invert_one(const double *x, double *u) const {
         if (!domain.contains(x)) { u[0] = u[1] = kNaN; return; }
