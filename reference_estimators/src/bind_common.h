@@ -8,8 +8,6 @@
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
 
-#include <sys/mman.h>  // madvise: huge pages under big arrays
-
 #include <cstdint>
 #include <sstream>
 #include <string>
@@ -24,17 +22,6 @@ namespace nb = nanobind;
 using InArray = nb::ndarray<const double, nb::c_contig, nb::device::cpu>;
 using OutArray = nb::ndarray<nb::numpy, double>;
 
-// Asks the kernel for transparent huge pages under a new array of `bytes` from 4 MiB (what
-// numpy does for its own arrays): a million 3-vectors are 24 MB, 6000 page faults of 4 KiB
-// without it, 11 ms of this VM's time a fresh array (as long as the computation filling
-// it), and 12 with it.  Only advice: where THP is off it changes nothing.
-inline void advise_huge_pages(void *p, size_t bytes) {
-    if (bytes < (size_t(1) << 22)) return;
-    const uintptr_t first = (reinterpret_cast<uintptr_t>(p) + 4095) & ~uintptr_t(4095);
-    const uintptr_t end = reinterpret_cast<uintptr_t>(p) + bytes;
-    if (end > first) madvise(reinterpret_cast<void *>(first), end - first, MADV_HUGEPAGE);
-}
-
 // Memory for `count` values of an output array, from the BufferCache, and the capsule that
 // gives it back when numpy frees the array: the buffer's capacity sits in a header of
 // kBufferHeader bytes before the values.
@@ -44,7 +31,6 @@ T *output_buffer(size_t count, nb::capsule &owner) {
     size_t capacity;
     char *base = static_cast<char *>(BufferCache::instance().take(kBufferHeader + count * sizeof(T), capacity));
     *reinterpret_cast<size_t *>(base) = capacity;
-    advise_huge_pages(base, capacity);
     owner = nb::capsule(base + kBufferHeader, [](void *q) noexcept {
         char *b = static_cast<char *>(q) - kBufferHeader;
         BufferCache::instance().give(b, *reinterpret_cast<size_t *>(b));

@@ -11,13 +11,27 @@
 // its pages already mapped.  Contents are never relied on: the arrays are written before use.
 #pragma once
 
+#include <sys/mman.h>  // madvise: huge pages under big arrays
+
 #include <cstddef>
+#include <cstdint>
 #include <mutex>
 #include <new>
 #include <utility>
 #include <vector>
 
 namespace re {
+
+// Asks the kernel for transparent huge pages under a new buffer of `bytes` from 4 MiB (what
+// numpy does for its own arrays): a million 3-vectors are 24 MB, 6000 page faults of 4 KiB
+// without it, 11 ms of this VM's time a fresh array (as long as the computation filling
+// it), and 12 with it.  Only advice: where THP is off it changes nothing.
+inline void advise_huge_pages(void *p, size_t bytes) {
+    if (bytes < (size_t(1) << 22)) return;
+    const uintptr_t first = (reinterpret_cast<uintptr_t>(p) + 4095) & ~uintptr_t(4095);
+    const uintptr_t end = reinterpret_cast<uintptr_t>(p) + bytes;
+    if (end > first) madvise(reinterpret_cast<void *>(first), end - first, MADV_HUGEPAGE);
+}
 
 class BufferCache {
   public:
@@ -47,7 +61,9 @@ class BufferCache {
             }
         }
         capacity = bytes > 0 ? bytes : 1;
-        return ::operator new(capacity, std::align_val_t(kAlign));
+        void *p = ::operator new(capacity, std::align_val_t(kAlign));
+        advise_huge_pages(p, capacity);   // once, where the memory is new
+        return p;
     }
 
     // A buffer from take() back: kept for reuse when it is large enough and fits the cache

@@ -13,7 +13,6 @@ namespace re {
 namespace {
 
 constexpr size_t kBlock = 2048;  // samples per block: u and y (16 KiB each) stay in L1
-constexpr double kMax = std::numeric_limits<double>::max();
 
 uint64_t chunk_count(uint64_t n) { return (n + kChunkSize - 1) / kChunkSize; }
 
@@ -93,7 +92,7 @@ size_t mark_invalid_samples(const Domain &dom, const double *x, const double *p,
         drop[i] = 0;
         if (!dom.contains(xi)) diag.record(Issue::OutsideDomain, first + i, xi, d, p[i]);
         else if (p[i] == 0) diag.record(Issue::ZeroPdf, first + i, xi, d, p[i]);
-        else if (!(p[i] > 0 && p[i] <= kMax)) diag.record(Issue::BadPdf, first + i, xi, d, p[i]);
+        else if (!valid_pdf(p[i])) diag.record(Issue::BadPdf, first + i, xi, d, p[i]);
         else continue;
         drop[i] = 1;
         ++marked;

@@ -133,19 +133,18 @@ inline void fill_points(const PointSetContext &ctx, UniformStream &stream, uint6
                 throw std::invalid_argument("Sobol' points need " + std::to_string(ud) +
                                             " dimensions; direction numbers are loaded for " + std::to_string(dirs.dims));
             // x(i) = x(hi) ^ x(lo), lo the low kSobolLowBits bits (SobolDirections::low)
-            constexpr uint32_t kLowBits = kSobolLowBits, kLow = kSobolLow;
             for (int j = 0; j < ud; ++j) {
-                const uint32_t *low = dirs.low.data() + size_t(j) * kLow;
+                const uint32_t *low = dirs.low.data() + size_t(j) * kSobolLow;
                 StreamKey dk = ctx.key;
                 dk.chunk = 0x50b01ULL + uint64_t(j);
                 uint32_t seed = uint32_t(splitmix64(dk.seed ^ splitmix64(dk.case_id ^ splitmix64(dk.replica ^ splitmix64(dk.chunk)))));
                 // in runs of one high index, so that the loop over a run has no branch and
                 // vectorises (a Sobol' estimate had spent two thirds of its time here)
                 for (size_t i0 = 0; i0 < m;) {
-                    const uint64_t hi_index = (first + i0) >> kLowBits;
-                    const size_t i1 = std::min<uint64_t>(m, ((hi_index + 1) << kLowBits) - first);
-                    const uint32_t hi_bits = sobol_bits(hi_index << kLowBits, j, dirs);
-                    const uint32_t lo0 = uint32_t((first + i0) & (kLow - 1));
+                    const uint64_t hi_index = (first + i0) >> kSobolLowBits;
+                    const size_t i1 = std::min<uint64_t>(m, ((hi_index + 1) << kSobolLowBits) - first);
+                    const uint32_t hi_bits = sobol_bits(hi_index << kSobolLowBits, j, dirs);
+                    const uint32_t lo0 = uint32_t((first + i0) & (kSobolLow - 1));
                     double *out = u + j;
                     for (size_t i = i0; i < i1; ++i) {
                         const uint32_t x = owen_scramble(hi_bits ^ low[lo0 + (i - i0)], seed);

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
 #include <sstream>
 
 #include "integrands.h"
@@ -17,15 +16,12 @@ void Sampler::invert(const double *, double *, size_t) const {
 
 size_t count_invalid_pdfs(const double *p, size_t n) {
     // in vector lanes (GCC's loop compared one at a time)
-    constexpr double kMax = std::numeric_limits<double>::max();
     size_t bad = 0, i = 0;
     simd::i64v lanes = {};
-    for (; i + simd::kWidth <= n; i += simd::kWidth) {
-        const simd::f64v v = simd::load(p + i);
-        lanes += (v > 0.0) & (v <= kMax) ? simd::i64v{} : simd::i64v{} + 1;
-    }
+    for (; i + simd::kWidth <= n; i += simd::kWidth)
+        lanes += valid_pdf(simd::load(p + i)) ? simd::i64v{} : simd::i64v{} + 1;
     for (size_t l = 0; l < simd::kWidth; ++l) bad += size_t(lanes[l]);
-    for (; i < n; ++i) bad += !(p[i] > 0 && p[i] <= kMax);
+    for (; i < n; ++i) bad += !valid_pdf(p[i]);
     return bad;
 }
 
@@ -118,7 +114,6 @@ class Directional : public Pointwise<D> {
     template <bool screen>
     size_t sample_lanes(const double *u, double *x, double *p, size_t n) const {
         constexpr size_t W = simd::kWidth;
-        constexpr double kMax = std::numeric_limits<double>::max();
         simd::i64v bad = {};
         size_t i = 0;
         for (; i + W <= n; i += W) {
@@ -128,7 +123,7 @@ class Directional : public Pointwise<D> {
             simd::store(p + i, pv);
             simd::store3(x + 3 * i, w0, w1, w2);
             if (screen) {
-                auto ok = on_sphere_v(w0, w1, w2) & (pv > 0.0) & (pv <= kMax);
+                auto ok = on_sphere_v(w0, w1, w2) & valid_pdf(pv);
                 if (hemisphere) ok &= w2 >= 0.0;
                 bad += ok ? simd::i64v{} : simd::i64v{} + 1;
             }
@@ -137,7 +132,7 @@ class Directional : public Pointwise<D> {
         for (size_t l = 0; l < W; ++l) count += size_t(bad[l]);
         for (; i < n; ++i) {
             p[i] = sample_one(u + 2 * i, x + 3 * i);
-            if (screen) count += !(this->domain.contains(x + 3 * i) && p[i] > 0 && p[i] <= kMax);
+            if (screen) count += !(this->domain.contains(x + 3 * i) && valid_pdf(p[i]));
         }
         return count;
     }
@@ -177,7 +172,7 @@ class UniformBox final : public Pointwise<UniformBox> {
         const double a0 = domain.lo[0], b0 = domain.hi[0], a1 = domain.lo[1], b1 = domain.hi[1], q = inv_measure_;
         for (size_t i = 0; i < n; ++i) {
             const double s = x[2 * i], t = x[2 * i + 1];
-            p[i] = (s >= a0) & (s <= b0) & (t >= a1) & (t <= b1) ? q : 0.0;
+            p[i] = in_rectangle(s, t, a0, b0, a1, b1) ? q : 0.0;
         }
     }
 
@@ -378,17 +373,17 @@ struct PiecewiseTables {
         }
         return size_t(below[k * bins + std::min(lo, bins - 1)]);
     }
-    size_t bin_of_x(double x) const {
-        double t = (inv_width > 0 ? (x - a) * inv_width : (x - a) / (b - a)) * double(bins);
-        return std::min(size_t(t), bins - 1);
-    }
+    // x's position on [a, b] in units of bins: (x - a) / (b - a) * bins, the division a
+    // multiplication where that is exact.
+    double position(double x) const { return (inv_width > 0 ? (x - a) * inv_width : (x - a) / (b - a)) * double(bins); }
+    size_t bin_of_x(double x) const { return std::min(size_t(position(x)), bins - 1); }
     bool in_bin(double x, size_t o) const { return x >= edge[o] && x < edge[o + 1]; }
     // Table k's density and CDF at x in [a, b].
     double density(size_t k, double x) const { return f[k * bins + bin_of_x(x)] * scale[k]; }
     double cdf_at(size_t k, double x) const {
         const size_t o = bin_of_x(x);
         const double *c = &cdf[k * (bins + 1)];
-        const double s = (inv_width > 0 ? (x - a) * inv_width : (x - a) / (b - a)) * double(bins) - double(o);
+        const double s = position(x) - double(o);
         return c[o] + s * (c[o + 1] - c[o]);
     }
 
@@ -527,7 +522,7 @@ class PiecewiseConstant2D final : public Pointwise<PiecewiseConstant2D> {
         return py * px;
     }
     double pdf_one(const double *x) const {
-        if (!((x[0] >= 0) & (x[0] <= 1) & (x[1] >= 0) & (x[1] <= 1))) return 0.0;   // domain.contains, inline
+        if (!in_rectangle(x[0], x[1], 0.0, 1.0, 0.0, 1.0)) return 0.0;   // domain.contains, inline
         const size_t row = marginal_.bin_of_x(x[1]);   // marginal_.density's bin too
         return marginal_.f[row] * marginal_.scale[0] * conditional_.density(row, x[0]);
     }

@@ -2,6 +2,7 @@
 // stream-driven draw() that also serves samplers needing a variable number of uniforms
 // (rejection).  One virtual call per block, never per sample.
 #pragma once
+#include <limits>
 #include <map>
 #include <memory>
 #include <stdexcept>
@@ -47,7 +48,12 @@ class Sampler {
 
 using SamplerPtr = std::shared_ptr<const Sampler>;
 
-// How many of the pdf values p[0..n) are not in (0, max double] (NaN included), in vector lanes.
+// Whether a pdf value is usable: in (0, max double] (NaN, infinite, negative and 0 are not),
+// for double or simd::f64v (a bool, or a lane mask).
+template <class V>
+RE_INLINE auto valid_pdf(V p) { return (p > 0.0) & (p <= std::numeric_limits<double>::max()); }
+
+// How many of the pdf values p[0..n) are not valid_pdf, in vector lanes.
 size_t count_invalid_pdfs(const double *p, size_t n);
 
 // Registry: names, parameter names with defaults, and what each sampler is.
