@@ -13,7 +13,7 @@ from . import _core
 
 __all__ = [
     "CHECK_DOMAINS", "domain_params", "domain_points", "cubature_nodes", "cubature_points", "cubature_sums",
-    "grid_histogram", "rosenblatt",
+    "cubature_moment_sums", "grid_histogram", "rosenblatt",
     "piecewise_linear_lookup", "transform_statistics", "cramer_von_mises_sum", "pdf_summary",
     "all_float32", "dither_float32",
     "float32_unit_rows", "cap_to_world",
@@ -102,6 +102,16 @@ def cubature_sums(lo: Any, hi: Any, values: Any, weights: Any, scale: float = 1.
     a, b = (np.ascontiguousarray(v, dtype=np.float64) for v in (lo, hi))
     return _core.cubature_sums(a, b, np.ascontiguousarray(values, dtype=np.float64),
                                np.ascontiguousarray(weights, dtype=np.float64).reshape(-1), float(scale))
+
+
+def cubature_moment_sums(lo: Any, hi: Any, values: Any, weights: Any, c: float) -> np.ndarray:
+    """(M, 3) integrals of q, h q and h^2 q, h = q / (q + c) (0 when c <= 0), by the tensor rule
+    on the boxes [lo, hi] (M, k), from q's ``values`` (M g^k,) at cubature_nodes' nodes:
+    cubature_sums of those columns made in numpy (h * q, h * h * q), the same bits, without
+    their array.  One pass in C++."""
+    a, b = (np.ascontiguousarray(v, dtype=np.float64) for v in (lo, hi))
+    return _core.cubature_moment_sums(a, b, np.ascontiguousarray(values, dtype=np.float64).reshape(-1),
+                                      np.ascontiguousarray(weights, dtype=np.float64).reshape(-1), float(c))
 
 
 def grid_histogram(s: Any, inside: Any, shape: tuple[int, ...]) -> np.ndarray:

@@ -32,7 +32,7 @@ import numpy as np
 import reference_estimators as rest
 
 from harness.samplers.cubature import cell_integrals, rounding_floor
-from harness.samplers.domains import Domain, ParamDensity, as_domain
+from harness.samplers.domains import Domain, MomentColumns, ParamDensity, as_domain
 from harness.samplers.reported import reported_pdf_failure
 from harness.samplers.result import SamplerCheck
 from harness.samplers.transform import STRIPS, Transform, cramer_von_mises_from_sums
@@ -85,10 +85,6 @@ class SamplerTest:
         pre, _ = cell_integrals(squares, pre_shape, 1e-8, max_depth=6, floor=floor)
         self.c = c = float(pre[:, 1].sum() / max(pre[:, 0].sum(), 1e-300))  # E_q[q], in units of q
 
-        def moments(v: np.ndarray) -> np.ndarray:
-            h = v / (v + c) if c > 0 else np.zeros_like(v)
-            return np.column_stack([v, h * v, h * h * v])
-
         # tolerance: 1 % of each base cell's Poisson noise, from the pre-pass's expected counts
         per = [b // p for b, p in zip(base, pre_shape)]
         expect = np.maximum(pre[:, 0], 0).reshape(pre_shape)
@@ -101,7 +97,7 @@ class SamplerTest:
         # left is carried into the chi-square's variance (power lost on the edges' cells, never
         # level).  The zoo's samplers spend at most 8.2 million here (envmap 16x32), a bitmap
         # area light in Mitsuba's cap map spent 48 million
-        mass3, err3 = cell_integrals(dataclasses.replace(density, columns=moments), base, tol, floor=floor,
+        mass3, err3 = cell_integrals(dataclasses.replace(density, columns=MomentColumns(c)), base, tol, floor=floor,
                                      max_evals=_MOMENT_EVALS)
         self.quadrature_faults = int((~np.all(np.isfinite(mass3), axis=1)).sum())
         mass3, err3 = np.nan_to_num(mass3), np.nan_to_num(err3)

@@ -116,8 +116,7 @@ def box_integrals(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.
     tol = np.broadcast_to(np.asarray(tol, dtype=float), (ncell,))
     owner = np.arange(ncell)
     whole = _rule(q, lo, hi)
-    total = np.zeros((ncell, whole.shape[1]))
-    err = np.zeros_like(total)
+    finished: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []   # (owner, integral, error) per depth
     evals = ncell * 4**k
     share = np.ones(ncell)
     for depth in range(max_depth + 1):
@@ -136,8 +135,7 @@ def box_integrals(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.
         diff = np.abs(refined - whole)
         limit = np.maximum(tol[owner] * share, floor * np.abs(whole[:, 0]))
         done = (change[rows, best] <= limit) | (depth == max_depth) | (evals > max_evals)
-        np.add.at(total, owner[done], refined[done])
-        np.add.at(err, owner[done], diff[done])
+        finished.append((owner[done], refined[done], diff[done]))
         if done.all():
             break
         keep = np.flatnonzero(~done)
@@ -159,4 +157,13 @@ def box_integrals(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.
         share = np.concatenate([t[2] for t in new_lo])
         hi = np.concatenate(new_hi)
         whole = np.concatenate(new_whole)
-    return total, err
+    return _owner_sums(finished, ncell, 1), _owner_sums(finished, ncell, 2)
+
+
+def _owner_sums(finished: list[tuple[np.ndarray, ...]], ncell: int, which: int) -> np.ndarray:
+    """(ncell, m): per box, the sum of its leaves' column ``which`` of ``finished`` (owner,
+    integral, error), leaves in the order they finished: np.add.at's sums, by a bincount per
+    column (add.at took a tenth of a setup)."""
+    owner = np.concatenate([f[0] for f in finished])
+    values = np.concatenate([f[which] for f in finished])
+    return np.stack([np.bincount(owner, values[:, j], minlength=ncell) for j in range(values.shape[1])], axis=1)

@@ -23,7 +23,7 @@ import numpy as np
 
 import reference_estimators as rest
 
-__all__ = ["DOMAINS", "Domain", "ParamDensity", "as_domain"]
+__all__ = ["DOMAINS", "Domain", "MomentColumns", "ParamDensity", "as_domain"]
 
 DOMAINS = ("interval", "half_line", "square", "disk", "hemisphere", "sphere")
 
@@ -83,6 +83,20 @@ class Domain:
 
 
 @dataclass(frozen=True)
+class MomentColumns:
+    """The columns (q, h q, h^2 q) of a density's values q, h = q / (q + c) bounded in [0, 1)
+    (h = 0 when c <= 0): what the sampler check's pdf moment test integrates.  A
+    :class:`ParamDensity` with these columns has the core integrate them from q's values
+    (:func:`reference_estimators.cubature_moment_sums`, the same bits as this call's array)."""
+
+    c: float
+
+    def __call__(self, q: np.ndarray) -> np.ndarray:
+        h = q / (q + self.c) if self.c > 0 else np.zeros_like(q)
+        return np.column_stack([q, h * q, h * h * q])
+
+
+@dataclass(frozen=True)
 class ParamDensity:
     """A claimed density in its domain's parameter space, q(s) = pdf(x(s)) times the Jacobian
     (:meth:`Domain.jacobian`), or columns made of it (``columns``: q's values (N,) to (N, m),
@@ -116,6 +130,8 @@ class ParamDensity:
         jacobian = self.dom.jacobian_at_points(x)
         if self.columns is None and np.ndim(jacobian) == 0:
             return rest.cubature_sums(lo, hi, pdf, weights, jacobian)
+        if isinstance(self.columns, MomentColumns):
+            return rest.cubature_moment_sums(lo, hi, pdf * jacobian, weights, self.columns.c)
         return rest.cubature_sums(lo, hi, self._columns_of(pdf * jacobian), weights)
 
 

@@ -213,6 +213,23 @@ void bind_checks(nb::module_ &m) {
     }, "lo"_a, "hi"_a, "values"_a, "weights"_a, "scale"_a,
        "(M, m) integrals of the tensor rule on the boxes [lo, hi] (M, k): the weighted sum of the values "
        "(M g^k, m) at their nodes times the volume, times `scale`.");
+    m.def("cubature_moment_sums", [](InArray lo, InArray hi, InArray values, InArray weights, double c) {
+        const size_t k = check_boxes(lo, hi), boxes = lo.shape(0), per = weights.size();
+        if (values.ndim() != 1 || values.shape(0) != boxes * per)
+            throw nb::value_error("'values' must have one value per node: shape (M g^k,)");
+        double *out;
+        OutArray oa = new_array(boxes, 3, &out);
+        {
+            nb::gil_scoped_release r;
+            for_chunks(boxes, std::max<size_t>(kCheckChunk / per, 1), [&](size_t, size_t a, size_t b, int) {
+                cubature_moment_sums(lo.data() + a * k, hi.data() + a * k, b - a, k, values.data() + a * per,
+                                     weights.data(), per, c, out + a * 3);
+            });
+        }
+        return oa;
+    }, "lo"_a, "hi"_a, "values"_a, "weights"_a, "c"_a,
+       "(M, 3) integrals of q, h q and h^2 q (h = q / (q + c), 0 when c <= 0) by the tensor rule on the boxes "
+       "[lo, hi] (M, k), from q's values (M g^k,) at the nodes.");
     m.def("grid_histogram", [](InArray s, BoolArray inside, const std::vector<int64_t> &shape) {
         if (shape.empty() || shape.size() > 2 || shape[0] < 1 || (shape.size() == 2 && shape[1] < 1))
             throw nb::value_error("'shape' must be one or two positive cell counts");

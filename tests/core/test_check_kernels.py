@@ -197,6 +197,36 @@ def test_cubature_sums_are_each_boxes_weighted_sum_times_its_volume(k, cols):
     np.testing.assert_array_equal(scaled, got * (2 * math.pi))
 
 
+@pytest.mark.parametrize("cols", [0, 3, 6])
+def test_cubature_sums_of_several_columns_are_each_columns_own_sums(cols):
+    """Columns summed in one pass (four at a time): each the same bits as that column alone."""
+    rng = np.random.default_rng(7)
+    lo, hi = random_boxes(2, 3_001, rng)
+    w = np.outer(GL_W, GL_W).reshape(-1)
+    v = rng.lognormal(0, 3, (lo.shape[0] * w.size, max(cols, 1)))
+    got = rest.cubature_sums(lo, hi, v if cols else v[:, 0], w)
+    for j in range(max(cols, 1)):
+        alone = rest.cubature_sums(lo, hi, np.ascontiguousarray(v[:, j]), w)
+        np.testing.assert_array_equal(got[:, j].view(np.uint64), alone[:, 0].view(np.uint64))
+
+
+@pytest.mark.parametrize("c", [0.7, 0.0, -1.0])
+def test_cubature_moment_sums_are_the_sums_of_the_moment_columns(c):
+    """The fused moment integrals: the same bits as cubature_sums of the columns (q, h q, h^2 q)
+    made in numpy (harness.samplers.domains.MomentColumns), zeros, infinities and NaN included."""
+    from harness.samplers.domains import MomentColumns
+    rng = np.random.default_rng(8)
+    lo, hi = random_boxes(2, 3_001, rng)
+    w = np.outer(GL_W, GL_W).reshape(-1)
+    q = rng.lognormal(0, 3, lo.shape[0] * w.size)
+    q[rng.integers(0, q.size, 300)] = 0.0
+    q[[5, 77, 901]] = [np.inf, np.nan, 1e300]
+    with np.errstate(invalid="ignore"):
+        want = rest.cubature_sums(lo, hi, MomentColumns(c)(q), w)
+        got = rest.cubature_moment_sums(lo, hi, q, w, c)
+    np.testing.assert_array_equal(got.view(np.uint64), want.view(np.uint64))
+
+
 def test_cubature_kernels_reject_mismatched_boxes_and_values():
     lo, hi = np.zeros((3, 2)), np.ones((3, 2))
     with pytest.raises(ValueError, match="shape"):
@@ -205,6 +235,8 @@ def test_cubature_kernels_reject_mismatched_boxes_and_values():
         rest.cubature_points("interval", lo, hi, GL_X)
     with pytest.raises(ValueError, match="one row per node"):
         rest.cubature_sums(lo, hi, np.ones(47), np.ones(16))
+    with pytest.raises(ValueError, match="one value per node"):
+        rest.cubature_moment_sums(lo, hi, np.ones((48, 2)), np.ones(16), 1.0)
 
 
 def test_float32_unit_rows_match_numpy_and_name_the_bad_rows():
