@@ -97,8 +97,8 @@ class SamplerTest:
         # left is carried into the chi-square's variance (power lost on the edges' cells, never
         # level).  The zoo's samplers spend at most 8.2 million here (envmap 16x32), a bitmap
         # area light in Mitsuba's cap map spent 48 million
-        mass3, err3 = cell_integrals(dataclasses.replace(density, columns=MomentColumns(c)), base, tol, floor=floor,
-                                     max_evals=_MOMENT_EVALS)
+        mass3, err3 = cell_integrals(dataclasses.replace(density, columns=MomentColumns(c)), base, tol,
+                                     floor=floor, max_evals=_MOMENT_EVALS)
         self.quadrature_faults = int((~np.all(np.isfinite(mass3), axis=1)).sum())
         mass3, err3 = np.nan_to_num(mass3), np.nan_to_num(err3)
         self.mass, self.err = mass3[:, 0].reshape(base), err3[:, 0].reshape(base)

@@ -166,4 +166,5 @@ def _owner_sums(finished: list[tuple[np.ndarray, ...]], ncell: int, which: int) 
     column (add.at took a tenth of a setup)."""
     owner = np.concatenate([f[0] for f in finished])
     values = np.concatenate([f[which] for f in finished])
-    return np.stack([np.bincount(owner, values[:, j], minlength=ncell) for j in range(values.shape[1])], axis=1)
+    columns = [np.bincount(owner, values[:, j], minlength=ncell) for j in range(values.shape[1])]
+    return np.stack(columns, axis=1)
