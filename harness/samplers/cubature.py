@@ -157,14 +157,13 @@ def box_integrals(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.
         share = np.concatenate([t[2] for t in new_lo])
         hi = np.concatenate(new_hi)
         whole = np.concatenate(new_whole)
-    return _owner_sums(finished, ncell, 1), _owner_sums(finished, ncell, 2)
+    owner, integral, error = (np.concatenate(part) for part in zip(*finished))
+    return _owner_sums(owner, integral, ncell), _owner_sums(owner, error, ncell)
 
 
-def _owner_sums(finished: list[tuple[np.ndarray, ...]], ncell: int, which: int) -> np.ndarray:
-    """(ncell, m): per box, the sum of its leaves' column ``which`` of ``finished`` (owner,
-    integral, error), leaves in the order they finished: np.add.at's sums, by a bincount per
-    column (add.at took a tenth of a setup)."""
-    owner = np.concatenate([f[0] for f in finished])
-    values = np.concatenate([f[which] for f in finished])
+def _owner_sums(owner: np.ndarray, values: np.ndarray, ncell: int) -> np.ndarray:
+    """(ncell, m): per box, the sum of the rows of ``values`` (L, m) that it owns, in row order
+    (the leaves in the order they finished): np.add.at's sums, by a bincount per column
+    (add.at took a tenth of a setup)."""
     columns = [np.bincount(owner, values[:, j], minlength=ncell) for j in range(values.shape[1])]
     return np.stack(columns, axis=1)

@@ -380,6 +380,13 @@ inline void cubature_points(CheckDomain d, double dlo, double dhi, const double 
     domain_points(d, dlo, dhi, scratch.data(), count, x);
 }
 
+// The volume prod (hi - lo) of a box with corners lo, hi (k coordinates each), in axis order.
+inline double box_volume(const double *lo, const double *hi, size_t k) {
+    double vol = 1.0;
+    for (size_t j = 0; j < k; ++j) vol *= hi[j] - lo[j];
+    return vol;
+}
+
 // The tensor rule's integrals out (boxes, cols): for box m and column c, the sum over its
 // `per` nodes, in order, of weights[node] v[m per + node, c] (v (boxes per, cols), the values
 // at cubature_nodes' nodes) times the box's volume prod (hi - lo), times `scale` (a constant
@@ -390,8 +397,7 @@ inline void cubature_points(CheckDomain d, double dlo, double dhi, const double 
 inline void cubature_sums(const double *lo, const double *hi, size_t boxes, size_t k, const double *v, size_t cols,
                           const double *weights, size_t per, double scale, double *out) {
     for (size_t m = 0; m < boxes; ++m) {
-        double vol = 1.0;
-        for (size_t j = 0; j < k; ++j) vol *= hi[k * m + j] - lo[k * m + j];
+        const double vol = box_volume(lo + k * m, hi + k * m, k);
         const double *vm = v + m * per * cols;
         for (size_t c = 0; c < cols; c += 4) {
             const size_t width = std::min<size_t>(4, cols - c);
@@ -411,8 +417,7 @@ inline void cubature_sums(const double *lo, const double *hi, size_t boxes, size
 inline void cubature_moment_sums(const double *lo, const double *hi, size_t boxes, size_t k, const double *v,
                                  const double *weights, size_t per, double c, double *out) {
     for (size_t m = 0; m < boxes; ++m) {
-        double vol = 1.0;
-        for (size_t j = 0; j < k; ++j) vol *= hi[k * m + j] - lo[k * m + j];
+        const double vol = box_volume(lo + k * m, hi + k * m, k);
         const double *vm = v + m * per;
         double s0 = 0.0, s1 = 0.0, s2 = 0.0;
         for (size_t i = 0; i < per; ++i) {
