@@ -87,8 +87,8 @@ def test_one_cached_reference_per_estimand(raster):
 
 def test_a_planted_offset_bias_is_found(tmp_path, monkeypatch):
     """Sub-pixel offsets shifted by 0.15 pixel (a filter not centred on the pixel) estimate a
-    different image: the per-pixel test must say so (16 replicas: the count from which pixels and
-    small tiles, where an edge's shift shows, are tested)."""
+    different image: the multiscale test must say so at a local scale (16 replicas: the count from
+    which pixels and small tiles, where an edge's shift shows, are tested)."""
     from harness.adapters.pyrender import render as adapter
 
     real = adapter.PyrenderRenderer._placements
@@ -116,10 +116,15 @@ def test_a_planted_offset_bias_is_found(tmp_path, monkeypatch):
     summary = run_suite(suite, tmp_path / "shifted.sqlite")
     b = summary["render"].results[0].bias
     assert [v["bias"] for v in summary["render"].verdicts] == ["biased (expected)"]
-    # a shift keeps the image's mean: fine scales (pixels or small tiles along the edges) find it,
-    # the whole image's mean does not (which scale is the most significant depends on the render
-    # seeds, which follow the core's build: 8x8 tiles along an edge may beat the pixels)
-    fine = [s for s in b.scales if s.size in (1, 2, 4)]
+    # a shift keeps the image's mean: local scales (pixels up to 8x8 tiles along the edges) find
+    # it, the whole image's mean does not.  Which local scale does depends on the render seeds,
+    # which follow the suite seed and the core's build: a pixel on an edge averages 64 covered or
+    # uncovered offsets (binomial, skewed one way where it is mostly dark, the other where it is
+    # mostly lit), so the skew gate may leave both sides of every edge pixel and small tile
+    # untested.  Measured over suite seeds 0-5 (this build): 8x8 tiles rejected on all six
+    # (p <= 5e-8 at alpha 1.7e-3), pixels on five; on seed 0 the gate left every pixel, 2x2 and
+    # 4x4 side untested.
+    fine = [s for s in b.scales if s.size in (1, 2, 4, 8)]
     assert any(s.rejected for s in fine), [(s.size, s.pvalue, s.alpha) for s in b.scales]
     assert b.pvalue_mean > suite.alpha
 
