@@ -4,6 +4,7 @@
     out = r.render(spp=16, seed=3)       # Render: image (height, width, channels) float64, seconds
     r.exact()                            # the exact image where the scene has one, else None
     r.fingerprint()                      # JSON-able dict of everything that fixes the images
+                                         # (its "environment" key: see ENVIRONMENT)
     r.reference()                        # the renderer of the reference when exact() is None
     r.describe()                         # optional: (scene, configuration) for tables
     r.notes()                            # optional: lines a reader of the table must know
@@ -33,12 +34,20 @@ from typing import Any, Callable, Protocol
 import numpy as np
 
 __all__ = ["Render", "Renderer", "RenderError", "ImageFaults", "image_faults", "read_image", "renderer",
-           "adapter_names", "check_spec", "file_digest", "ExactImage", "ADAPTERS", "ENTRY_POINTS"]
+           "adapter_names", "check_spec", "file_digest", "ExactImage", "ADAPTERS", "ENTRY_POINTS",
+           "ENVIRONMENT"]
 
 # adapter name -> module that defines `make_renderer(spec: dict[, base=]) -> Renderer`
 ADAPTERS = {"mitsuba": "harness.adapters.mitsuba.render", "pyrender": "harness.adapters.pyrender.render",
             "command": "harness.adapters.command", "python": "harness.adapters.python"}
 ENTRY_POINTS = "harness.adapters"   # the entry-point group of third-party adapters
+# A fingerprint's key for what renders rather than what is rendered: library versions, compiled
+# builds, GL driver strings, digests of a team's renderer sources, file locations.  It is part of
+# a stored render's key (a new version re-renders) but not of the render seeds, which derive from
+# the rest and the suite seed: a suite draws the same seeds on every machine and build (a core
+# built for AVX2 or AVX-512 hashes differently), and a fixed renderer is compared with the old
+# one on common random numbers.
+ENVIRONMENT = "environment"
 
 
 class RenderError(RuntimeError):

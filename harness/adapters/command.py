@@ -45,7 +45,15 @@ from typing import Any
 
 import numpy as np
 
-from harness.adapters.base import ExactImage, Render, RenderError, check_spec, file_digest, read_image
+from harness.adapters.base import (
+    ENVIRONMENT,
+    ExactImage,
+    Render,
+    RenderError,
+    check_spec,
+    file_digest,
+    read_image,
+)
 
 __all__ = ["CommandRenderer", "make_renderer"]
 
@@ -114,9 +122,12 @@ class CommandRenderer:
         return CommandRenderer(spec, self.base)
 
     def fingerprint(self) -> dict[str, Any]:
+        """The table's keys and exact image; the digests of the files the command names are the
+        environment (part of the store key, not of the seeds: an edited script is compared with
+        the old one on the same seeds)."""
         files = {w: file_digest(self.base / w) for w in _words(self.command) if (self.base / w).is_file()}
         return {"adapter": "command", **{k: v for k, v in self.spec.items() if k != "exact"},
-                "sources": files, "exact": self._exact.digest()}
+                "exact": self._exact.digest(), ENVIRONMENT: {"sources": files}}
 
     def describe(self) -> tuple[str, str]:
         """(scene, configuration) for tables: the ``scene`` key or the script the command runs,

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from harness.adapters.base import ExactImage, Render, RenderError, check_spec
+from harness.adapters.base import ENVIRONMENT, ExactImage, Render, RenderError, check_spec
 from harness.usercode import UserCodeError, load_attr, source_fingerprint
 
 __all__ = ["PythonRenderer", "make_renderer"]
@@ -81,8 +81,11 @@ class PythonRenderer:
         return self
 
     def fingerprint(self) -> dict[str, Any]:
+        """The function, its parameters and exact image; its source's digest is the environment
+        (part of the store key, not of the seeds: an edited function is compared with the old one
+        on the same seeds)."""
         return {"adapter": "python", "function": self.target, "params": self.params,
-                "source": source_fingerprint(self.function), "exact": self._exact.digest()}
+                "exact": self._exact.digest(), ENVIRONMENT: {"source": source_fingerprint(self.function)}}
 
     def describe(self) -> tuple[str, str]:
         params = ", ".join(f"{k}={v}" for k, v in self.params.items())

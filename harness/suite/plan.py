@@ -26,6 +26,7 @@ from typing import Any
 
 import reference_estimators as rest
 
+from harness.adapters.base import ENVIRONMENT
 from harness.fingerprint import code_fingerprint
 from harness.stats.tails import TailSample
 from harness.stats.timing import CLOCK
@@ -113,27 +114,37 @@ def sampler_spec(suite: Suite, sc: SamplerCase) -> str:
                        "udim": sc.udim})
 
 
+def _settings(fingerprint: dict[str, Any]) -> dict[str, Any]:
+    """A renderer fingerprint without its ``environment`` (harness.adapters.base.ENVIRONMENT)."""
+    return {k: v for k, v in fingerprint.items() if k != ENVIRONMENT}
+
+
 def render_stream(suite: Suite, fingerprint: dict[str, Any]) -> str:
-    """What a render case's seeds derive from: the renderer's fingerprint and the suite seed."""
-    return _hash({"renderer": fingerprint, "seed": suite.seed, "format": _RENDER_FORMAT})
+    """What a render case's seeds derive from: the renderer's settings (its fingerprint but the
+    environment, so the same suite draws the same seeds on every machine, build and library
+    version) and the suite seed."""
+    return _hash({"renderer": _settings(fingerprint), "seed": suite.seed, "format": _RENDER_FORMAT})
 
 
 def render_key(suite: Suite, fingerprint: dict[str, Any]) -> str:
-    """Fingerprint of a render case's images: its seeds' source (:func:`render_stream`) and the
-    harness's adapter code."""
-    return _hash({"stream": render_stream(suite, fingerprint), "code": code_fingerprint(*_RENDER_CODE)})
+    """Fingerprint of a render case's images: its seeds' source (:func:`render_stream`), the
+    renderer's environment and the harness's adapter code."""
+    return _hash({"stream": render_stream(suite, fingerprint), "environment": fingerprint.get(ENVIRONMENT),
+                  "code": code_fingerprint(*_RENDER_CODE)})
 
 
 def reference_stream(suite: Suite, rc: RenderCase, fingerprint: dict[str, Any]) -> str:
-    """What a rendered reference's seeds derive from: its renderer, budget, parts, the suite seed."""
-    return _hash({"reference": fingerprint, "spp": rc.reference_spp, "parts": rc.reference_parts,
+    """What a rendered reference's seeds derive from: its renderer's settings, budget, parts and
+    the suite seed."""
+    return _hash({"reference": _settings(fingerprint), "spp": rc.reference_spp, "parts": rc.reference_parts,
                   "seed": suite.seed, "format": _RENDER_FORMAT})
 
 
 def reference_key(suite: Suite, rc: RenderCase, fingerprint: dict[str, Any]) -> str:
-    """Fingerprint of a rendered reference: its seeds' source and the harness's adapter code."""
+    """Fingerprint of a rendered reference: its seeds' source, its renderer's environment and the
+    harness's adapter code."""
     return _hash({"stream": reference_stream(suite, rc, fingerprint),
-                  "code": code_fingerprint(*_RENDER_CODE)})
+                  "environment": fingerprint.get(ENVIRONMENT), "code": code_fingerprint(*_RENDER_CODE)})
 
 
 def render_seed(stream_key: str, unit: Unit) -> int:

@@ -94,7 +94,7 @@ def test_the_fingerprint_follows_the_script_source(repo):
     before = renderer("command", command(), base=repo).fingerprint()
     (repo / "render.py").write_text((repo / "render.py").read_text() + "\n# changed\n")
     after = renderer("command", command(), base=repo).fingerprint()
-    assert before["sources"]["render.py"] != after["sources"]["render.py"]
+    assert before["environment"]["sources"]["render.py"] != after["environment"]["sources"]["render.py"]
     assert "cwd" not in json.dumps(after) and str(repo) not in json.dumps(after)
 
 

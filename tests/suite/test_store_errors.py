@@ -258,6 +258,22 @@ def test_keys_follow_the_harness_code_but_seeds_do_not(monkeypatch):
     assert after[2] == before[2] and plan.render_seed(after[2], unit) == seed   # the same random streams
 
 
+def test_keys_follow_a_renderers_environment_but_seeds_do_not():
+    """A core built on another machine (or another library version, a GL driver, an edited user
+    renderer) re-renders, with the same seeds; a changed setting draws new ones."""
+    suite = loads_suite('[[render]]\nadapter = "mitsuba"\nscene = "furnace"\nvariant = "scalar_rgb"\n')
+    rc = suite.renders[0]
+    here = {"scene": "furnace", "spp": 4, "environment": {"core": "a1", "mitsuba": "3.9.1"}}
+    there = {**here, "environment": {"core": "b2", "mitsuba": "3.9.1"}}
+    other = {**here, "spp": 8}
+    assert plan.render_key(suite, here) != plan.render_key(suite, there)
+    assert plan.reference_key(suite, rc, here) != plan.reference_key(suite, rc, there)
+    assert plan.render_stream(suite, here) == plan.render_stream(suite, there)
+    assert plan.reference_stream(suite, rc, here) == plan.reference_stream(suite, rc, there)
+    assert plan.render_stream(suite, here) != plan.render_stream(suite, other)
+    assert plan.reference_stream(suite, rc, here) != plan.reference_stream(suite, rc, other)
+
+
 def test_a_suite_too_big_to_plan_is_refused_before_anything_is_made():
     start = time.perf_counter()
     with pytest.raises(harness.SuiteError, match=r"suite\.toml:3: samples: .*1e\+15 samples need "

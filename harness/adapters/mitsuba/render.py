@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from harness.adapters.base import Render
+from harness.adapters.base import ENVIRONMENT, Render
 from harness.adapters.mitsuba.runtime import VARIANT_LOCK, activate
 
 __all__ = ["MitsubaRenderer", "make_renderer", "SCENES"]
@@ -131,14 +131,16 @@ class MitsubaRenderer:
         return None if value is None else np.full((self.height, self.width, 3), value)
 
     def fingerprint(self) -> dict[str, Any]:
+        """The settings (a scene file by its content) and the environment: Mitsuba's version and
+        where the scene file lies (part of the store key, not of the seeds)."""
         mi = _mi()
-        scene = self.scene_name
+        scene, environment = self.scene_name, {"mitsuba": mi.__version__}
         if self._is_file:
-            scene = {"file": str(Path(scene).resolve()),
-                     "sha256": hashlib.sha256(Path(scene).read_bytes()).hexdigest()}
-        return {"adapter": "mitsuba", "mitsuba": mi.__version__, "scene": scene,
-                "integrator": self.integrator_type, "variant": self.variant, "max_depth": self.max_depth,
-                "width": self.width, "height": self.height}
+            scene = {"sha256": hashlib.sha256(Path(scene).read_bytes()).hexdigest()}
+            environment["file"] = str(Path(self.scene_name).resolve())
+        return {"adapter": "mitsuba", "scene": scene, "integrator": self.integrator_type,
+                "variant": self.variant, "max_depth": self.max_depth, "width": self.width,
+                "height": self.height, ENVIRONMENT: environment}
 
     def reference(self) -> MitsubaRenderer:
         """The renderer of this scene's reference: path tracing (volpath with media) at the

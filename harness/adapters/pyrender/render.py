@@ -82,7 +82,7 @@ from pyrender.shader_program import ShaderProgramCache
 
 import reference_estimators as rest
 
-from harness.adapters.base import Render
+from harness.adapters.base import ENVIRONMENT, Render
 from harness.adapters.pyrender import scenes
 from harness.stats.validate import integer_in
 
@@ -352,8 +352,13 @@ class PyrenderRenderer:
         return PyrenderRenderer({**self._spec, "points": "sobol"})
 
     def fingerprint(self) -> dict[str, Any]:
-        """Everything that fixes the images (JSON-able), and ``estimand_digest``: a hash of all
-        of it but the point set, which names the expected image a reference estimates."""
+        """Everything that fixes the images (JSON-able): the settings, the ``environment``
+        (library versions, the core's build, the GL strings: part of the store key, not of the
+        seeds), and ``estimand_digest``: a hash of all of it but the point set, which names the
+        expected image a reference estimates."""
+        environment = {"pyrender": pyrender.__version__, "PyOpenGL": OpenGL.__version__,
+                       "trimesh": trimesh.__version__, "gl": _gl_strings(self.width, self.height),
+                       "core": rest.core_fingerprint()}
         fp: dict[str, Any] = {
             "adapter": "pyrender", "scene": self.scene_name, "scene_digest": scenes.digest(self.desc),
             "width": self.width, "height": self.height, "technique": self.technique, "points": self.points,
@@ -361,13 +366,12 @@ class PyrenderRenderer:
             "image": "mean of 8-bit frames / 255 (pyrender gamma 1/2.2, clamped)",
             "shadow_map": SHADOW_TEX_SZ if self.desc.area_light is not None else None,
             "points_source": "reference_estimators.points(spp, dim, points, seed=seed, case_id=0, replica=0)",
-            "pyrender": pyrender.__version__, "PyOpenGL": OpenGL.__version__, "trimesh": trimesh.__version__,
-            "core": rest.core_fingerprint(),
+            ENVIRONMENT: environment,
         }
-        fp["gl"] = _gl_strings(self.width, self.height)
-        # what fixes the expected image: everything but the point set (random, stratified and
-        # Sobol' estimate the same image, so they can share one cached reference)
-        estimand = {k: v for k, v in fp.items() if k not in ("points", "points_source", "core")}
+        # what fixes the expected image: everything but the point set and the core that draws it
+        # (random, stratified and Sobol' estimate the same image, so they can share one reference)
+        estimand = {k: v for k, v in fp.items() if k not in ("points", "points_source", ENVIRONMENT)}
+        estimand["renderer"] = {k: v for k, v in environment.items() if k != "core"}
         fp["estimand_digest"] = hashlib.sha256(json.dumps(estimand, sort_keys=True).encode()).hexdigest()[:16]
         return fp
 
