@@ -43,7 +43,7 @@ def test_render_protocol_and_exact_scenes(variant):
         means = imgs.reshape(8, -1).mean(axis=1)
         assert abs(means.mean() - value) < 4 * means.std(ddof=1) / math.sqrt(8) + 1e-6
         fp = r.fingerprint()
-        assert fp["variant"] == variant and fp["scene"] == scene and "mitsuba" in fp
+        assert fp["variant"] == variant and fp["scene"] == scene and "mitsuba" in fp["environment"]
 
 
 def test_spec_errors_name_the_key():
@@ -242,7 +242,9 @@ def test_xml_scene_file(tmp_path):
         </scene>"""))
     r = renderer("mitsuba", {"scene": str(xml), "integrator": "path"})
     assert r.exact() is None and r.render(4, 1).image.shape == (16, 16, 3)
-    assert r.fingerprint()["scene"]["sha256"] == __import__("hashlib").sha256(xml.read_bytes()).hexdigest()
+    fp = r.fingerprint()
+    assert fp["scene"] == {"sha256": __import__("hashlib").sha256(xml.read_bytes()).hexdigest()}
+    assert fp["environment"]["file"] == str(xml.resolve())   # where it lies: the key's, not the seeds'
     with pytest.raises(ValueError, match="'width'"):
         renderer("mitsuba", {"scene": str(xml), "width": 8})
 
