@@ -107,6 +107,7 @@ def correct() -> list[ZooSampler]:
     return [
         _core("linear", "interval", a=1.0, b=0.37),
         _core("power", "interval", k=-0.5),
+        _core("power", "interval", k=-0.9),   # a strong singularity: the cubature's tail extrapolated
         _core("trimmed_logistic", "interval", mu=0.3, s=1e-3, a=0.0, b=1.0),
         ZooSampler("piecewise_constant_1d (zero bins, steps in cells)", ("interval", -1.0, 2.0),
                    lambda u: steps.sample(u)[0], steps.pdf),
