@@ -124,25 +124,16 @@ def box_integrals(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.
     ncell, k = lo.shape
     tol = np.broadcast_to(np.asarray(tol, dtype=float), (ncell,))
     owner = np.arange(ncell)
-    whole: np.ndarray | None = None     # the boxes' integrals: found with their halves at depth 0
+    whole = _rule(q, lo, hi)
     finished: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []   # (owner, integral, error) per depth
     evals = ncell * 4**k
     share = np.ones(ncell)
     history = np.full((ncell, 2), np.nan)   # the changes of each box's parent's and grandparent's splits
     for depth in range(max_depth + 1):
-        # the halves along every axis (and at depth 0 the boxes themselves) in one call of q:
-        # near a singularity a depth refines a few boxes, and each call's fixed cost (numpy's
-        # and the pdf's own) was most of a tabulation's time there.  The same integrals: each
-        # box's rule depends on its own nodes only
-        halves = [_halves(lo, hi, axis) for axis in range(k)]
-        first = [(lo, hi)] if whole is None else []
-        boxes = first + halves
-        values = _rule(q, np.concatenate([b[0] for b in boxes]), np.concatenate([b[1] for b in boxes]))
-        if whole is None:
-            whole, values = values[:lo.shape[0]], values[lo.shape[0]:]
         splits = []
-        for axis, (clo, chi) in enumerate(halves):
-            parts = values[axis * clo.shape[0]:(axis + 1) * clo.shape[0]].reshape(-1, 2, whole.shape[1])
+        for axis in range(k):
+            clo, chi = _halves(lo, hi, axis)
+            parts = _rule(q, clo, chi).reshape(-1, 2, whole.shape[1])
             splits.append((clo, chi, parts))
             evals += clo.shape[0] * 4**k
         # each split's integrals, its halves added (numpy's sum over an axis of 2 cost 10x more)

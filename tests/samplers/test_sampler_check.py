@@ -256,23 +256,6 @@ def test_half_line_domain_for_heavy_tails():
 
 
 # --- the cubature ------------------------------------------------------------------------------
-def test_the_cubature_calls_the_density_once_a_depth():
-    """x^-1/2 y on 4 x 4 cells of the square (singular along x = 0, so refined to the depth
-    limit): every depth's halves along both axes, and at depth 0 the cells themselves, are
-    integrated in one call of q (a call a rule had cost a singular pdf's setup most of its time
-    in fixed costs)."""
-    from harness.samplers.cubature import cell_integrals
-
-    batches = []
-
-    def q(x):
-        batches.append(len(x))
-        return x[:, 0] ** -0.5 * x[:, 1]
-
-    cell_integrals(q, (4, 4), 1e-14, max_depth=6)
-    assert len(batches) == 6 + 1 and batches[0] == 16 * 16 * 5, batches
-
-
 @pytest.mark.parametrize("a", [0.5, 0.75, 0.9])
 @pytest.mark.parametrize("depth", [3, 6, 24])
 def test_the_cubature_error_bounds_a_singularity_it_stops_short_of(a, depth):
