@@ -142,13 +142,14 @@ def box_integrals(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.
         best = np.argmax(change, axis=1)
         rows = np.arange(lo.shape[0])
         refined = np.stack(split_sums, axis=1)[rows, best]
+        moved = change[rows, best]          # the best split's change of component 0
         diff = np.abs(refined - whole)
         limit = np.maximum(tol[owner] * share, floor * np.abs(whole[:, 0]))
-        converged = change[rows, best] <= limit
+        converged = moved <= limit
         done = converged | (depth == max_depth) | (evals > max_evals)
         stopped = done & ~converged
         if extrapolate and stopped.any():
-            diff[stopped] *= _unconverged_factor(change[rows, best][stopped], history[stopped])[:, None]
+            diff[stopped] *= _unconverged_factor(moved[stopped], history[stopped])[:, None]
         finished.append((owner[done], refined[done], diff[done]))
         if done.all():
             break
