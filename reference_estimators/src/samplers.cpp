@@ -323,17 +323,25 @@ struct PiecewiseTables {
     double a, b;
     std::vector<double> cdf, f, scale;
     std::vector<int64_t> below;   // below[k bins + o]: the last non-empty bin at or below o (or 0)
+    // Small tables' CDFs for bin_of_u's counting search: table k's cdf[1 .. bins] at
+    // upper[k stride ..], padded with +inf to stride, a whole number of vectors.  Kept while
+    // every table's CDF is non-decreasing (then the count of entries <= u is the last bin
+    // with cdf[o] <= u, as the halving search finds it); else empty and unused.
+    std::vector<double> upper;
     // edge[o]: the least double x with bin_of_x(x) >= o (edge[0] = -inf, edge[bins] = inf), so
     // bin_of_x(x) == o exactly where edge[o] <= x < edge[o + 1]: two comparisons in place of
     // bin_of_x's division where a sampled point is checked to lie in its bin.
     std::vector<double> edge;
     double inv_bins;   // 1 / bins where bins is a power of 2 (dividing by it is multiplying by that, exactly), else 0
     double inv_width;  // 1 / (b - a) where b - a is a power of 2 (the unit interval's 1: likewise exact), else 0
+    size_t stride;     // upper's entries a table (0: upper unused)
+    bool gaps = false; // whether a table has an empty bin (else below[k bins + o] = o)
 
     // No tables yet, each to have `bins` bins over [a, b].
     explicit PiecewiseTables(size_t bins, double a = 0, double b = 1)
         : bins(bins), a(a), b(b), edge(bins + 1), inv_bins((bins & (bins - 1)) == 0 ? 1.0 / double(bins) : 0.0),
-          inv_width(exact_reciprocal(b - a)) {
+          inv_width(exact_reciprocal(b - a)),
+          stride(bins <= kCountedBins ? (bins + simd::kWidth - 1) / simd::kWidth * simd::kWidth : 0) {
         edge[0] = -INFINITY;
         for (size_t o = 1; o < bins; ++o) edge[o] = first_above(a, b, o - 1);
         edge[bins] = INFINITY;
@@ -355,24 +363,36 @@ struct PiecewiseTables {
             size_t e = o;
             while (e > 0 && cdf[base + e + 1] == cdf[base + e]) --e;
             below.push_back(int64_t(e));
+            gaps |= e != o;
+        }
+        bool increasing = stride > 0;
+        for (size_t o = 0; increasing && o < bins; ++o) increasing = cdf[base + o] <= cdf[base + o + 1];
+        if (increasing) {
+            upper.insert(upper.end(), cdf.begin() + base + 1, cdf.end());
+            upper.resize(upper.size() + stride - bins, INFINITY);
+        } else {
+            upper.clear();
+            stride = 0;
         }
     }
 
-    // Bin o of table k for uniform u: the last with cdf[o] <= u (found by a branch-free
-    // halving search: a mispredicted branch a step cost more than the rest; u below cdf[0] = 0
-    // or NaN gives 0, u = 1 the last bin), moved down past empty bins.  (The search moves lo
-    // only onto values <= u, so lo is that bin or 0 already: recounting cdf[lo] <= u after it,
-    // as before, gave the same o for one more dependent load.)
+    // Bin o of table k for uniform u: the last with cdf[o] <= u (u below cdf[0] = 0 or NaN
+    // gives 0, u = 1 the last bin), moved down past empty bins.  Tables of up to kCountedBins
+    // bins count their CDF's entries <= u, a vector of entries a compare, with no dependent
+    // loads (the same bin: see upper); larger ones search by halving.
     size_t bin_of_u(size_t k, double u) const {
-        const double *c = &cdf[k * (bins + 1)];
-        size_t lo = 0, len = bins + 1;
-        while (len > 1) {
-            const size_t half = len / 2;
-            lo = c[lo + half] <= u ? lo + half : lo;
-            len -= half;
-        }
-        return size_t(below[k * bins + std::min(lo, bins - 1)]);
+        size_t o;
+        bins_of_u(&k, &u, &o, 1, 1);
+        return o;
     }
+    // bin_of_u for n points, point j's table k[j] (table 0 where k is null) and uniform
+    // u[j * ustride], its bin to o[j]; the search chosen once for all of them.
+    template <class K, class O>
+    void bins_of_u(const K *k, const double *u, O *o, size_t n, size_t ustride) const {
+        if (stride > 0) gaps ? search<true, true>(k, u, o, n, ustride) : search<true, false>(k, u, o, n, ustride);
+        else gaps ? search<false, true>(k, u, o, n, ustride) : search<false, false>(k, u, o, n, ustride);
+    }
+
     // x's position on [a, b] in units of bins: (x - a) / (b - a) * bins, the division a
     // multiplication where that is exact.
     double position(double x) const { return (inv_width > 0 ? (x - a) * inv_width : (x - a) / (b - a)) * double(bins); }
@@ -392,28 +412,71 @@ struct PiecewiseTables {
 
     // sample_one for n points, point j from table k[j] (table 0 when k is null) with the
     // uniform u[j * ustride], its x to x[j * xstride] and its density to p[j]; the bin x lies
-    // in to landed[j] if asked: the bins of a block of points found in one pass, their points
-    // in a second, so that the out-of-order core overlaps many points' dependent searches (one
-    // point at a time, each waited on its own; vector lanes with gathers were slower still, on
-    // AMD's Zen 3 and Zen 4 alike).  The same bits as sample_one.
+    // in to landed[j] if asked.  In blocks of four passes: the points' bins (one pass, so that
+    // the out-of-order core overlaps many points' halving searches), those bins' CDF entries
+    // (scalar loads: vector gathers were slower, on AMD's Zen 3 and Zen 4 alike), the points
+    // in vector lanes, then the rare step back into a bin and the strided stores.
+    // The same bits as sample_one.
     void sample_many(const int64_t *k, const double *u, size_t ustride, size_t n, double *x, size_t xstride,
                      double *p, int64_t *landed = nullptr) const {
         constexpr size_t kBlock = 256;
         uint32_t bin[kBlock];
+        alignas(64) double uj[kBlock], lo[kBlock], hi[kBlock], o[kBlock], xj[kBlock];
         for (size_t a0 = 0; a0 < n; a0 += kBlock) {
             const size_t m = std::min(kBlock, n - a0);
-            for (size_t j = 0; j < m; ++j) bin[j] = uint32_t(bin_of_u(k ? size_t(k[a0 + j]) : 0, u[(a0 + j) * ustride]));
-            for (size_t j = 0; j < m; ++j)
-                p[a0 + j] = point_in(k ? size_t(k[a0 + j]) : 0, bin[j], u[(a0 + j) * ustride], x + (a0 + j) * xstride);
-            if (landed)   // bin[j], unless bin j holds no double (point_in then went past it)
-                for (size_t j = 0; j < m; ++j) {
-                    const double xj = x[(a0 + j) * xstride];
-                    landed[a0 + j] = int64_t(in_bin(xj, bin[j]) ? bin[j] : bin_of_x(xj));
-                }
+            bins_of_u(k ? k + a0 : k, u + a0 * ustride, bin, m, ustride);
+            for (size_t j = 0; j < m; ++j) {
+                const size_t t = k ? size_t(k[a0 + j]) : 0, bj = bin[j];
+                const double *c = &cdf[t * (bins + 1)];
+                uj[j] = u[(a0 + j) * ustride];
+                lo[j] = c[bj];
+                hi[j] = c[bj + 1];
+                o[j] = double(bj);
+                p[a0 + j] = f[t * bins + bj] * scale[t];
+            }
+            size_t j = 0;
+            for (; j + simd::kWidth <= m; j += simd::kWidth)
+                simd::store(xj + j, unplaced(simd::load(uj + j), simd::load(lo + j), simd::load(hi + j),
+                                             simd::load(o + j)));
+            for (; j < m; ++j) xj[j] = unplaced(uj[j], lo[j], hi[j], o[j]);
+            for (j = 0; j < m; ++j) {
+                const double xs = placed(xj[j], bin[j]);
+                x[(a0 + j) * xstride] = xs;
+                // bin[j], unless bin j holds no double (placed then went past it)
+                if (landed) landed[a0 + j] = int64_t(in_bin(xs, bin[j]) ? bin[j] : bin_of_x(xs));
+            }
         }
     }
 
   private:
+    static constexpr size_t kCountedBins = 8 * simd::kWidth;
+
+    // bins_of_u with the counting search (counted) or a branch-free halving one (a mispredicted
+    // branch a step cost more than the rest; the search moves lo only onto values <= u, so lo
+    // is the bin or 0 already), then past empty bins where a table has any (gaps).
+    template <bool counted, bool has_gaps, class K, class O>
+    void search(const K *k, const double *u, O *o, size_t n, size_t ustride) const {
+        for (size_t j = 0; j < n; ++j) {
+            const size_t t = k ? size_t(k[j]) : 0;
+            const double uj = u[j * ustride];
+            size_t lo = 0;
+            if (counted) {
+                const double *c = &upper[t * stride];
+                for (size_t i = 0; i < stride; i += simd::kWidth) lo += simd::count_at_most(c + i, uj);
+            } else {
+                const double *c = &cdf[t * (bins + 1)];
+                size_t len = bins + 1;
+                while (len > 1) {
+                    const size_t half = len / 2;
+                    lo = c[lo + half] <= uj ? lo + half : lo;
+                    len -= half;
+                }
+            }
+            lo = std::min(lo, bins - 1);
+            o[j] = O(has_gaps ? size_t(below[t * bins + lo]) : lo);
+        }
+    }
+
     // 1 / w where w is a power of 2 and 1 / w a normal double (then v / w == v * (1 / w) for
     // every v, subnormal results included), else 0.
     static double exact_reciprocal(double w) {
@@ -426,18 +489,28 @@ struct PiecewiseTables {
     // x in bin o of table k for uniform u, and its density.
     double point_in(size_t k, size_t o, double u, double *x) const {
         const double *c = &cdf[k * (bins + 1)];
-        double du = (u - c[o]) / (c[o + 1] - c[o]);
-        double t = inv_bins > 0 ? (double(o) + du) * inv_bins : (double(o) + du) / double(bins);
-        double xs = std::min(a + t * (b - a), b);
-        // Rounding can put x on the edge of a neighbouring bin (then pdf(x) would report that
-        // bin's density, possibly 0): move to the nearest double inside bin o, the last below
-        // its upper edge or its lower edge itself (if bin o holds no double, that edge).
+        x[0] = placed(unplaced(u, c[o], c[o + 1], double(o)), o);
+        return f[k * bins + o] * scale[k];
+    }
+
+    // The point of uniform u in bin o (as a double: D may be a vector of bins) whose CDF runs
+    // from lo to hi, before placed: min(a + t (b - a), b) as std::min gives it.
+    template <class D>
+    RE_INLINE D unplaced(D u, D lo, D hi, D o) const {
+        const D du = (u - lo) / (hi - lo);
+        const D t = inv_bins > 0 ? (o + du) * inv_bins : (o + du) / double(bins);
+        return simd::min_or_second(b - D{}, a + t * (b - a));   // b - 0 is b, -0 included
+    }
+
+    // Rounding can put x on the edge of a neighbouring bin (then pdf(x) would report that
+    // bin's density, possibly 0): x moved to the nearest double inside bin o, the last below
+    // its upper edge or its lower edge itself (if bin o holds no double, that edge).
+    double placed(double xs, size_t o) const {
         if (!in_bin(xs, o)) {
             if (xs >= edge[o + 1]) xs = std::nextafter(edge[o + 1], -INFINITY);
             if (xs < edge[o]) xs = edge[o];
         }
-        x[0] = xs;
-        return f[k * bins + o] * scale[k];
+        return xs;
     }
 
     // The smallest double x in (lo, hi] with bin_of_x(x) > o, for bin_of_x(lo) <= o <
@@ -499,6 +572,11 @@ class PiecewiseConstant2D final : public Pointwise<PiecewiseConstant2D> {
             conditional_.add(row);
         }
         marginal_.add(row_sums);
+        // marginal_.density(0, y) conditional_.density(row, x), the same products in the same order
+        for (size_t r = 0; r < rows; ++r)
+            for (size_t c = 0; c < cols; ++c)
+                cell_pdf_.push_back(marginal_.f[r] * marginal_.scale[0]
+                                    * (conditional_.f[r * cols + c] * conditional_.scale[r]));
     }
     // In blocks: the marginal's y and density for every point, then each point's row, then
     // the conditionals' x and density (PiecewiseTables::sample_many's passes).
@@ -523,8 +601,28 @@ class PiecewiseConstant2D final : public Pointwise<PiecewiseConstant2D> {
     }
     double pdf_one(const double *x) const {
         if (!in_rectangle(x[0], x[1], 0.0, 1.0, 0.0, 1.0)) return 0.0;   // domain.contains, inline
-        const size_t row = marginal_.bin_of_x(x[1]);   // marginal_.density's bin too
-        return marginal_.f[row] * marginal_.scale[0] * conditional_.density(row, x[0]);
+        return cell_pdf_[marginal_.bin_of_x(x[1]) * conditional_.bins + conditional_.bin_of_x(x[0])];
+    }
+    // pdf_one, kWidth points at a time: the cells' indices in vector lanes (bin_of_x on [0, 1]
+    // is min(floor(x bins), bins - 1), x bins exact for bins a power of 2 or not), then their
+    // densities loaded lane by lane.  Three times the speed of the loop over pdf_one.
+    void pdf(const double *x, double *p, size_t n) const override {
+        using simd::f64v;
+        constexpr size_t W = simd::kWidth;
+        const double rows = double(marginal_.bins), cols = double(conditional_.bins);
+        size_t i = 0;
+        for (; i + W <= n; i += W) {
+            f64v x0, x1;
+            for (size_t l = 0; l < W; ++l) { x0[l] = x[2 * (i + l)]; x1[l] = x[2 * (i + l) + 1]; }
+            const auto in = (x0 >= 0.0) & (x0 <= 1.0) & (x1 >= 0.0) & (x1 <= 1.0);
+            const f64v row = simd::min_or_second(simd::floor(in ? x1 * rows : f64v{}), rows - 1 - f64v{});
+            const f64v col = simd::min_or_second(simd::floor(in ? x0 * cols : f64v{}), cols - 1 - f64v{});
+            const auto cell = __builtin_convertvector(row * cols + col, simd::i64v);
+            f64v d;
+            for (size_t l = 0; l < W; ++l) d[l] = cell_pdf_[size_t(cell[l])];
+            simd::store(p + i, in ? d : f64v{});
+        }
+        for (; i < n; ++i) p[i] = pdf_one(x + 2 * i);
     }
     void invert_one(const double *x, double *u) const {
         if (!domain.contains(x)) { u[0] = u[1] = kNaN; return; }
@@ -534,6 +632,7 @@ class PiecewiseConstant2D final : public Pointwise<PiecewiseConstant2D> {
 
   private:
     PiecewiseTables marginal_, conditional_;   // rows over y; each row's columns over x
+    std::vector<double> cell_pdf_;   // the density of cell (row, col) at [row cols + col]
 };
 
 class Rejection final : public Sampler {

@@ -112,6 +112,20 @@ RE_INLINE f64v floor(f64v x) {
 #endif
 }
 
+// How many of the kWidth doubles at c are <= u (none where u is NaN): a compare and a
+// population count of its mask.
+RE_INLINE unsigned count_at_most(const double *c, double u) {
+#if defined(__AVX512F__)
+    return unsigned(__builtin_popcount(_mm512_cmp_pd_mask(_mm512_loadu_pd(c), _mm512_set1_pd(u), _CMP_LE_OQ)));
+#elif defined(__AVX__)
+    return unsigned(__builtin_popcount(_mm256_movemask_pd(_mm256_cmp_pd(_mm256_loadu_pd(c), _mm256_set1_pd(u), _CMP_LE_OQ))));
+#else
+    unsigned n = 0;
+    for (size_t w = 0; w < kWidth; ++w) n += c[w] <= u;
+    return n;
+#endif
+}
+
 // table[bits(t) & 15]: the low four bits of t's representation pick the entry (table: 16
 // doubles, 64-byte aligned).
 RE_INLINE double lookup16(const double *table, double t) { return table[bits(t) & 15u]; }

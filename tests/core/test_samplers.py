@@ -419,6 +419,65 @@ def test_points_near_table_breakpoints_stay_in_their_bin(case):
     np.testing.assert_allclose(s.invert(x), u, atol=1e-9)
 
 
+def neumaier_cdf(values: np.ndarray) -> np.ndarray:
+    """A table's CDF as the core builds it: running compensated (Neumaier) sums over the
+    values in order, each divided by the total, the last entry set to 1."""
+    sums, total, comp = [0.0], 0.0, 0.0
+    for v in map(float, values):
+        t = total + v
+        comp += (total - t) + v if abs(total) >= abs(v) else (v - t) + total
+        total = t
+        sums.append(total + comp)
+    cdf = np.array(sums) / sums[-1]
+    cdf[-1] = 1.0
+    return cdf
+
+
+@pytest.mark.parametrize("bins", [1, 2, 3, 7, 8, 15, 16, 17, 31, 32, 33, 63, 64, 65, 80, 200])
+def test_table_bins_are_the_last_with_cdf_at_or_below_u(bins):
+    """The bin a table sampler picks for u is pbrt's, the last o with cdf[o] <= u moved down
+    past empty bins, on both sides of the core's switch from counting CDF entries (tables of
+    up to 16, 32 or 64 bins by ISA) to a halving search, with empty bins and u at, just below
+    and just above every CDF value."""
+    rng = np.random.default_rng(bins)
+    t = rng.random(bins) ** 4
+    t[rng.random(bins) < 0.3] = 0.0
+    t[rng.integers(bins)] = 1.0
+    s = rest.sampler("piecewise_constant_1d", table=t, a=0.0, b=1.0)
+    cdf = neumaier_cdf(t)
+    u = np.concatenate([rng.random(20_000), cdf, np.nextafter(cdf, 0.0), np.nextafter(cdf, 1.0)])
+    u = u[(u >= 0) & (u <= 1)]
+    want = np.minimum(np.searchsorted(cdf, u, side="right") - 1, bins - 1)
+    empty = np.append(cdf[1:] == cdf[:-1], False)
+    for o in range(bins - 1, 0, -1):   # below[o]: the last non-empty bin at or below o
+        want[(want == o) & empty[o]] = o - 1
+    x, p = s.sample(u)
+    got = np.minimum(np.floor(x * bins), bins - 1).astype(int)
+    bad = got != want
+    assert not bad.any(), f"(u, bin, pbrt's bin):\n  {fmt(u[bad], got[bad], want[bad])}"
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (3, 5), (16, 16), (8, 64), (64, 8), (128, 256)])
+def test_table_2d_pdf_in_batches_equals_pdf_point_by_point(shape):
+    """pdf of many points (vector lanes) and of one point at a time (the scalar path) agree
+    bit for bit, on cell edges, the square's boundary, just outside it and inside empty rows."""
+    rng = np.random.default_rng(shape[0] * 1000 + shape[1])
+    t = rng.random(shape)
+    t[rng.random(shape) < 0.2] = 0.0
+    t[rng.integers(shape[0])] = 0.0
+    t[0, 0] = 1.0
+    s = rest.sampler("piecewise_constant_2d", table=t)
+    edges = np.stack([rng.integers(0, shape[1] + 1, 3000) / shape[1],
+                      rng.integers(0, shape[0] + 1, 3000) / shape[0]], axis=1)
+    x = np.concatenate([rng.random((3000, 2)) * 1.2 - 0.1, edges,
+                        np.nextafter(edges, rng.choice([-1.0, 2.0], edges.shape))])
+    batch = s.pdf(x)
+    one = np.array([s.pdf(x[i:i + 1])[0] for i in range(len(x))])
+    bad = batch.view(np.uint64) != one.view(np.uint64)
+    assert not bad.any(), f"(x, batch pdf, one point's pdf):\n  {fmt(x[bad], batch[bad], one[bad])}"
+    assert (batch[(x < 0).any(axis=1) | (x > 1).any(axis=1)] == 0).all()
+
+
 def test_a_bin_edge_near_zero_ends_the_move_into_the_bin():
     """Over [-0.3, 1.1] in 14 bins, u = 3/14 puts x at -2.8e-17 + rounding, just above bin 3's
     edge near 0 in x but in bin 2 by bin_of_x; the sampler moves x into bin 3.  Stepping one ulp
