@@ -323,28 +323,42 @@ struct PiecewiseTables {
     double a, b;
     std::vector<double> cdf, f, scale;
     std::vector<int64_t> below;   // below[k bins + o]: the last non-empty bin at or below o (or 0)
-    // Small tables' CDFs for bin_of_u's counting search: table k's cdf[1 .. bins] at
-    // upper[k stride ..], padded with +inf to stride, a whole number of vectors.  Kept while
-    // every table's CDF is non-decreasing (then the count of entries <= u is the last bin
-    // with cdf[o] <= u, as the halving search finds it); else empty and unused.
-    std::vector<double> upper;
+    // The CDFs again for bin_of_u's counting search, in levels: level 0 holds table k's
+    // cdf[1 .. bins], level l + 1 the last entry of each group of kWidth entries of level l;
+    // table k's level l at levels[l][k width[l] ..], padded with +inf to a whole number of
+    // vectors and one vector more.  The top level (at most kTopVectors vectors) is counted
+    // whole; each level below it, in the one group the count so far points to.  Where every
+    // CDF is non-decreasing a group lies wholly at or below u exactly when its last entry
+    // does, so the count is the last bin with cdf[o] <= u, as a halving search finds it; where
+    // one is not (counted false), the halving search is used.
+    std::vector<std::vector<double>> levels;
+    std::vector<size_t> width;
+    size_t top_entries;   // the top level's entries counted (a whole number of vectors)
+    bool counted = true;
     // edge[o]: the least double x with bin_of_x(x) >= o (edge[0] = -inf, edge[bins] = inf), so
     // bin_of_x(x) == o exactly where edge[o] <= x < edge[o + 1]: two comparisons in place of
     // bin_of_x's division where a sampled point is checked to lie in its bin.
     std::vector<double> edge;
     double inv_bins;   // 1 / bins where bins is a power of 2 (dividing by it is multiplying by that, exactly), else 0
     double inv_width;  // 1 / (b - a) where b - a is a power of 2 (the unit interval's 1: likewise exact), else 0
-    size_t stride;     // upper's entries a table (0: upper unused)
     bool gaps = false; // whether a table has an empty bin (else below[k bins + o] = o)
 
     // No tables yet, each to have `bins` bins over [a, b].
     explicit PiecewiseTables(size_t bins, double a = 0, double b = 1)
         : bins(bins), a(a), b(b), edge(bins + 1), inv_bins((bins & (bins - 1)) == 0 ? 1.0 / double(bins) : 0.0),
-          inv_width(exact_reciprocal(b - a)),
-          stride(bins <= kCountedBins ? (bins + simd::kWidth - 1) / simd::kWidth * simd::kWidth : 0) {
+          inv_width(exact_reciprocal(b - a)) {
         edge[0] = -INFINITY;
         for (size_t o = 1; o < bins; ++o) edge[o] = first_above(a, b, o - 1);
         edge[bins] = INFINITY;
+        constexpr size_t W = simd::kWidth;
+        size_t entries = bins;
+        for (;;) {
+            width.push_back((entries + W - 1) / W * W + W);
+            if (entries <= kTopVectors * W) break;
+            entries = (entries + W - 1) / W;
+        }
+        top_entries = width.back() - W;
+        levels.resize(width.size());
     }
 
     // Appends the table of the values f (bins of them, the same count for every table; not all
@@ -365,21 +379,29 @@ struct PiecewiseTables {
             below.push_back(int64_t(e));
             gaps |= e != o;
         }
-        bool increasing = stride > 0;
-        for (size_t o = 0; increasing && o < bins; ++o) increasing = cdf[base + o] <= cdf[base + o + 1];
-        if (increasing) {
-            upper.insert(upper.end(), cdf.begin() + base + 1, cdf.end());
-            upper.resize(upper.size() + stride - bins, INFINITY);
-        } else {
-            upper.clear();
-            stride = 0;
+        for (size_t o = 0; counted && o < bins; ++o) counted = cdf[base + o] <= cdf[base + o + 1];
+        if (!counted) {
+            levels.clear();
+            return;
+        }
+        constexpr size_t W = simd::kWidth;
+        const size_t k = below.size() / bins - 1;
+        for (size_t l = 0; l < levels.size(); ++l) {
+            std::vector<double> &level = levels[l];
+            if (l == 0) {
+                level.insert(level.end(), cdf.begin() + base + 1, cdf.end());
+            } else {
+                const double *finer = &levels[l - 1][k * width[l - 1]];
+                for (size_t g = 0; g < (width[l - 1] - W) / W; ++g) level.push_back(finer[g * W + W - 1]);
+            }
+            level.resize((k + 1) * width[l], INFINITY);
         }
     }
 
     // Bin o of table k for uniform u: the last with cdf[o] <= u (u below cdf[0] = 0 or NaN
-    // gives 0, u = 1 the last bin), moved down past empty bins.  Tables of up to kCountedBins
-    // bins count their CDF's entries <= u, a vector of entries a compare, with no dependent
-    // loads (the same bin: see upper); larger ones search by halving.
+    // gives 0, u = 1 the last bin), moved down past empty bins: by counting the CDF's
+    // entries <= u, a vector of entries a compare, one dependent load a level (see levels),
+    // where a halving search waits for one a halving.
     size_t bin_of_u(size_t k, double u) const {
         size_t o;
         bins_of_u(&k, &u, &o, 1, 1);
@@ -389,8 +411,13 @@ struct PiecewiseTables {
     // u[j * ustride], its bin to o[j]; the search chosen once for all of them.
     template <class K, class O>
     void bins_of_u(const K *k, const double *u, O *o, size_t n, size_t ustride) const {
-        if (stride > 0) gaps ? search<true, true>(k, u, o, n, ustride) : search<true, false>(k, u, o, n, ustride);
-        else gaps ? search<false, true>(k, u, o, n, ustride) : search<false, false>(k, u, o, n, ustride);
+        constexpr Search kCount = Search::Count, kLevels = Search::CountLevels, kHalving = Search::Halving;
+        if (!counted)
+            gaps ? search<kHalving, true>(k, u, o, n, ustride) : search<kHalving, false>(k, u, o, n, ustride);
+        else if (levels.size() == 1)
+            gaps ? search<kCount, true>(k, u, o, n, ustride) : search<kCount, false>(k, u, o, n, ustride);
+        else
+            gaps ? search<kLevels, true>(k, u, o, n, ustride) : search<kLevels, false>(k, u, o, n, ustride);
     }
 
     // x's position on [a, b] in units of bins: (x - a) / (b - a) * bins, the division a
@@ -449,27 +476,37 @@ struct PiecewiseTables {
     }
 
   private:
-    static constexpr size_t kCountedBins = 8 * simd::kWidth;
+    static constexpr size_t kTopVectors = 8;
 
-    // bins_of_u with the counting search (counted) or a branch-free halving one (a mispredicted
-    // branch a step cost more than the rest; the search moves lo only onto values <= u, so lo
-    // is the bin or 0 already), then past empty bins where a table has any (gaps).
-    template <bool counted, bool has_gaps, class K, class O>
+    // bins_of_u's searches: by counting, in one level (Count) or several (CountLevels), or a
+    // branch-free halving search (a mispredicted branch a step cost more than the rest; it
+    // moves lo only onto values <= u, so lo is the bin or 0 already); then past empty bins
+    // where a table has any (has_gaps).
+    enum class Search { Count, CountLevels, Halving };
+    template <Search how, bool has_gaps, class K, class O>
     void search(const K *k, const double *u, O *o, size_t n, size_t ustride) const {
+        constexpr size_t W = simd::kWidth;
+        const size_t top = levels.empty() ? 0 : levels.size() - 1, top_width = levels.empty() ? 0 : width[top];
+        const double *top_level = levels.empty() ? nullptr : levels[top].data();
+        const size_t top_count = top_entries;   // locals: the stores to o[] may alias members
         for (size_t j = 0; j < n; ++j) {
             const size_t t = k ? size_t(k[j]) : 0;
             const double uj = u[j * ustride];
             size_t lo = 0;
-            if (counted) {
-                const double *c = &upper[t * stride];
-                for (size_t i = 0; i < stride; i += simd::kWidth) lo += simd::count_at_most(c + i, uj);
-            } else {
+            if (how == Search::Halving) {
                 const double *c = &cdf[t * (bins + 1)];
                 size_t len = bins + 1;
                 while (len > 1) {
                     const size_t half = len / 2;
                     lo = c[lo + half] <= uj ? lo + half : lo;
                     len -= half;
+                }
+            } else {
+                const double *c = top_level + t * top_width;
+                for (size_t i = 0; i < top_count; i += W) lo += simd::count_at_most(c + i, uj);
+                for (size_t l = top; how == Search::CountLevels && l-- > 0;) {
+                    lo = std::min(lo, width[l] / W - 1);   // the padding's group at most (u = +inf)
+                    lo = lo * W + simd::count_at_most(&levels[l][t * width[l] + lo * W], uj);
                 }
             }
             lo = std::min(lo, bins - 1);

@@ -433,12 +433,12 @@ def neumaier_cdf(values: np.ndarray) -> np.ndarray:
     return cdf
 
 
-@pytest.mark.parametrize("bins", [1, 2, 3, 7, 8, 15, 16, 17, 31, 32, 33, 63, 64, 65, 80, 200])
+@pytest.mark.parametrize("bins", [1, 2, 3, 7, 8, 15, 16, 17, 31, 32, 33, 63, 64, 65, 80, 200, 512, 513,
+                                  4096, 4097, 40_000])
 def test_table_bins_are_the_last_with_cdf_at_or_below_u(bins):
     """The bin a table sampler picks for u is pbrt's, the last o with cdf[o] <= u moved down
-    past empty bins, on both sides of the core's switch from counting CDF entries (tables of
-    up to 16, 32 or 64 bins by ISA) to a halving search, with empty bins and u at, just below
-    and just above every CDF value."""
+    past empty bins, for tables counted in one level (up to 16, 32 or 64 bins by ISA) and in
+    two to five, with empty bins and u at, just below and just above every CDF value."""
     rng = np.random.default_rng(bins)
     t = rng.random(bins) ** 4
     t[rng.random(bins) < 0.3] = 0.0
@@ -448,9 +448,9 @@ def test_table_bins_are_the_last_with_cdf_at_or_below_u(bins):
     u = np.concatenate([rng.random(20_000), cdf, np.nextafter(cdf, 0.0), np.nextafter(cdf, 1.0)])
     u = u[(u >= 0) & (u <= 1)]
     want = np.minimum(np.searchsorted(cdf, u, side="right") - 1, bins - 1)
-    empty = np.append(cdf[1:] == cdf[:-1], False)
-    for o in range(bins - 1, 0, -1):   # below[o]: the last non-empty bin at or below o
-        want[(want == o) & empty[o]] = o - 1
+    full = cdf[1:] > cdf[:-1]
+    below = np.maximum.accumulate(np.where(full, np.arange(bins), 0))   # last non-empty bin <= o, or 0
+    want = below[want]
     x, p = s.sample(u)
     got = np.minimum(np.floor(x * bins), bins - 1).astype(int)
     bad = got != want
