@@ -642,7 +642,8 @@ class PiecewiseConstant2D final : public Pointwise<PiecewiseConstant2D> {
     }
     // pdf_one, kWidth points at a time: the cells' indices in vector lanes (bin_of_x on [0, 1]
     // is min(floor(x bins), bins - 1), x bins exact for bins a power of 2 or not), then their
-    // densities loaded lane by lane.  Three times the speed of the loop over pdf_one.
+    // densities loaded lane by lane: pdf() 2.8x the speed of the loop over pdf_one on a 16 x 16
+    // table, 2x on 256 x 512 (2e6 points through the Python API, Zen 4).
     void pdf(const double *x, double *p, size_t n) const override {
         using simd::f64v;
         constexpr size_t W = simd::kWidth;
