@@ -123,10 +123,12 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
     The cubature stops at q's rounding ``floor`` (relative).
     ``coarse``: fewer pieces (S, P', 2) to refine with instead, where on the starting leaves
     they give every quarter's integral within the refinement's tolerance (or q's rounding) of
-    ``pieces``' (and their cubature error within it too): a density smooth across the pieces
-    (an azimuth that does not matter, a lobe at the pole) needs no more, and the refinement's
-    pdf calls fall by P / P'; a density with structure across them (a step, a texel table, a
-    singular pole) keeps ``pieces``.
+    ``pieces``' and their cubature error within it too, or, on a leaf where ``pieces``' own
+    error misses it, within 1 % of that error (a singular pole or a step along the axis,
+    which pieces across do not resolve: the cone's rim, the disk's centre): a density smooth
+    across the pieces (an azimuth that does not matter, a lobe at the pole) needs no more, and
+    the refinement's pdf calls fall by P / P'; a density with structure across them (a step,
+    a texel table) keeps ``pieces``.
     A box whose integral is not finite counts as mass 0 with error 1 (the bound then covers
     the whole strip: its tests lose their power, never their level)."""
     nstrip, npiece = pieces.shape[:2]
@@ -183,7 +185,9 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
         spent += boxes
         # a quarter's tolerance, as the cubature's: its share of the strip's, or q's rounding
         allowed = np.maximum((strip_tol[strip] * np.maximum((b - a) / 4, 1 / 4096))[:, None], floor * qs)
-        if not (np.all(np.abs(coarse_qs - qs) <= allowed) and np.all(coarse_errs <= allowed.sum(axis=1))):
+        # errs: pieces' own cubature error on each leaf (at the first pass's tighter tolerance)
+        if not (np.all(np.abs(coarse_qs - qs) <= allowed)
+                and np.all(coarse_errs <= allowed.sum(axis=1) + 1.01 * errs)):
             pieces, used, npiece = fine
     done: list[tuple[np.ndarray, ...]] = []
     for depth in range(_MAX_DEPTH + 1):
