@@ -333,7 +333,6 @@ struct PiecewiseTables {
     // one is not (counted false), the halving search is used.
     std::vector<std::vector<double>> levels;
     std::vector<size_t> width;
-    size_t top_entries;   // the top level's entries counted (a whole number of vectors)
     bool counted = true;
     // edge[o]: the least double x with bin_of_x(x) >= o (edge[0] = -inf, edge[bins] = inf), so
     // bin_of_x(x) == o exactly where edge[o] <= x < edge[o + 1]: two comparisons in place of
@@ -357,7 +356,6 @@ struct PiecewiseTables {
             if (entries <= kTopVectors * W) break;
             entries = (entries + W - 1) / W;
         }
-        top_entries = width.back() - W;
         levels.resize(width.size());
     }
 
@@ -488,7 +486,7 @@ struct PiecewiseTables {
         constexpr size_t W = simd::kWidth;
         const size_t top = levels.empty() ? 0 : levels.size() - 1, top_width = levels.empty() ? 0 : width[top];
         const double *top_level = levels.empty() ? nullptr : levels[top].data();
-        const size_t top_count = top_entries;   // locals: the stores to o[] may alias members
+        const size_t top_count = levels.empty() ? 0 : top_width - W;   // its entries, less the padding vector
         for (size_t j = 0; j < n; ++j) {
             const size_t t = k ? size_t(k[j]) : 0;
             const double uj = u[j * ustride];
