@@ -113,11 +113,12 @@ def main() -> None:
     if samplers:
         if mi is not None:
             mitsuba_test(mi, samplers[0], n, 0)
-        ours(SamplerTest(samplers[0].pdf, samplers[0].domain, sample_count=n), samplers[0], 0)
+        first = samplers[0]
+        ours(SamplerTest(first.pdf, first.domain, sample_count=n, breaks=first.breaks), first, 0)
     for s in samplers:
         m = [] if args.ours_only else [mitsuba_test(mi, s, n, seed) for seed in range(args.seeds)]
         t0 = time.perf_counter()
-        test = SamplerTest(s.pdf, s.domain, sample_count=n)
+        test = SamplerTest(s.pdf, s.domain, sample_count=n, breaks=s.breaks)
         setup = time.perf_counter() - t0
         o = [ours(test, s, seed) for seed in range(args.seeds)]
         sampler, check, pdf = (statistics.median(r[i] for r in o) for i in (1, 2, 3))

@@ -9,6 +9,7 @@ half line), so equal cells there are cells of equal measure:
     disk (unit)       s = (r^2, phi / 2 pi)                   |D| = pi
     hemisphere (z>0)  s = (cos theta, phi / 2 pi)             |D| = 2 pi   (solid angle)
     sphere            s = ((1 - cos theta) / 2, phi / 2 pi)   |D| = 4 pi
+                      (theta from +z, or from +y or +x: Domain("sphere", pole="y"))
 
 A claimed density pdf(x) becomes q(s) = |D| pdf(x(s)) in parameter space (pdf(x(s)) dx/ds
 on the half line), the density the cubature integrates and the histograms are compared with.
@@ -16,16 +17,23 @@ on the half line), the density the cubature integrates and the histograms are co
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 import reference_estimators as rest
 
-__all__ = ["DOMAINS", "Domain", "MomentColumns", "ParamDensity", "as_domain"]
+__all__ = ["DOMAINS", "Domain", "MomentColumns", "ParamDensity", "as_domain", "checked_breaks"]
 
 DOMAINS = ("interval", "half_line", "square", "disk", "hemisphere", "sphere")
+
+#: The sphere's pole: the point's components (x', y', z') in the frame whose z' is the pole,
+#: a cyclic permutation of (x, y, z) (a rotation, exact in floating point).  Pole "y" puts
+#: theta = acos(y) and phi = atan2(x, z): a y-up lat-long map's rows (Mitsuba's envmap) are
+#: then cuts of the first parameter, its columns of the second (:meth:`Domain.breaks`).
+_POLES = {"z": [0, 1, 2], "y": [2, 0, 1], "x": [1, 2, 0]}
 
 
 @dataclass(frozen=True)
@@ -35,6 +43,14 @@ class Domain:
     kind: str
     lo: float = 0.0
     hi: float = 1.0
+    pole: str = "z"     # the sphere's: the axis theta is measured from (below)
+
+    def __post_init__(self):
+        if self.pole not in _POLES:
+            raise ValueError(f"'pole' must be one of {tuple(_POLES)}, got {self.pole!r}")
+        if self.pole != "z" and self.kind != "sphere":
+            raise ValueError(f"'pole' {self.pole!r} is for the sphere only; the {self.kind} has none "
+                             "to choose")
 
     @property
     def k(self) -> int:
@@ -70,16 +86,40 @@ class Domain:
         return {"interval": self.hi - self.lo, "square": 1.0, "disk": math.pi, "hemisphere": 2 * math.pi,
                 "sphere": 4 * math.pi}[self.kind]
 
+    def breaks(self, *coordinates: Any) -> tuple[np.ndarray | None, ...]:
+        """The parameter-space breaks (:func:`checked_breaks`) of a density that may step or
+        kink where its natural coordinates take the given values, one sequence (or None) per
+        coordinate: x on an interval or the half line; x, y on the square; r, phi on the disk;
+        theta, phi on the hemisphere and sphere (radians, theta from the pole, phi from +x
+        toward +y about +z; about another pole, from the next axis in cyclic order toward the
+        one after: from +z toward +x about +y).  A lat-long map's texel edges, say, are
+        ``Domain("sphere").breaks(pi * arange(1, H) / H, 2 * pi * arange(W) / W)``."""
+        if len(coordinates) != self.k:
+            raise ValueError(f"the {self.kind} has {self.k} coordinate(s), got {len(coordinates)} sequences")
+        maps = {"interval": [lambda x: (x - self.lo) / (self.hi - self.lo)],
+                "half_line": [lambda x: x / (1 + x)],
+                "square": [lambda x: x, lambda y: y],
+                "disk": [lambda r: r * r, _azimuth],
+                "hemisphere": [np.cos, _azimuth],
+                "sphere": [lambda t: (1 - np.cos(t)) / 2, _azimuth]}[self.kind]
+        return tuple(None if c is None else f(np.asarray(c, dtype=float)) for f, c in zip(maps, coordinates))
+
     def to_points(self, s: np.ndarray) -> np.ndarray:
         """Points x(s) of parameters s (N, k): (N,) or (N, point_dim).  One pass in the core
         (:func:`reference_estimators.domain_points`)."""
-        return rest.domain_points(self.kind, s, self.lo, self.hi)
+        return self.from_pole_frame(rest.domain_points(self.kind, s, self.lo, self.hi))
 
     def to_params(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(s of shape (N, k), mask of points inside the domain).  Unit vectors may be off
         by 1e-5 in squared norm (float32 renderers).  One pass in the core
         (:func:`reference_estimators.domain_params`)."""
+        if self.pole != "z":
+            x = np.asarray(x)[:, _POLES[self.pole]]
         return rest.domain_params(self.kind, x, self.lo, self.hi)
+
+    def from_pole_frame(self, x: np.ndarray) -> np.ndarray:
+        """Points (N, 3) given in the frame whose z is the pole, in the domain's own frame."""
+        return x if self.pole == "z" else x[:, np.argsort(_POLES[self.pole])]
 
 
 @dataclass(frozen=True)
@@ -126,6 +166,7 @@ class ParamDensity:
         directly (:func:`reference_estimators.cubature_points`), and a constant Jacobian
         multiplies each box's sum rather than every value (the same integrals to rounding)."""
         x = rest.cubature_points(self.dom.kind, lo, hi, nodes, (self.dom.lo, self.dom.hi))
+        x = self.dom.from_pole_frame(x)
         pdf = np.asarray(self.pdf(x), dtype=float)
         jacobian = self.dom.jacobian_at_points(x)
         if self.columns is None and np.ndim(jacobian) == 0:
@@ -133,6 +174,39 @@ class ParamDensity:
         if isinstance(self.columns, MomentColumns):
             return rest.cubature_moment_sums(lo, hi, pdf * jacobian, weights, self.columns.c)
         return rest.cubature_sums(lo, hi, self._columns_of(pdf * jacobian), weights)
+
+
+def _azimuth(phi: np.ndarray) -> np.ndarray:
+    """The parameter coordinate phi / 2 pi of azimuths phi (radians), wrapped into [0, 1)."""
+    return np.mod(phi / (2 * math.pi), 1.0)
+
+
+def checked_breaks(breaks: Sequence[Any] | None, dom: Domain) -> tuple[np.ndarray | None, ...] | None:
+    """``breaks`` as the cubature takes them: per parameter axis of ``dom``, the sorted distinct
+    coordinates in (0, 1) where a claimed density may step or kink (0 and 1 dropped: every
+    box's ends), or None for an axis without.  Raises ValueError, naming 'breaks', for the
+    wrong number of axes or coordinates that are not finite numbers in [0, 1]."""
+    if breaks is None:
+        return None
+    if isinstance(breaks, (str, bytes)) or not isinstance(breaks, Sequence) or len(breaks) != dom.k:
+        raise ValueError(f"'breaks' must be a sequence of {dom.k} coordinate sequence(s) (or None) for the "
+                         f"{dom.kind}'s parameter axes, got {breaks!r:.200}")
+    out = []
+    for axis, b in enumerate(breaks):
+        if b is None:
+            out.append(None)
+            continue
+        try:
+            v = np.asarray(b, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise ValueError(f"'breaks'[{axis}] must be numbers in [0, 1], got {b!r:.200}") from None
+        bad = ~(np.isfinite(v) & (v >= 0) & (v <= 1))
+        if bad.any():
+            raise ValueError(f"'breaks'[{axis}]: {int(bad.sum())} of {v.size} coordinates are not finite "
+                             f"numbers in [0, 1] (the parameter space), e.g. {v[bad][:3].tolist()}")
+        v = np.unique(v)
+        out.append(v[(v > 0) & (v < 1)])
+    return tuple(out)
 
 
 def as_domain(d: str | tuple | Domain) -> Domain:

@@ -36,7 +36,7 @@ from scipy import special
 
 import reference_estimators as rest
 
-from harness.samplers.cubature import box_integrals, tensor_rule
+from harness.samplers.cubature import box_integrals, split_points, tensor_rule
 
 __all__ = ["AxisCdf", "Transform", "cramer_von_mises", "cramer_von_mises_columns",
            "cramer_von_mises_from_sums", "cvm_sf"]
@@ -58,6 +58,11 @@ _MAX_TABLE_EVALS = 160_000_000  # pdf evaluations a whole tabulation may spend (
                         # with its bound): a backstop behind the stop at a useless bound
                         # (_tabulate); the most a useful table spent is 96 million (Mitsuba's
                         # Beckmann alpha = 0.01), the zoo's at most 27 million
+
+
+#: Per parameter axis, the sorted coordinates where a claimed density may step or kink, or
+#: None where none are declared (:func:`harness.samplers.cubature.split_points`).
+Breaks = tuple[np.ndarray | None, ...] | None
 
 
 @dataclass(frozen=True)
@@ -107,7 +112,8 @@ class _Counted:
 
 def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: np.ndarray, leaves: int,
               eps: float, max_share: float = 1.0, floor: float = 0.0, useless: float = math.inf,
-              coarse: np.ndarray | None = None) -> AxisCdf:
+              coarse: np.ndarray | None = None, breaks: Breaks = None,
+              expect: np.ndarray | None = None) -> AxisCdf:
     """The CDF of q along ``axis`` within each strip: strip g spans all of [0, 1] along
     ``axis`` (cut into ``leaves`` leaves to start) and, on the square, the pieces
     pieces[g, j] = (lo, hi) across it (arrays (S, P, 2); each leaf quarter is integrated as one
@@ -120,7 +126,13 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
     missed by that much in all is a step or singularity that more halving does not resolve.
     The table's bound counts only the leaves it keeps: their interpolation bound and their
     boxes' cubature error (a refined-away leaf's integral is not in the table, nor its error).
-    The cubature stops at q's rounding ``floor`` (relative).
+    The cubature stops at q's rounding ``floor`` (relative).  ``breaks``: per axis, where q
+    may step or kink (:func:`harness.samplers.cubature.split_points`): a leaf with one inside
+    is split there rather than halved, and so are the cubature's boxes.  ``expect``: each
+    strip's mass as known beforehand (S,) (the marginal's from the base grid's cubature, a
+    strip's of the conditional from the marginal), which sets the first pass's tolerance
+    (else a thousandth of the refinement's, relative to the pieces' measure: a pass that drove
+    every box of Mitsuba's 256 x 128 envmap to its float32 floor and to the evaluation limit).
     ``coarse``: fewer pieces (S, P', 2) to refine with instead, where on the starting leaves
     they give every quarter's integral within the refinement's tolerance (or q's rounding) of
     ``pieces``' and their cubature error within it too, or, on a leaf where ``pieces``' own
@@ -164,7 +176,7 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
         # of 0.02 in place of 2e-5.  The kept leaves' own understatement is at most
         # r / (1 - r) times their boxes' tails (2.4 at x^-1/2), far below the bound there
         v, e = box_integrals(counted, lo[full], hi[full], tol[full], max_depth=16 if k == 1 else 8,
-                             max_evals=budget, floor=floor, extrapolate=False)
+                             max_evals=budget, floor=floor, extrapolate=False, breaks=breaks)
         bad = ~(np.isfinite(v[:, 0]) & np.isfinite(e[:, 0]))   # a pdf infinite at a node
         val[full] = np.where(bad, 0.0, v[:, 0])
         err[full] = np.where(bad, 1.0, e[:, 0])   # unknown mass: the bound becomes the whole strip
@@ -172,8 +184,12 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
                 err.reshape(-1, 4 * npiece).sum(axis=1), int(full.sum()))
 
     # a first pass at a tolerance relative to the boxes' measure finds the strips' masses
-    measure = np.ones(nstrip) if k == 1 else np.sum(pieces[:, :, 1] - pieces[:, :, 0], axis=1)
-    qs, errs, spent = quarters(strip, a, b, 1e-3 * eps * measure)
+    if expect is not None:      # half the refinement's tolerance (below), at the expected mass
+        first_tol = 0.05 * eps * np.maximum(expect, 1e-300)
+    else:
+        measure = np.ones(nstrip) if k == 1 else np.sum(pieces[:, :, 1] - pieces[:, :, 0], axis=1)
+        first_tol = 1e-3 * eps * measure
+    qs, errs, spent = quarters(strip, a, b, first_tol)
     strip_mass = np.bincount(strip, qs.sum(axis=1), minlength=nstrip)
     strip_tol = 0.1 * eps * np.maximum(strip_mass, 1e-300)   # cubature error: a tenth of eps
     spent_err = np.bincount(strip, errs, minlength=nstrip)
@@ -203,7 +219,7 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
         if ok.all():
             break
         s, lo, hi = strip[~ok], a[~ok], b[~ok]
-        mid = (lo + hi) / 2
+        mid = split_points(lo, hi, None if breaks is None else breaks[axis])
         strip, a, b = np.repeat(s, 2), np.stack([lo, mid], 1).reshape(-1), np.stack([mid, hi], 1).reshape(-1)
         qs, errs, boxes = quarters(strip, a, b, strip_tol)
         spent_err += np.bincount(strip, errs, minlength=nstrip)
@@ -316,7 +332,8 @@ class Transform:
     error: float
 
     @classmethod
-    def build(cls, q: Callable[[np.ndarray], np.ndarray], k: int, n: int, floor: float = 0.0) -> Transform:
+    def build(cls, q: Callable[[np.ndarray], np.ndarray], k: int, n: int, floor: float = 0.0,
+              breaks: Breaks = None, total: float | None = None) -> Transform:
         """Tabulates q's CDFs for a test of ``n`` points: to eps = 0.02 / sqrt(n) on the
         square, so that the carried error moves sqrt(n W^2) by at most about 0.02, and ten
         times finer on an interval (cheap there), where the equiprobable chi-square's up to
@@ -330,12 +347,16 @@ class Transform:
         error that size moves sqrt(n W^2) by 1, and a strip that has missed by that much is a
         step or singularity across its boxes that halving does not resolve (a rotated
         checkerboard: refining on to the limits took 6x the pdf calls and kept leaves carrying
-        8x the error).  The bound carried is that of the leaves kept."""
+        8x the error).  The bound carried is that of the leaves kept.  ``breaks``: where q may
+        step or kink, per axis (:func:`_tabulate`); ``total``: q's integral as far as known
+        (the base grid's cubature), which sets the marginal's first pass (:func:`_tabulate`)."""
+        expect = np.array([total]) if total is not None and math.isfinite(total) and total > 0 else None
         eps = 0.02 / math.sqrt(n)
         useless = 1 / math.sqrt(n)
         if k == 1:
             eps /= 10
-            marginal = _tabulate(q, 1, 0, np.zeros((1, 1, 2)), 1024, eps, floor=floor, useless=useless)
+            marginal = _tabulate(q, 1, 0, np.zeros((1, 1, 2)), 1024, eps, floor=floor, useless=useless,
+                                 breaks=breaks, expect=expect)
             return cls(marginal, None, np.array([0.0, 1.0]), np.ones(1), marginal.error)
         def across(count: int) -> np.ndarray:
             cuts = np.arange(count + 1) / count
@@ -343,12 +364,13 @@ class Transform:
 
         marginal = _tabulate(q, 2, 0, across(_MARGINAL_PIECES), 128, eps / 8,
                              max_share=1 / (4 * STRIPS * SUBSTRIPS), floor=floor, useless=useless,
-                             coarse=across(_COARSE_PIECES))
+                             coarse=across(_COARSE_PIECES), breaks=breaks, expect=expect)
         levels, cdf = _snapped_levels(marginal, STRIPS * SUBSTRIPS)
         pieces = _cut_at_steps(levels[::SUBSTRIPS], levels, marginal)
-        conditional = _tabulate(q, 2, 1, pieces, 64, eps, floor=floor, useless=useless)
         probability = np.diff(cdf[::SUBSTRIPS])
         share = marginal.strip_mass[0] * probability
+        conditional = _tabulate(q, 2, 1, pieces, 64, eps, floor=floor, useless=useless, breaks=breaks,
+                                expect=share)
         missed = np.abs(conditional.strip_mass - share) / np.maximum(share, 1e-300)
         error_u1 = conditional.error + float(missed.max())
         conditional = dataclasses.replace(conditional, error=error_u1)

@@ -2,9 +2,10 @@
 
 Accepted (``resolve_sampler``): an object with ``sample(u)`` and ``pdf(x)`` methods and,
 optionally, ``domain`` (a domain name), ``total`` (the integral of its pdf where some u give
-no sample) and ``udim`` (uniforms per sample); a tuple ``(sample, pdf)`` or ``(sample, pdf,
-domain)``; or a factory returning either (a class, or a callable without ``sample``), called
-with ``params`` (``GGX(alpha=0.3)``).
+no sample), ``udim`` (uniforms per sample), ``breaks`` (where its pdf steps or kinks, per
+parameter axis: check_sampler's) and ``pole`` (the sphere's: "x", "y" or "z"); a tuple
+``(sample, pdf)`` or ``(sample, pdf, domain)``; or a factory returning either (a class, or a
+callable without ``sample``), called with ``params`` (``GGX(alpha=0.3)``).
 """
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from harness.samplers.domains import Domain
 from harness.usercode import UserCodeError
 
 __all__ = ["UserSampler", "resolve_sampler"]
@@ -28,6 +30,12 @@ class UserSampler:
     domain: str | None = None
     total: float | None = None
     udim: int | None = None
+    breaks: Any = None
+    pole: str = "z"
+
+    def check_domain(self, domain: str) -> Domain:
+        """The domain ``domain`` (the sampler's or the suite's name) with this sampler's pole."""
+        return Domain(domain, pole=self.pole)
 
 
 def resolve_sampler(obj: Any, params: dict[str, Any] | None = None, *, name: str) -> UserSampler:
@@ -47,10 +55,12 @@ def resolve_sampler(obj: Any, params: dict[str, Any] | None = None, *, name: str
             raise UserCodeError(f"{name}: expected a (sample, pdf) or (sample, pdf, domain) tuple, got "
                                 f"{len(obj)} items")
         sample, pdf, domain, total, udim = obj[0], obj[1], obj[2] if len(obj) == 3 else None, None, None
+        breaks, pole = None, "z"
     else:
         sample, pdf = getattr(obj, "sample", None), getattr(obj, "pdf", None)
         domain, total, udim = (getattr(obj, "domain", None), getattr(obj, "total", None),
                                getattr(obj, "udim", None))
+        breaks, pole = getattr(obj, "breaks", None), getattr(obj, "pole", "z")
     if not (callable(sample) and callable(pdf)):
         raise UserCodeError(f"{name}: expected an object with sample(u) and pdf(x) methods, a (sample, pdf) "
                             f"tuple or a factory of one, got a {type(obj).__name__}")
@@ -61,4 +71,6 @@ def resolve_sampler(obj: Any, params: dict[str, Any] | None = None, *, name: str
         raise UserCodeError(f"{name}: 'total' must be the pdf's integral, in (0, 1], got {total!r}")
     if udim is not None and (isinstance(udim, bool) or not isinstance(udim, int) or udim < 1):
         raise UserCodeError(f"{name}: 'udim' must be a positive integer, got {udim!r}")
-    return UserSampler(name, sample, pdf, domain, None if total is None else float(total), udim)
+    if pole not in ("x", "y", "z"):
+        raise UserCodeError(f"{name}: 'pole' must be 'x', 'y' or 'z', got {pole!r}")
+    return UserSampler(name, sample, pdf, domain, None if total is None else float(total), udim, breaks, pole)

@@ -12,6 +12,8 @@ import numpy as np
 
 import reference_estimators as rest
 
+from harness.samplers.domains import Domain
+
 __all__ = ["ZooSampler", "correct", "smooth_warps", "wrong"]
 
 
@@ -22,6 +24,7 @@ class ZooSampler:
     sample: Callable[[np.ndarray], np.ndarray]
     pdf: Callable[[np.ndarray], np.ndarray]
     fault: str = ""
+    breaks: tuple | None = None     # where the pdf steps, declared (check_sampler's ``breaks``)
 
 
 def _core(name: str, domain, **params) -> ZooSampler:
@@ -43,10 +46,12 @@ def _uniform_theta_sphere() -> ZooSampler:
     return ZooSampler("uniform_theta_sphere (pole singularity)", "sphere", sample, pdf)
 
 
-def _envmap(table: np.ndarray, scale_texel: tuple[int, int] | None = None) -> ZooSampler:
+def _envmap(table: np.ndarray, scale_texel: tuple[int, int] | None = None,
+            declared: bool = False) -> ZooSampler:
     """A lat-long environment map on the sphere: (u, v) from a piecewise-constant table,
     theta = pi v, phi = 2 pi u, pdf_w = pdf_uv / (2 pi^2 sin theta): texel steps and pole
-    singularities.  ``scale_texel`` makes the claimed pdf 10 % too large in one texel."""
+    singularities.  ``scale_texel`` makes the claimed pdf 10 % too large in one texel;
+    ``declared``: the texel edges are declared as the pdf's breaks."""
     s = rest.sampler("piecewise_constant_2d", table=table)
     claimed = table.copy()
     if scale_texel is not None:
@@ -67,10 +72,13 @@ def _envmap(table: np.ndarray, scale_texel: tuple[int, int] | None = None) -> Zo
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(st > 0, c.pdf(uv) / (2 * math.pi**2 * st), np.inf)
     share = f"{table[scale_texel] / table.sum():.1%} of the mass" if scale_texel is not None else ""
-    name = "envmap 16x32 on the sphere" + (f", one texel's pdf 10 % too large ({share})"
-                                           if scale_texel else "")
+    rows, columns = table.shape
+    name = (f"envmap {rows}x{columns} on the sphere" + (", texel edges declared" if declared else "")
+            + (f", one texel's pdf 10 % too large ({share})" if scale_texel else ""))
     fault = "one texel's pdf 10 % too large" if scale_texel is not None else ""
-    return ZooSampler(name, "sphere", sample, pdf, fault)
+    edges = (math.pi * np.arange(1, rows) / rows, 2 * math.pi * np.arange(columns) / columns)
+    breaks = Domain("sphere").breaks(*edges) if declared else None
+    return ZooSampler(name, "sphere", sample, pdf, fault, breaks)
 
 
 def _disk_polar() -> ZooSampler:
@@ -118,6 +126,7 @@ def correct() -> list[ZooSampler]:
         _core("uniform_sphere", "sphere"),
         _uniform_theta_sphere(),
         _envmap(_env_table()),
+        _envmap(_env_table(), declared=True),
         ZooSampler("piecewise_constant_2d (texel steps)", "square",
                    lambda u, s=rest.sampler("piecewise_constant_2d", table=_env_table()): s.sample(u)[0],
                    rest.sampler("piecewise_constant_2d", table=_env_table()).pdf),
@@ -154,6 +163,7 @@ def wrong() -> list[ZooSampler]:
         ZooSampler("sphere, azimuth u^1.02", "sphere", sphere_skewed_azimuth,
                    lambda w: np.full(w.shape[0], 0.25 / math.pi), "azimuth slightly non-uniform"),
         _envmap(_env_table(), scale_texel=np.unravel_index(np.argmax(_env_table()), (16, 32))),  # brightest
+        _envmap(_env_table(), scale_texel=np.unravel_index(np.argmax(_env_table()), (16, 32)), declared=True),
     ]
 
 
@@ -174,7 +184,7 @@ def smooth_warps() -> list[ZooSampler]:
         r = np.sqrt(np.maximum(0, 1 - z * z))
         return np.column_stack([r * np.cos(ph), r * np.sin(ph), z])
 
-    pole, env = _uniform_theta_sphere(), _envmap(_env_table())
+    pole, env, declared = _uniform_theta_sphere(), _envmap(_env_table()), _envmap(_env_table(), declared=True)
 
     def pole_azimuth_warp(u):
         return pole.sample(np.column_stack([u[:, 0], u[:, 1] ** 1.005]))
@@ -191,6 +201,8 @@ def smooth_warps() -> list[ZooSampler]:
                    "azimuth warped by u^1.005"),
         ZooSampler("envmap 16x32, azimuth u^1.005", "sphere", envmap_azimuth_warp, env.pdf,
                    "azimuth warped by u^1.005"),
+        ZooSampler("envmap 16x32, texel edges declared, azimuth u^1.005", "sphere", envmap_azimuth_warp,
+                   env.pdf, "azimuth warped by u^1.005", declared.breaks),
         ZooSampler("ggx alpha 0.1003 sampled, 0.1 claimed", "hemisphere", lambda u: ggx_off.sample(u)[0],
                    ggx.pdf, "lobe 0.3 % too wide"),
         ZooSampler("sphere, density tilted 0.2 %", "sphere", sphere_tilt,

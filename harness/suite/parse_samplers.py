@@ -80,6 +80,7 @@ def _user_sampler(c: dict[str, Any], samples: int, case_id: int, base: Path, whe
     """A team's own sampler (harness.samplers.user): loaded, built with ``params`` if it is a
     factory, and checked for sample/pdf and its domain here, so mistakes name the line."""
     from harness.samplers import DOMAINS
+    from harness.samplers.domains import checked_breaks
     from harness.samplers.user import resolve_sampler
 
     check_keys(c, _USER_SAMPLER_KEYS, where, table)
@@ -97,6 +98,10 @@ def _user_sampler(c: dict[str, Any], samples: int, case_id: int, base: Path, whe
                                                f"expected one of: {', '.join(DOMAINS)}"))
     if domain not in DOMAINS:
         raise SuiteError(where.at(table, "domain", f"expected one of: {', '.join(DOMAINS)}, got {domain!r}"))
+    try:    # the sampler's own pole and breaks (harness.samplers.user), on this domain
+        checked_breaks(user.breaks, user.check_domain(domain))
+    except ValueError as e:
+        raise SuiteError(where.at(table, "sampler", f"{target}: {e}")) from None
     total = float(c["total"]) if "total" in c else user.total
     if total is not None and not 0 < total <= 1:
         raise SuiteError(where.at(table, "total", f"expected the pdf's integral, in (0, 1], got {total}"))

@@ -58,8 +58,9 @@ class SamplerJob:
             user = resolve_sampler(load_attr(spec["target"], base=Path(spec["base"])), spec["params"],
                                    name=spec["target"])
             check = check_sampler if kind == "chi_square" else mcmc_crosscheck
-            extra = {"total": spec["total"]} if kind == "chi_square" else {}
-            r = check(user.sample, user.pdf, spec["domain"], seed=self.seed, udim=spec["udim"],
+            extra = {"total": spec["total"], "breaks": user.breaks} if kind == "chi_square" else {}
+            r = check(user.sample, user.pdf, user.check_domain(spec["domain"]), seed=self.seed,
+                      udim=spec["udim"],
                       sample_count=spec["samples"] if kind == "chi_square" else min(spec["samples"], 20_000),
                       **extra)
         elif kind == "chi_square":

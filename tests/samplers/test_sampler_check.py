@@ -28,7 +28,7 @@ COSINE = next(z for z in CORRECT if z.name == "cosine_hemisphere")
 def test_false_alarm_rate_over_200_seeds(s):
     """alpha = 0.01, 1e5 samples, seeds 0..199: failures must stay below the Binomial(200,
     0.01) quantile at 1e-3 / (number of correct samplers) (Bonferroni)."""
-    t = SamplerTest(s.pdf, s.domain, sample_count=100_000, alpha=0.01)
+    t = SamplerTest(s.pdf, s.domain, sample_count=100_000, alpha=0.01, breaks=s.breaks)
     fails = [seed for seed in range(200) if not t.check(s.sample, seed=seed).passed]
     bound = stats.binom.isf(1e-3 / len(CORRECT), 200, 0.01)
     assert len(fails) <= bound, (f"{s.name}: {len(fails)} false alarms of 200 (bound {bound:.0f}), "
@@ -38,7 +38,7 @@ def test_false_alarm_rate_over_200_seeds(s):
 @pytest.mark.slow
 @pytest.mark.parametrize("s", WRONG, ids=lambda s: s.name)
 def test_every_mutant_is_caught_at_one_million_samples(s):
-    t = SamplerTest(s.pdf, s.domain, sample_count=1_000_000)
+    t = SamplerTest(s.pdf, s.domain, sample_count=1_000_000, breaks=s.breaks)
     results = [t.check(s.sample, seed=seed) for seed in range(5)]
     assert not any(r.passed for r in results), f"{s.name} ({s.fault}) passed: {[r.pvalue for r in results]}"
 
@@ -327,7 +327,7 @@ def test_a_float32_shaders_narrow_lobe_passes_its_points_dithered_within_their_r
         r, phi = np.sqrt(t2) * z, np.float32(2 * np.pi) * u1
         return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
 
-    t = SamplerTest(s.pdf, s.domain, sample_count=1_000_000)
+    t = SamplerTest(s.pdf, s.domain, sample_count=1_000_000, breaks=s.breaks)
     results = [t.check(float32_ggx, seed=seed) for seed in range(3)]
     assert all(r.passed for r in results), [str(r) for r in results]
 

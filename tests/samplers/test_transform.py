@@ -167,7 +167,7 @@ def test_singular_and_stepped_marginals_carry_only_their_kept_leaves_error(prefi
     sqrt(n W^2) by at most 0.02, so Cramer-von Mises on u0 keeps its power."""
     s = next(z for z in zoo.correct() if z.name.startswith(prefix))
     n = 1_000_000
-    m = SamplerTest(s.pdf, s.domain, sample_count=n).transform.marginal
+    m = SamplerTest(s.pdf, s.domain, sample_count=n, breaks=s.breaks).transform.marginal
     x = np.concatenate([np.linspace(0, 1, 100_001), m.lo, m.hi, np.geomspace(1e-12, 1, 2001)])
     got = m(np.zeros(x.size, dtype=np.int64), x)
     assert np.max(np.abs(got - cdf(x))) <= m.error
@@ -183,7 +183,7 @@ def test_conditionals_at_poles_and_edges_are_tabulated_within_their_bound(prefix
     where the boxes are cut (a box across it had left 4.7e-5)."""
     s = next(z for z in zoo.correct() if z.name.startswith(prefix))
     n = 1_000_000
-    t = SamplerTest(s.pdf, s.domain, sample_count=n).transform
+    t = SamplerTest(s.pdf, s.domain, sample_count=n, breaks=s.breaks).transform
     hi = 0.05 if "cone" in prefix else 1.0                 # the cone: s0 in [0, 0.05]
     s0 = np.concatenate([np.geomspace(1e-12, hi, 3000), hi - np.geomspace(1e-12, hi, 3000)[1:]])
     s1 = np.random.default_rng(0).random(s0.size)
@@ -202,7 +202,7 @@ def test_a_texel_tables_conditional_is_exact_between_its_steps():
     centres = np.column_stack([np.repeat((np.arange(cols) + 0.5) / cols, rows),
                                np.tile((np.arange(rows) + 0.5) / rows, cols)])
     texel = s.pdf(centres).reshape(cols, rows)
-    t = SamplerTest(s.pdf, s.domain, sample_count=1_000_000).transform
+    t = SamplerTest(s.pdf, s.domain, sample_count=1_000_000, breaks=s.breaks).transform
     rng = np.random.default_rng(1)
     worst = 0.0
     left = np.arange(cols) / cols
@@ -308,7 +308,7 @@ def test_an_exact_inversion_sampler_maps_back_to_its_uniforms(name, domain, para
 def test_a_smooth_azimuth_warp_no_bin_resolves_is_caught_at_one_million_samples(s):
     """The cosine lobe with azimuth u^1.005 passed the binned tests at every seed at 1e6
     samples; the transform's Cramer-von Mises on u1 rejects it at alpha = 0.01 (seeds 0..4)."""
-    t = SamplerTest(s.pdf, s.domain, sample_count=1_000_000)
+    t = SamplerTest(s.pdf, s.domain, sample_count=1_000_000, breaks=s.breaks)
     results = [t.check(s.sample, seed=seed) for seed in range(5)]
     assert not any(r.passed for r in results), [r.pvalue for r in results]
     for r in results:
@@ -326,7 +326,7 @@ def test_a_smooth_azimuth_warp_is_seen_through_singular_and_stepped_tables(prefi
     there.  Seeds 0..9 at 1e6 samples; measured over 20 seeds: 19 and 14 rejected, where tables
     with one box across each pole and texel row (bounds 1.5e-3 and 5.9e-3) gave 0 and 1."""
     s = next(z for z in zoo.smooth_warps() if z.name.startswith(prefix))
-    t = SamplerTest(s.pdf, s.domain, sample_count=1_000_000)
+    t = SamplerTest(s.pdf, s.domain, sample_count=1_000_000, breaks=s.breaks)
     assert t.transform.conditional.error * 1000 <= 0.1
     rejected = sum(not t.check(s.sample, seed=seed).passed for seed in range(10))
     assert rejected >= at_least

@@ -1,6 +1,7 @@
 """A team's own samplers in a suite ([[sampler]] sampler = "module:attr"): an object, a tuple
 or a factory with params, checked against its pdf (missing samples allowed for with total),
 xfail for known findings, and every mistake named with file, line and key."""
+import re
 import textwrap
 
 import pytest
@@ -34,6 +35,38 @@ linear = Linear()
 pair = (lambda u: u, lambda x: np.ones(len(x)), "interval")
 
 
+class Steps:
+    """A density stepping 1:2.5 at x = 1/3, by inversion, the step declared as a break."""
+    domain = "interval"
+    breaks = ([1 / 3],)
+
+    def sample(self, u):
+        return np.where(u < 1 / 6, 2 * u, 1 / 3 + (u - 1 / 6) / 1.25)
+
+    def pdf(self, x):
+        return np.where(x < 1 / 3, 0.5, 1.25)
+
+
+class PoleY:
+    """theta = pi u0 about +y (pdf 1 / (2 pi^2 sin theta)), checked with its pole at +y."""
+    domain, pole = "sphere", "y"
+
+    def sample(self, u):
+        th, ph = np.pi * u[:, 0], 2 * np.pi * u[:, 1]
+        return np.column_stack([np.sin(th) * np.sin(ph), np.cos(th), np.sin(th) * np.cos(ph)])
+
+    def pdf(self, w):
+        return 1 / (2 * np.pi**2 * np.sqrt(np.maximum(1 - w[:, 1] ** 2, 1e-300)))
+
+
+class BadBreaks(Steps):
+    breaks = ([1 / 3], [0.5])
+
+
+class BadPole(Steps):
+    pole = "y"
+
+
 def broken_factory(**params):
     raise RuntimeError("no such roughness")
 
@@ -61,6 +94,12 @@ measurements = ["chi_square", "mcmc"]
 sampler = "mysampler:Linear"
 params = { power = 0.55 }
 xfail = "a known finding: too many samples near 0"
+
+[[sampler]]
+sampler = "mysampler:Steps"
+
+[[sampler]]
+sampler = "mysampler:PoleY"
 '''
 
 
@@ -74,14 +113,20 @@ def repo(tmp_path):
 def test_user_samplers_are_checked_and_xfailed(repo):
     suite = load_suite(repo / "suite.toml")
     assert [s.label for s in suite.samplers] == ["mysampler:linear", "mysampler.py:Linear(absorb=0.25)",
-                                                 "mysampler:pair", "mysampler:Linear(power=0.55)"]
+                                                 "mysampler:pair", "mysampler:Linear(power=0.55)",
+                                                 "mysampler:Steps", "mysampler:PoleY"]
     assert suite.samplers[1].total == 0.75
     s = run_suite(suite, repo / "r.sqlite", threads=2)
     o = s["sampler"]
-    assert [o.status(i) for i in range(4)] == ["passed", "passed", "passed", "xfailed"]
+    assert [o.status(i) for i in range(6)] == ["passed", "passed", "passed", "xfailed", "passed", "passed"]
     assert s.failed == 0
     checks = o.results[1].checks["chi_square"]
     assert any(t["test"] == "failed samples" for t in checks["tests"])
+    # PoleY's pole reached its check: the conditional's table about +y is as tight as the zoo's
+    # about +z (8.7e-7; with the pole at +z the singular axis crosses the strips: 1.7e-4)
+    u1 = next(t for t in o.results[5].checks["chi_square"]["tests"]
+              if t["test"].startswith("Cramer-von Mises u1"))
+    assert float(re.search(r"CDF error bound ([0-9.e+-]+) carried", u1["detects"]).group(1)) < 1e-5
     assert run_suite(load_suite(repo / "suite.toml"), repo / "r.sqlite", threads=2).units_run == 0
     # a change of the module's source gives every check a new key: its stored units are not reused
     before = [sampler_key(suite, sc) for sc in suite.samplers]
@@ -105,6 +150,10 @@ def test_user_samplers_are_checked_and_xfailed(repo):
      "bad.toml:3: measurements: expected some of: chi_square, mcmc for a sampler of your own, "
      "got 'weight'"),
     ('sampler = "mysampler:linear"\nxfail = ""', "bad.toml:3: xfail: expected the reason"),
+    ('sampler = "mysampler:BadBreaks"', "bad.toml:2: sampler: mysampler:BadBreaks: 'breaks' must be a "
+                                        "sequence of 1 coordinate sequence(s)"),
+    ('sampler = "mysampler:BadPole"',
+     "bad.toml:2: sampler: mysampler:BadPole: 'pole' 'y' is for the sphere only"),
 ])
 def test_user_sampler_mistakes_name_file_line_and_key(repo, table, message):
     (repo / "bad.toml").write_text(textwrap.dedent(f"[[sampler]]\n{table}\n"))

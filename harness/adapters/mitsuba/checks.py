@@ -53,6 +53,7 @@ import reference_estimators as rest
 from harness.adapters.mitsuba.cap import CapView
 from harness.adapters.mitsuba.runtime import is_jit
 from harness.samplers.check import SAMPLE_CASE, check_with_missing
+from harness.samplers.domains import Domain
 from harness.samplers.reported import reported_pdf_failure, rounding_spread
 from harness.samplers.result import SamplerCheck
 from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
@@ -74,6 +75,9 @@ def check_mitsuba_sampler(sampler: Any, *, sample_count: int = 1_000_000, seed: 
     call reported is checked against ``pdf()`` at the returned direction: a deterministic
     "reported_pdf" failure with its count and examples (tolerance in the module docstring),
     beside the statistical tests at ``alpha``; Dirac-lobe and failed samples are skipped.
+    A sampler's optional ``pole`` (the sphere's, :class:`~harness.samplers.domains.Domain`) and
+    ``breaks`` (where its pdf may step or kink, :func:`~harness.samplers.check_sampler`), as
+    an envmap's, let the cubature cut at its texel lines.
     A sampler with a ``cap`` (an area light) is tested statistically in the cap's map
     (``CapView``) and its reported pdf on the same draw's world directions.
     """
@@ -84,8 +88,10 @@ def check_mitsuba_sampler(sampler: Any, *, sample_count: int = 1_000_000, seed: 
     cap = getattr(sampler, "cap", None)
     with_pdf = getattr(sampler, "sample_with_pdf", None)
     if cap is None:
-        return check_with_missing(with_pdf or sampler.sample, sampler.pdf, sampler.domain,
-                                  sample_count=sample_count, seed=seed, alpha=alpha, udim=sampler.udim)
+        domain = Domain(sampler.domain, pole=getattr(sampler, "pole", "z"))
+        return check_with_missing(with_pdf or sampler.sample, sampler.pdf, domain, sample_count=sample_count,
+                                  seed=seed, alpha=alpha, udim=sampler.udim,
+                                  breaks=getattr(sampler, "breaks", None))
     view = CapView(sampler, cap)
     r = check_with_missing(view.sample, view.pdf, view.domain, sample_count=sample_count, seed=seed,
                            alpha=alpha, udim=sampler.udim)

@@ -30,6 +30,7 @@ import numpy as np
 from harness.adapters.mitsuba.batch import MitsubaSampler, zeros
 from harness.adapters.mitsuba.cap import Cap, bounding_cap, box_cap
 from harness.adapters.mitsuba.runtime import using_variant
+from harness.samplers.domains import Domain
 
 __all__ = ["AreaEmitterSampler", "EnvmapSampler", "area_emitter_sampler", "envmap_sampler", "light_bitmap",
            "rectangle_light", "refuse_delta_emitter", "sky_bitmap", "sphere_light"]
@@ -45,8 +46,11 @@ class EnvmapSampler(MitsubaSampler):
     domain = "sphere"
 
     def __init__(self, bitmap: np.ndarray | None = None, *, plugin: dict[str, Any] | None = None,
-                 variant: str = "llvm_ad_rgb", name: str | None = None):
+                 variant: str = "llvm_ad_rgb", name: str | None = None, texel_breaks: bool = False):
         params = dict(plugin or {"type": "envmap"})
+        self.texel_breaks = bool(texel_breaks)
+        # with texel_breaks the map's rows, cones about +y, are cuts of the sphere's first parameter
+        self.pole = "y" if self.texel_breaks else "z"
         if params.get("type") != "envmap":
             raise ValueError("'plugin' must be an envmap plugin dict ({'type': 'envmap', ...}), "
                              f"got {plugin!r}")
@@ -72,6 +76,22 @@ class EnvmapSampler(MitsubaSampler):
         if self.image is not None:
             d["bitmap"] = mi.Bitmap(self.image)
         return mi.load_dict(d)
+
+    @property
+    def breaks(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """With ``texel_breaks``, where the pdf kinks, in the parameters of
+        ``Domain("sphere", pole="y")``: Mitsuba samples the map's luminance interpolated
+        bilinearly between texel centres, rows at theta = pi i / (H - 1) and columns at
+        u = (j + 1/2) / W, where u = phi_m / 2 pi with d = (sin theta sin phi_m, cos theta,
+        -sin theta cos phi_m), so the domain's azimuth atan2(x, z) is pi - phi_m (probed on a
+        random 8 x 16 map: the kinks lie there to 1e-3 of a texel).  Else None, as for a map
+        given by file name."""
+        if self.image is None or not self.texel_breaks:
+            return None
+        height, width = self.image.shape[:2]
+        theta = math.pi * np.arange(1, height - 1) / (height - 1)
+        phi = math.pi - 2 * math.pi * (np.arange(width) + 0.5) / width
+        return Domain("sphere", pole=self.pole).breaks(theta, phi)
 
     @staticmethod
     def _it(mi, width):
@@ -103,7 +123,8 @@ class EnvmapSampler(MitsubaSampler):
             with open(str(self.plugin["filename"]), "rb") as f:
                 digest = hashlib.sha256(f.read()).hexdigest()
         return {"plugin": {k: v for k, v in self.plugin.items()}, "image_sha256": digest,
-                "bitmap_shape": list(self.image.shape) if self.image is not None else None}
+                "bitmap_shape": list(self.image.shape) if self.image is not None else None,
+                **({"texel_breaks": True} if self.texel_breaks else {})}
 
 
 def sky_bitmap(width: int = 256, height: int = 128, *, sun_theta: float = 40.0, sun_phi: float = 70.0,
@@ -137,11 +158,16 @@ def sky_bitmap(width: int = 256, height: int = 128, *, sun_theta: float = 40.0, 
 
 
 def envmap_sampler(bitmap: np.ndarray | None = None, *, plugin: dict[str, Any] | None = None,
-                   variant: str = "llvm_ad_rgb", name: str | None = None) -> EnvmapSampler:
+                   variant: str = "llvm_ad_rgb", name: str | None = None,
+                   texel_breaks: bool = False) -> EnvmapSampler:
     """Directions from an ``envmap`` emitter built from ``bitmap`` (a lat-long float array;
     default: ``sky_bitmap()``) or from ``plugin`` (e.g. {"type": "envmap", "filename": ...,
-    "scale": 2}), on the sphere."""
-    return EnvmapSampler(bitmap, plugin=plugin, variant=variant, name=name)
+    "scale": 2}), on the sphere.  ``texel_breaks``: check it on the sphere with its pole at
+    +y and the texel lines declared as the pdf's breaks (``EnvmapSampler.breaks``): on the
+    256 x 128 sky with a hard-edged sun the marginal table's bound falls from 0.04 (a u0 test
+    without power) to 3e-6, at about twice the setup's pdf calls; with the soft rim only to
+    6e-3 (the refinement's evaluation budget runs out)."""
+    return EnvmapSampler(bitmap, plugin=plugin, variant=variant, name=name, texel_breaks=texel_breaks)
 
 
 def refuse_delta_emitter(kind: str) -> None:

@@ -40,6 +40,8 @@ class Mutant:
         self.pdf_from, self.weight_fault, self.reported_fault = pdf_from or base, weight_fault, reported_fault
         self._pdf_fault = pdf_scale != 1.0 or pdf_from is not None
         self.domain, self.udim = base.domain, base.udim
+        # the base's sphere pole and pdf breaks (an envmap's texel lines): hints to the cubature
+        self.pole, self.breaks = getattr(base, "pole", "z"), getattr(self.pdf_from, "breaks", None)
         self.variant, self.kind = base.variant, base.kind
         self.cap = getattr(base, "cap", None)   # an area light's: the chi-square runs in its map
 
