@@ -129,7 +129,8 @@ def _samples(c: dict[str, Any], samples: int, where: Locator, table: Any) -> int
 
 
 _ADAPTER_SAMPLER_KEYS = {"adapter": str, "plugin": dict, "wi": (int, float, list), "ref": list,
-                         "variant": str, "samples": int, "measurements": list, "xfail": str}
+                         "texel_breaks": bool, "variant": str, "samples": int, "measurements": list,
+                         "xfail": str}
 
 
 def _adapter_sampler(c: dict[str, Any], samples: int, case_id: int, where: Locator,
@@ -144,7 +145,7 @@ def _adapter_sampler(c: dict[str, Any], samples: int, case_id: int, where: Locat
                                   f"not supported), got {c['adapter']!r}"))
     from harness.adapters.mitsuba.samplers import make_sampler
 
-    spec = {k: c[k] for k in ("plugin", "wi", "ref", "variant") if k in c}
+    spec = {k: c[k] for k in ("plugin", "wi", "ref", "texel_breaks", "variant") if k in c}
     try:
         s = make_sampler(spec)
     except (ValueError, TypeError, RuntimeError) as e:

@@ -139,6 +139,20 @@ def test_envmap_texel_breaks_lie_on_the_kinks_of_its_pdf():
     assert plain.breaks is None and plain.pole == "z"
 
 
+def test_texel_breaks_of_an_envmap_file_and_from_a_suite_table(tmp_path):
+    """A map given by file name has the breaks of its resolution, as read by Mitsuba; a suite
+    table asks for them with texel_breaks = true (the sampler's fingerprint says so)."""
+    img = np.random.default_rng(2).uniform(0.2, 1.0, (8, 16, 3)).astype(np.float32)
+    path = tmp_path / "sky.exr"
+    with runtime.using_variant("llvm_ad_rgb") as mi:
+        mi.Bitmap(img).write(str(path))
+    from_file = ms.make_sampler({"plugin": {"type": "envmap", "filename": str(path)}, "texel_breaks": True})
+    from_array = ms.envmap_sampler(img, texel_breaks=True)
+    assert all(np.array_equal(a, b) for a, b in zip(from_file.breaks, from_array.breaks))
+    assert from_file.pole == "y" and from_file.fingerprint()["texel_breaks"] is True
+    assert "texel_breaks" not in ms.make_sampler({"plugin": {"type": "envmap"}}).fingerprint()
+
+
 @pytest.mark.slow
 def test_an_envmap_with_texel_breaks_keeps_its_marginal_tests_sharp():
     """The 256 x 128 sky with a hard-edged sun: without texel_breaks the marginal CDF table
@@ -289,6 +303,8 @@ def test_make_sampler_from_a_suite_table():
     ({"plugin": {"type": "diffuse"}, "variant": "nope"}, "installed Mitsuba variant"),
     ({"plugin": {"type": "microfacet", "alpha": 0.1, "roughness": 2}}, "unknown key 'roughness'"),
     ({"plugin": {"type": "microfacet", "distribution": "phong"}}, "'distribution' must be"),
+    ({"plugin": {"type": "diffuse"}, "texel_breaks": True}, "'texel_breaks': .* for an envmap only"),
+    ({"plugin": {"type": "envmap"}, "texel_breaks": "yes"}, "'texel_breaks': true or false"),
 ])
 def test_make_sampler_errors_name_the_key(spec, match):
     with pytest.raises(ValueError, match=match):
@@ -337,6 +353,7 @@ def test_suite_sampler_tables_run_mitsuba_checks(tmp_path):
     ('plugin = { type = "microfacet" }\nmeasurements = ["weight"]', "measurements"),
     ('plugin = { type = "diffuse" }\nsamples = 10', "samples"),
     ('plugin = { type = "diffuse" }\nfoo = 1', "foo"),
+    ('plugin = { type = "diffuse" }\ntexel_breaks = true', "texel_breaks"),
 ])
 def test_suite_sampler_table_errors_name_the_key(tmp_path, body, key):
     from harness.suite.parse import SuiteError, load_suite

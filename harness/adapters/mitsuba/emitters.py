@@ -67,9 +67,15 @@ class EnvmapSampler(MitsubaSampler):
                              f"got {self.image.shape}")
         self.plugin = params
         label = name or ("envmap " + (f"{self.image.shape[1]}x{self.image.shape[0]}" if self.image is not None
-                                      else str(self.plugin.get("filename"))))
+                                      else str(self.plugin.get("filename")))
+                         + (", texel breaks" if self.texel_breaks else ""))
         super().__init__(variant, label)
         self._build_checked(f"an envmap from {self.plugin!r}")
+        self._resolution = None if self.image is None else self.image.shape[:2]
+        if self.texel_breaks and self.image is None:    # the file's (height, width), as Mitsuba read it
+            with using_variant(variant) as mi:
+                width, height = mi.Bitmap(str(self.plugin["filename"])).size()
+            self._resolution = (int(height), int(width))
 
     def _build(self, mi: Any) -> Any:
         d = dict(self.plugin)
@@ -84,11 +90,10 @@ class EnvmapSampler(MitsubaSampler):
         bilinearly between texel centres, rows at theta = pi i / (H - 1) and columns at
         u = (j + 1/2) / W, where u = phi_m / 2 pi with d = (sin theta sin phi_m, cos theta,
         -sin theta cos phi_m), so the domain's azimuth atan2(x, z) is pi - phi_m (probed on a
-        random 8 x 16 map: the kinks lie there to 1e-3 of a texel).  Else None, as for a map
-        given by file name."""
-        if self.image is None or not self.texel_breaks:
+        random 8 x 16 map: the kinks lie there to 1e-3 of a texel).  Else None."""
+        if not self.texel_breaks:
             return None
-        height, width = self.image.shape[:2]
+        height, width = self._resolution
         theta = math.pi * np.arange(1, height - 1) / (height - 1)
         phi = math.pi - 2 * math.pi * (np.arange(width) + 0.5) / width
         return Domain("sphere", pole=self.pole).breaks(theta, phi)

@@ -202,14 +202,16 @@ def make_sampler(spec: dict[str, Any]) -> MitsubaSampler:
         wi       polar angle of the incident direction in degrees, or a 3-vector (default 0;
                  BSDFs, microfacet distributions and phase functions)
         ref      the reference point an emitter on a shape is sampled from (default origin)
+        texel_breaks  an envmap's: check it about +y with its texel lines declared as the
+                 pdf's breaks (``envmap_sampler``; default false)
         variant  default "llvm_ad_rgb"
 
     Delta emitters (spot, point, directional) are refused.  Raises ValueError naming the key
     at fault."""
-    unknown = set(spec) - {"plugin", "wi", "variant", "name", "ref"}
+    unknown = set(spec) - {"plugin", "wi", "variant", "name", "ref", "texel_breaks"}
     if unknown:
         raise ValueError(f"'{sorted(unknown)[0]}': unknown key for a Mitsuba sampler; "
-                         "expected plugin, wi, ref, variant, name")
+                         "expected plugin, wi, ref, texel_breaks, variant, name")
     plugin = spec.get("plugin")
     if not isinstance(plugin, dict) or not isinstance(plugin.get("type"), str):
         raise ValueError(f"'plugin': expected a table with a 'type' key (a Mitsuba plugin), got {plugin!r}")
@@ -221,8 +223,12 @@ def make_sampler(spec: dict[str, Any]) -> MitsubaSampler:
         raise ValueError(f"'ref': only emitters on shapes are sampled from a reference point, not {kind!r}")
     if kind in _DELTA_EMITTERS:
         refuse_delta_emitter(kind)
+    texel_breaks = spec.get("texel_breaks", False)
+    if not isinstance(texel_breaks, bool) or (texel_breaks and kind != "envmap"):
+        raise ValueError(f"'texel_breaks': true or false, for an envmap only; got {texel_breaks!r} for a "
+                         f"{kind!r}")
     if kind == "envmap":
-        return envmap_sampler(plugin=plugin, variant=variant, name=name)
+        return envmap_sampler(plugin=plugin, variant=variant, name=name, texel_breaks=texel_breaks)
     if kind in _SHAPES:
         return area_emitter_sampler(plugin, ref=spec.get("ref", (0.0, 0.0, 0.0)), variant=variant, name=name)
     if kind in _PHASES:
