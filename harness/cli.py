@@ -179,9 +179,10 @@ def _check_sampler(args) -> int:
         print("harness: say --domain (interval, square, disk, hemisphere, sphere)", file=sys.stderr)
         return 2
     total = args.total if args.total is not None else user.total
-    try:
-        result = check_sampler(user.sample, user.pdf, domain, sample_count=args.samples, seed=args.seed,
-                               alpha=args.alpha, udim=user.udim, total=total)
+    try:    # the sampler's own pole and breaks, if it has them (harness.samplers.user)
+        result = check_sampler(user.sample, user.pdf, user.check_domain(domain), sample_count=args.samples,
+                               seed=args.seed, alpha=args.alpha, udim=user.udim, total=total,
+                               breaks=user.breaks)
     except ValueError as e:  # a bad argument, or the user's code failing (UserCodeError names it)
         print(f"harness: {e}", file=sys.stderr)
         return 2
@@ -190,8 +191,8 @@ def _check_sampler(args) -> int:
     ok = result.passed
     if args.mcmc:
         try:
-            m = mcmc_crosscheck(user.sample, user.pdf, domain, seed=args.seed, alpha=args.alpha,
-                                udim=user.udim)
+            m = mcmc_crosscheck(user.sample, user.pdf, user.check_domain(domain), seed=args.seed,
+                                alpha=args.alpha, udim=user.udim)
         except ValueError as e:  # the user's code failing (UserCodeError names it)
             print(f"harness: {e}", file=sys.stderr)
             return 2

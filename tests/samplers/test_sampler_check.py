@@ -192,7 +192,12 @@ def test_cli_check_sampler(tmp_path):
                    "_s = rest.sampler('ggx', alpha=0.1)\n"
                    "def good():\n    return (lambda u: _s.sample(u)[0], _s.pdf, 'hemisphere')\n"
                    "def bad():\n"
-                   "    return (lambda u: _s.sample(u)[0], lambda w: 1.01 * _s.pdf(w), 'hemisphere')\n")
+                   "    return (lambda u: _s.sample(u)[0], lambda w: 1.01 * _s.pdf(w), 'hemisphere')\n"
+                   "class Turned:\n"   # GGX about +y, on the sphere with its pole at +y
+                   "    domain, pole = 'sphere', 'y'\n"
+                   "    def sample(self, u):\n        return _s.sample(u)[0][:, [1, 2, 0]]\n"
+                   "    def pdf(self, w):\n        return _s.pdf(w[:, [2, 0, 1]])\n"
+                   "class BadBreaks(Turned):\n    breaks = ([2.0], None)\n")
     (tmp_path / "raises.py").write_text("raise RuntimeError('no GPU here')\n")
     harness = str(Path(sys.executable).with_name("harness"))
 
@@ -206,6 +211,11 @@ def test_cli_check_sampler(tmp_path):
         assert "summary: 1 passed, 0 failed" in r.stdout, r.stdout + r.stderr
     r = run("my_sampler:bad", "--samples", "200000")
     assert r.returncode == 1 and "normalization" in r.stdout and "1.010000" in r.stdout
+    r = run("my_sampler:Turned", "--samples", "200000")
+    assert r.returncode == 0 and "PASSED" in r.stdout, r.stdout + r.stderr
+    r = run("my_sampler:BadBreaks", "--samples", "200000")
+    assert r.returncode == 2 and "harness: 'breaks'[0]: 1 of 1 coordinates are not finite numbers in [0, 1]" \
+        in r.stderr and "Traceback" not in r.stderr, r.stderr
     for target, said in [("my_sampler:nope", "'my_sampler:nope': my_sampler has no attribute 'nope'"),
                          ("nothere:good", "'nothere:good': cannot import 'nothere'"),
                          ("./nothere.py:good", "'./nothere.py:good': no file"),
