@@ -183,8 +183,9 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
         return (np.maximum(val, 0).reshape(-1, 4, npiece).sum(axis=2),
                 err.reshape(-1, 4 * npiece).sum(axis=1), int(full.sum()))
 
-    # a first pass at a tolerance relative to the boxes' measure finds the strips' masses
-    if expect is not None:      # half the refinement's tolerance (below), at the expected mass
+    # a first pass finds the strips' masses: at half the refinement's tolerance (below) for
+    # the masses expected, where they are known, else at a tolerance relative to the boxes' measure
+    if expect is not None:
         first_tol = 0.05 * eps * np.maximum(expect, 1e-300)
     else:
         measure = np.ones(nstrip) if k == 1 else np.sum(pieces[:, :, 1] - pieces[:, :, 0], axis=1)
