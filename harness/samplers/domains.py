@@ -46,7 +46,7 @@ class Domain:
     pole: str = "z"     # the sphere's: the axis theta is measured from (below)
 
     def __post_init__(self):
-        if self.pole not in _POLES:
+        if not isinstance(self.pole, str) or self.pole not in _POLES:
             raise ValueError(f"'pole' must be one of {tuple(_POLES)}, got {self.pole!r}")
         if self.pole != "z" and self.kind != "sphere":
             raise ValueError(f"'pole' {self.pole!r} is for the sphere only; the {self.kind} has none "
@@ -188,6 +188,8 @@ def checked_breaks(breaks: Sequence[Any] | None, dom: Domain) -> tuple[np.ndarra
     wrong number of axes or coordinates that are not finite numbers in [0, 1]."""
     if breaks is None:
         return None
+    if isinstance(breaks, np.ndarray) and breaks.ndim == 2:    # one row per axis
+        breaks = list(breaks)
     if isinstance(breaks, (str, bytes)) or not isinstance(breaks, Sequence) or len(breaks) != dom.k:
         raise ValueError(f"'breaks' must be a sequence of {dom.k} coordinate sequence(s) (or None) for the "
                          f"{dom.kind}'s parameter axes, got {breaks!r:.200}")
@@ -197,9 +199,11 @@ def checked_breaks(breaks: Sequence[Any] | None, dom: Domain) -> tuple[np.ndarra
             out.append(None)
             continue
         try:
-            v = np.asarray(b, dtype=float).reshape(-1)
-        except (TypeError, ValueError):
+            v = np.asarray(b, dtype=float)
+        except (TypeError, ValueError, OverflowError):
             raise ValueError(f"'breaks'[{axis}] must be numbers in [0, 1], got {b!r:.200}") from None
+        if v.ndim != 1:     # a scalar here is a flat list of coordinates given for a 2-D domain
+            raise ValueError(f"'breaks'[{axis}] must be a sequence of coordinates (or None), got {b!r:.200}")
         bad = ~(np.isfinite(v) & (v >= 0) & (v <= 1))
         if bad.any():
             raise ValueError(f"'breaks'[{axis}]: {int(bad.sum())} of {v.size} coordinates are not finite "

@@ -7,6 +7,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from harness.samplers import Domain, SamplerTest, zoo
 from harness.samplers.cubature import box_integrals, split_points
@@ -61,8 +63,9 @@ def test_the_pole_permutes_the_frame_exactly():
     assert y.to_params(np.array([[0.0, 1.0, 0.0]]))[0][0, 0] == 0.0          # theta from +y
     with pytest.raises(ValueError, match="'pole' 'y' is for the sphere only"):
         Domain("hemisphere", pole="y")
-    with pytest.raises(ValueError, match="'pole' must be one of"):
-        Domain("sphere", pole="w")
+    for pole in ("w", ["y"], None):
+        with pytest.raises(ValueError, match="'pole' must be one of"):
+            Domain("sphere", pole=pole)
 
 
 def test_a_sampler_about_another_pole_gets_the_same_tables_bit_for_bit():
@@ -84,10 +87,37 @@ def test_breaks_are_validated_sorted_and_stripped_of_the_ends():
     b = checked_breaks([[0.5, 0.25, 0.5, 0.0, 1.0], None], dom)
     assert b[0].tolist() == [0.25, 0.5] and b[1] is None
     assert checked_breaks(None, dom) is None
+    rows = checked_breaks(np.array([[0.5, 0.25], [0.1, 0.2]]), dom)     # an array, a row per axis
+    assert rows[0].tolist() == [0.25, 0.5] and rows[1].tolist() == [0.1, 0.2]
     for bad, match in [([[0.5]], "sequence of 2"), ("ab", "sequence of 2"), ([[np.nan], None], "not finite"),
-                       ([[1.5], None], r"in \[0, 1\]"), ([["x"], None], "must be numbers")]:
+                       ([[1.5], None], r"in \[0, 1\]"), ([["x"], None], "must be numbers"),
+                       ([0.3, 0.5], "must be a sequence of coordinates"), (b"\x00\xff", "sequence of 2"),
+                       ([{"a": 1}, None], "must be numbers"), (7, "sequence of 2"),
+                       ([[10**400], None], "must be numbers")]:
         with pytest.raises(ValueError, match=match):
             checked_breaks(bad, dom)
+
+
+_ANYTHING = st.recursive(st.none() | st.booleans() | st.floats() | st.integers() | st.text(max_size=3)
+                         | st.binary(max_size=3), lambda inner: st.lists(inner, max_size=4)
+                         | st.tuples(inner, inner) | st.dictionaries(st.text(max_size=2), inner, max_size=2),
+                         max_leaves=12)
+
+
+@settings(max_examples=300, deadline=None)
+@given(_ANYTHING, st.sampled_from(["interval", "sphere"]))
+def test_any_breaks_are_taken_or_refused_with_a_value_error(breaks, kind):
+    """Whatever a sampler carries as ``breaks``: sorted coordinates strictly inside (0, 1), one
+    array (or None) per axis, or a ValueError naming 'breaks', never another exception."""
+    dom = Domain(kind)
+    try:
+        out = checked_breaks(breaks, dom)
+    except ValueError as e:
+        assert "'breaks'" in str(e)
+        return
+    assert out is None or len(out) == dom.k
+    for v in out or ():
+        assert v is None or (v.ndim == 1 and np.all((v > 0) & (v < 1)) and np.all(np.diff(v) > 0))
 
 
 def test_natural_coordinates_map_to_the_parameter_axes():
