@@ -17,7 +17,8 @@ import numpy as np
 
 import reference_estimators as rest
 
-__all__ = ["box_integrals", "cell_integrals", "rounding_floor", "split_points", "tensor_rule"]
+__all__ = ["box_integrals", "cell_integrals", "grouped_integrals", "rounding_floor", "split_points",
+           "tensor_rule"]
 
 #: The relative change of a box's integral that a float32 density's own rounding can cause:
 #: Mitsuba's float32 pdfs move a box's rule by up to ~1e-6 of its value where they are
@@ -113,13 +114,65 @@ def cell_integrals(q: Callable[[np.ndarray], np.ndarray], shape: tuple[int, ...]
                    max_depth: int = 24, max_evals: int = 40_000_000, floor: float = 0.0,
                    breaks: Sequence[np.ndarray | None] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Integrals of q (scalar or vector valued, (M,) or (M, m)) over the cells of a regular
-    grid on [0, 1]^k, and their error bounds: arrays (cells, m), cells in C order.  See
-    :func:`box_integrals`."""
+    grid on [0, 1]^k, and their error bounds: arrays (cells, m), cells in C order.  Where every
+    side of the grid is even the cells are judged in blocks of 2 per axis
+    (:func:`grouped_integrals`: a smooth density's 128 x 256 grid costs 0.7 million pdf calls
+    in place of 2.6), else one by one (:func:`box_integrals`)."""
     k = len(shape)
     idx = np.stack(np.meshgrid(*[np.arange(n) for n in shape], indexing="ij"), axis=-1).reshape(-1, k)
     size = np.array(shape, dtype=float)
-    return box_integrals(q, idx / size, (idx + 1) / size, tol, max_depth=max_depth, max_evals=max_evals,
-                         floor=floor, breaks=breaks)
+    if any(n % 2 for n in shape):
+        return box_integrals(q, idx / size, (idx + 1) / size, tol, max_depth=max_depth, max_evals=max_evals,
+                             floor=floor, breaks=breaks)
+    # the cells judged by blocks of 2 per axis (grouped_integrals)
+    blocks = np.array(shape) // 2
+    block_idx = idx // 2
+    group = np.ravel_multi_index(tuple(block_idx.T), tuple(blocks))
+    bidx = np.stack(np.meshgrid(*[np.arange(n) for n in blocks], indexing="ij"), axis=-1).reshape(-1, k)
+    bsize = blocks.astype(float)
+    return grouped_integrals(q, idx / size, (idx + 1) / size, group, bidx / bsize, (bidx + 1) / bsize, tol,
+                             max_depth=max_depth, max_evals=max_evals, floor=floor, breaks=breaks)
+
+
+def grouped_integrals(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.ndarray,
+                      group: np.ndarray, parent_lo: np.ndarray, parent_hi: np.ndarray,
+                      tol: np.ndarray | float, *, max_evals: int = 40_000_000, floor: float = 0.0,
+                      **kw) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`box_integrals` of boxes [lo, hi] (B, k) that tile parents [parent_lo, parent_hi]
+    (G, k), box i inside parent ``group[i]`` (the 2 x 2 blocks of a grid's cells, a leaf's
+    four quarters): each box and each parent is integrated by the rule once, and where a
+    parent's rule agrees with the sum of its boxes' to their summed tolerance (or to q's
+    rounding ``floor``), the boxes' rules are taken, their error the parent's change shared by
+    tolerance; the boxes of other parents go through :func:`box_integrals` (``kw`` passed on).
+    A box taken so costs the rule once plus its share of the parent's (20 evaluations a 2-D
+    cell of a 2 x 2 block, where :func:`box_integrals` spends 80 to judge a box that has
+    converged: its halves along each axis), and its error is the coarser rule's, the parent's.
+    The windows no rule sees (:func:`box_integrals`) move with the nodes: a step within 7 % of
+    a box's width from an edge it shares with a box of its parent, or from its parent's
+    outer edges, agrees in both."""
+    lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+    nbox, k = lo.shape
+    tol = np.broadcast_to(np.asarray(tol, dtype=float), (nbox,))
+    own = _rule(q, lo, hi)
+    parent = _rule(q, np.asarray(parent_lo, dtype=float), np.asarray(parent_hi, dtype=float))
+    ngroup = parent.shape[0]
+    sums = _owner_sums(group, own, ngroup)
+    change = np.abs(sums - parent)
+    group_tol = np.bincount(group, tol, minlength=ngroup)
+    with np.errstate(invalid="ignore"):
+        agreed = (np.all(np.isfinite(change), axis=1)
+                  & (change[:, 0] <= np.maximum(group_tol, floor * np.abs(parent[:, 0]))))
+    taken = agreed[group]
+    value, error = own.copy(), np.empty_like(own)
+    share = tol / np.maximum(group_tol[group], 1e-300)
+    error[taken] = change[group[taken]] * share[taken, None]
+    rest_ = np.flatnonzero(~taken)
+    if rest_.size:
+        spent = (nbox + ngroup) * 4**k
+        v, e = box_integrals(q, lo[rest_], hi[rest_], tol[rest_], max_evals=max(max_evals - spent, 0),
+                             floor=floor, **kw)
+        value[rest_], error[rest_] = v, e
+    return value, error
 
 
 def box_integrals(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.ndarray,
