@@ -151,10 +151,18 @@ def grouped_integrals(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi:
     a box's width from an edge it shares with a box of its parent, or from its parent's
     outer edges, agrees in both."""
     lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+    parent_lo, parent_hi = np.asarray(parent_lo, dtype=float), np.asarray(parent_hi, dtype=float)
     nbox, k = lo.shape
     tol = np.broadcast_to(np.asarray(tol, dtype=float), (nbox,))
+    # every parent cut along every axis: children that cut it along one only agree with it on a
+    # density they resolve no better across (a lobe narrow across: 1.6e-3 off, bound 1e-19)
+    cut = np.zeros((parent_lo.shape[0], k), dtype=bool)
+    np.logical_or.at(cut, group, hi < parent_hi[group])
+    if not cut.all():
+        raise ValueError("grouped_integrals: every parent must be cut along every axis by its boxes; "
+                         f"{int((~cut.all(axis=1)).sum())} of {cut.shape[0]} are not")
     own = _rule(q, lo, hi)
-    parent = _rule(q, np.asarray(parent_lo, dtype=float), np.asarray(parent_hi, dtype=float))
+    parent = _rule(q, parent_lo, parent_hi)
     ngroup = parent.shape[0]
     sums = _owner_sums(group, own, ngroup)
     change = np.abs(sums - parent)
