@@ -134,7 +134,7 @@ def test_natural_coordinates_map_to_the_parameter_axes():
 def test_a_declared_envmap_costs_fewer_pdf_calls_for_tighter_tables():
     """The zoo's 16 x 32 lat-long map with and without its texel edges declared: fewer pdf
     calls, a transform bound no larger, and its exact mass 1 within the cubature's bound (which
-    without the breaks it misses by 1.7e-4, 27 times its bound of 6.4e-6: a texel edge within
+    without the breaks it misses by 1.7e-4, 26 times its bound of 6.5e-6: a texel edge within
     3.5 % of a cell's width from its end or its middle lies between every node of the box's
     rule and of its halves', and the rules agree on the wrong value)."""
     env, declared = (next(s for s in zoo.correct() if s.name == name)
