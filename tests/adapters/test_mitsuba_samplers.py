@@ -135,7 +135,7 @@ def test_envmap_texel_breaks_lie_on_the_kinks_of_its_pdf():
         on = [bend[np.abs(mid - b) <= 2 / n].max() for b in declared]
         elsewhere = bend[away & (mid > 0.02) & (mid < 0.98)].max()
         assert min(on) > 3 * elsewhere, (axis, min(on), elsewhere)
-    plain = ms.envmap_sampler(img)
+    plain = ms.envmap_sampler(img, texel_breaks=False)
     assert plain.breaks is None and plain.pole == "z"
 
 
@@ -150,7 +150,9 @@ def test_texel_breaks_of_an_envmap_file_and_from_a_suite_table(tmp_path):
     from_array = ms.envmap_sampler(img, texel_breaks=True)
     assert all(np.array_equal(a, b) for a, b in zip(from_file.breaks, from_array.breaks))
     assert from_file.pole == "y" and from_file.fingerprint()["texel_breaks"] is True
-    assert "texel_breaks" not in ms.make_sampler({"plugin": {"type": "envmap"}}).fingerprint()
+    assert ms.make_sampler({"plugin": {"type": "envmap"}}).fingerprint()["texel_breaks"] is True  # default
+    off = ms.make_sampler({"plugin": {"type": "envmap"}, "texel_breaks": False})
+    assert off.fingerprint()["texel_breaks"] is False and off.breaks is None
 
 
 @pytest.mark.slow
@@ -169,7 +171,8 @@ def test_an_envmap_with_texel_breaks_keeps_its_marginal_tests_sharp():
                                      alpha=ALPHA)
     assert u0_bound(r) <= 1e-4 and r.pvalue > ALPHA, str(r)
     assert [f.check for f in r.failures] == ["reported_pdf"]
-    plain = checks.check_mitsuba_sampler(ms.envmap_sampler(hard), sample_count=N, seed=0, alpha=ALPHA)
+    plain = checks.check_mitsuba_sampler(ms.envmap_sampler(hard, texel_breaks=False), sample_count=N, seed=0,
+                                         alpha=ALPHA)
     assert u0_bound(plain) >= 0.01
 
 
@@ -304,6 +307,7 @@ def test_make_sampler_from_a_suite_table():
     ({"plugin": {"type": "microfacet", "alpha": 0.1, "roughness": 2}}, "unknown key 'roughness'"),
     ({"plugin": {"type": "microfacet", "distribution": "phong"}}, "'distribution' must be"),
     ({"plugin": {"type": "diffuse"}, "texel_breaks": True}, "'texel_breaks': .* for an envmap only"),
+    ({"plugin": {"type": "diffuse"}, "texel_breaks": False}, "'texel_breaks': .* for an envmap only"),
     ({"plugin": {"type": "envmap"}, "texel_breaks": "yes"}, "'texel_breaks': true or false"),
 ])
 def test_make_sampler_errors_name_the_key(spec, match):

@@ -46,7 +46,7 @@ class EnvmapSampler(MitsubaSampler):
     domain = "sphere"
 
     def __init__(self, bitmap: np.ndarray | None = None, *, plugin: dict[str, Any] | None = None,
-                 variant: str = "llvm_ad_rgb", name: str | None = None, texel_breaks: bool = False):
+                 variant: str = "llvm_ad_rgb", name: str | None = None, texel_breaks: bool = True):
         params = dict(plugin or {"type": "envmap"})
         self.texel_breaks = bool(texel_breaks)
         # with texel_breaks the map's rows, cones about +y, are cuts of the sphere's first parameter
@@ -68,7 +68,7 @@ class EnvmapSampler(MitsubaSampler):
         self.plugin = params
         label = name or ("envmap " + (f"{self.image.shape[1]}x{self.image.shape[0]}" if self.image is not None
                                       else str(self.plugin.get("filename")))
-                         + (", texel breaks" if self.texel_breaks else ""))
+                         + ("" if self.texel_breaks else ", without texel breaks"))
         super().__init__(variant, label)
         self._build_checked(f"an envmap from {self.plugin!r}")
         self._resolution = None if self.image is None else self.image.shape[:2]
@@ -85,7 +85,7 @@ class EnvmapSampler(MitsubaSampler):
 
     @property
     def breaks(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """With ``texel_breaks``, where the pdf kinks, in the parameters of
+        """With ``texel_breaks`` (the default), where the pdf kinks, in the parameters of
         ``Domain("sphere", pole="y")``: Mitsuba samples the map's luminance interpolated
         bilinearly between texel centres, rows at theta = pi i / (H - 1) and columns at
         u = (j + 1/2) / W, where u = phi_m / 2 pi with d = (sin theta sin phi_m, cos theta,
@@ -129,7 +129,7 @@ class EnvmapSampler(MitsubaSampler):
                 digest = hashlib.sha256(f.read()).hexdigest()
         return {"plugin": {k: v for k, v in self.plugin.items()}, "image_sha256": digest,
                 "bitmap_shape": list(self.image.shape) if self.image is not None else None,
-                **({"texel_breaks": True} if self.texel_breaks else {})}
+                "texel_breaks": self.texel_breaks}
 
 
 def sky_bitmap(width: int = 256, height: int = 128, *, sun_theta: float = 40.0, sun_phi: float = 70.0,
@@ -164,14 +164,15 @@ def sky_bitmap(width: int = 256, height: int = 128, *, sun_theta: float = 40.0, 
 
 def envmap_sampler(bitmap: np.ndarray | None = None, *, plugin: dict[str, Any] | None = None,
                    variant: str = "llvm_ad_rgb", name: str | None = None,
-                   texel_breaks: bool = False) -> EnvmapSampler:
+                   texel_breaks: bool = True) -> EnvmapSampler:
     """Directions from an ``envmap`` emitter built from ``bitmap`` (a lat-long float array;
     default: ``sky_bitmap()``) or from ``plugin`` (e.g. {"type": "envmap", "filename": ...,
-    "scale": 2}), on the sphere.  ``texel_breaks``: check it on the sphere with its pole at
-    +y and the texel lines declared as the pdf's breaks (``EnvmapSampler.breaks``): on the
-    256 x 128 sky the u0 table's bound falls from 0.03-0.04 (a u0 test without power at any n)
-    to 3e-6 and u1's from 1-2e-3 to 2-3e-5, for 1.4 times the setup's pdf calls (about twice
-    its time); no false alarm in 200 seeds either way (benchmarks/envmap_calibration.py)."""
+    "scale": 2}), on the sphere.  ``texel_breaks`` (default): check it on the sphere with its
+    pole at +y and the texel lines declared as the pdf's breaks (``EnvmapSampler.breaks``):
+    on the 256 x 128 sky the u0 table's bound is 3e-6 and u1's 2-3e-5 where without them
+    (``texel_breaks=False``) they are 0.03-0.04 (a u0 test without power at any n) and
+    1-2e-3, for 1.4 times the setup's pdf calls (about twice its time); no false alarm in 200
+    seeds either way (benchmarks/envmap_calibration.py)."""
     return EnvmapSampler(bitmap, plugin=plugin, variant=variant, name=name, texel_breaks=texel_breaks)
 
 

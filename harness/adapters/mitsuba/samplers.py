@@ -203,7 +203,7 @@ def make_sampler(spec: dict[str, Any]) -> MitsubaSampler:
                  BSDFs, microfacet distributions and phase functions)
         ref      the reference point an emitter on a shape is sampled from (default origin)
         texel_breaks  an envmap's: check it about +y with its texel lines declared as the
-                 pdf's breaks (``envmap_sampler``; default false)
+                 pdf's breaks (``envmap_sampler``; default true)
         variant  default "llvm_ad_rgb"
 
     Delta emitters (spot, point, directional) are refused.  Raises ValueError naming the key
@@ -223,8 +223,8 @@ def make_sampler(spec: dict[str, Any]) -> MitsubaSampler:
         raise ValueError(f"'ref': only emitters on shapes are sampled from a reference point, not {kind!r}")
     if kind in _DELTA_EMITTERS:
         refuse_delta_emitter(kind)
-    texel_breaks = spec.get("texel_breaks", False)
-    if not isinstance(texel_breaks, bool) or (texel_breaks and kind != "envmap"):
+    texel_breaks = spec.get("texel_breaks", True)
+    if "texel_breaks" in spec and (not isinstance(texel_breaks, bool) or kind != "envmap"):
         raise ValueError(f"'texel_breaks': true or false, for an envmap only; got {texel_breaks!r} for a "
                          f"{kind!r}")
     if kind == "envmap":
