@@ -46,6 +46,7 @@ def main() -> None:
     for label, bitmap in maps:
         for texel_breaks in (False, True):
             s = envmap_sampler(bitmap, texel_breaks=texel_breaks)
+            domain = Domain("sphere", pole=s.pole)
             calls = [0]
 
             def pdf(x, s=s):
@@ -53,8 +54,7 @@ def main() -> None:
                 return s.pdf(x)
 
             start = time.perf_counter()
-            raw = SamplerTest(pdf, Domain("sphere", pole=s.pole), sample_count=n, alpha=args.alpha,
-                              breaks=s.breaks)
+            raw = SamplerTest(pdf, domain, sample_count=n, alpha=args.alpha, breaks=s.breaks)
             test = raw.for_total(raw.normalization[0])
             setup, setup_calls = time.perf_counter() - start, calls[0]
             t = raw.transform
@@ -64,8 +64,8 @@ def main() -> None:
                 if np.isfinite(x).all():
                     r = test.check_points(x, seed=seed)
                 else:
-                    r = check_with_missing(lambda u, x=x: x, s.pdf, Domain("sphere", pole=s.pole),
-                                           sample_count=n, seed=seed, alpha=args.alpha, breaks=s.breaks)
+                    r = check_with_missing(lambda u, x=x: x, s.pdf, domain, sample_count=n, seed=seed,
+                                           alpha=args.alpha, breaks=s.breaks)
                 tests = r.tests[r.tests["test"] != "failed samples"]
                 statistical = bool((tests["adjusted"] <= args.alpha).any())
                 rejected += statistical

@@ -17,8 +17,8 @@ import numpy as np
 
 import reference_estimators as rest
 
-__all__ = ["box_integrals", "cell_integrals", "grouped_integrals", "rounding_floor", "split_points",
-           "tensor_rule"]
+__all__ = ["box_integrals", "cell_integrals", "grouped_integrals", "halves", "rounding_floor",
+           "split_points", "tensor_rule"]
 
 #: The relative change of a box's integral that a float32 density's own rounding can cause:
 #: Mitsuba's float32 pdfs move a box's rule by up to ~1e-6 of its value where they are
@@ -101,7 +101,7 @@ def split_points(lo: np.ndarray, hi: np.ndarray, breaks: np.ndarray | None) -> n
     return np.where(last > first, best, mid)
 
 
-def _halves(lo: np.ndarray, hi: np.ndarray, axis: int, cut: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def halves(lo: np.ndarray, hi: np.ndarray, axis: int, cut: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Each box split in two along ``axis`` at ``cut`` (B,): rows 2i, 2i+1 are the parts of
     box i."""
     clo, chi = np.repeat(lo, 2, axis=0), np.repeat(hi, 2, axis=0)
@@ -118,20 +118,25 @@ def cell_integrals(q: Callable[[np.ndarray], np.ndarray], shape: tuple[int, ...]
     side of the grid is even the cells are judged in blocks of 2 per axis
     (:func:`grouped_integrals`: a smooth density's 128 x 256 grid costs 0.7 million pdf calls
     in place of 2.6), else one by one (:func:`box_integrals`)."""
+    idx, lo, hi = _grid(shape)
+    if any(n % 2 for n in shape):
+        return box_integrals(q, lo, hi, tol, max_depth=max_depth, max_evals=max_evals, floor=floor,
+                             breaks=breaks)
+    # the cells judged by blocks of 2 per axis (grouped_integrals)
+    blocks = tuple(n // 2 for n in shape)
+    group = np.ravel_multi_index(tuple((idx // 2).T), blocks)
+    _, block_lo, block_hi = _grid(blocks)
+    return grouped_integrals(q, lo, hi, group, block_lo, block_hi, tol, max_depth=max_depth,
+                             max_evals=max_evals, floor=floor, breaks=breaks)
+
+
+def _grid(shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The cells of a regular grid on [0, 1]^k in C order: (their integer indices (C, k), lo,
+    hi)."""
     k = len(shape)
     idx = np.stack(np.meshgrid(*[np.arange(n) for n in shape], indexing="ij"), axis=-1).reshape(-1, k)
     size = np.array(shape, dtype=float)
-    if any(n % 2 for n in shape):
-        return box_integrals(q, idx / size, (idx + 1) / size, tol, max_depth=max_depth, max_evals=max_evals,
-                             floor=floor, breaks=breaks)
-    # the cells judged by blocks of 2 per axis (grouped_integrals)
-    blocks = np.array(shape) // 2
-    block_idx = idx // 2
-    group = np.ravel_multi_index(tuple(block_idx.T), tuple(blocks))
-    bidx = np.stack(np.meshgrid(*[np.arange(n) for n in blocks], indexing="ij"), axis=-1).reshape(-1, k)
-    bsize = blocks.astype(float)
-    return grouped_integrals(q, idx / size, (idx + 1) / size, group, bidx / bsize, (bidx + 1) / bsize, tol,
-                             max_depth=max_depth, max_evals=max_evals, floor=floor, breaks=breaks)
+    return idx, idx / size, (idx + 1) / size
 
 
 def grouped_integrals(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.ndarray,
@@ -234,7 +239,7 @@ def box_integrals(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.
         splits = []
         for axis in range(k):
             cut = split_points(lo[:, axis], hi[:, axis], None if breaks is None else breaks[axis])
-            clo, chi = _halves(lo, hi, axis, cut)
+            clo, chi = halves(lo, hi, axis, cut)
             parts = _rule(q, clo, chi).reshape(-1, 2, whole.shape[1])
             # the first part's share of the box's tolerance: half, or its share of the width
             # where the box is split at a break (exactly half where at the middle)

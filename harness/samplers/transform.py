@@ -38,7 +38,7 @@ from scipy import special
 
 import reference_estimators as rest
 
-from harness.samplers.cubature import grouped_integrals, split_points, tensor_rule
+from harness.samplers.cubature import grouped_integrals, halves, split_points, tensor_rule
 
 __all__ = ["AxisCdf", "Transform", "cramer_von_mises", "cramer_von_mises_columns",
            "cramer_von_mises_from_sums", "cvm_sf"]
@@ -192,9 +192,7 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
             phi[:, 1 - axis] = pieces[strip, :, 1].reshape(-1)
         clo, chi, ctol, cgroup = lo[full], hi[full], tol[full], group
         if k == 2:      # rows 2i, 2i + 1: the halves across of box i
-            mid = (clo[:, 1 - axis] + chi[:, 1 - axis]) / 2
-            clo, chi = np.repeat(clo, 2, axis=0), np.repeat(chi, 2, axis=0)
-            chi[0::2, 1 - axis], clo[1::2, 1 - axis] = mid, mid
+            clo, chi = halves(clo, chi, 1 - axis, (clo[:, 1 - axis] + chi[:, 1 - axis]) / 2)
             ctol, cgroup = np.repeat(ctol / 2, 2), np.repeat(cgroup, 2)
         v, e = grouped_integrals(counted, clo, chi, cgroup, plo[parents], phi[parents], ctol,
                                  max_depth=16 if k == 1 else 8, max_evals=budget, floor=floor,
@@ -205,7 +203,7 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
         val[full] = np.where(bad, 0.0, v[:, 0])
         err[full] = np.where(bad, 1.0, e[:, 0])   # unknown mass: the bound becomes the whole strip
         return (np.maximum(val, 0).reshape(-1, 4, npiece).sum(axis=2),
-                err.reshape(-1, 4 * npiece).sum(axis=1), int(full.sum()))
+                err.reshape(-1, 4 * npiece).sum(axis=1), nfull)
 
     # a first pass finds the strips' masses: at half the refinement's tolerance (below) for
     # the masses expected, where they are known, else at a tolerance relative to the boxes' measure

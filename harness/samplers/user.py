@@ -71,6 +71,8 @@ def resolve_sampler(obj: Any, params: dict[str, Any] | None = None, *, name: str
         raise UserCodeError(f"{name}: 'total' must be the pdf's integral, in (0, 1], got {total!r}")
     if udim is not None and (isinstance(udim, bool) or not isinstance(udim, int) or udim < 1):
         raise UserCodeError(f"{name}: 'udim' must be a positive integer, got {udim!r}")
-    if pole not in ("x", "y", "z"):
-        raise UserCodeError(f"{name}: 'pole' must be 'x', 'y' or 'z', got {pole!r}")
+    try:    # the pole as Domain takes it (which domain it is for, the suite or the caller checks)
+        Domain("sphere", pole=pole)
+    except ValueError as e:
+        raise UserCodeError(f"{name}: {e}") from None
     return UserSampler(name, sample, pdf, domain, None if total is None else float(total), udim, breaks, pole)

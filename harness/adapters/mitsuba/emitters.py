@@ -49,8 +49,6 @@ class EnvmapSampler(MitsubaSampler):
                  variant: str = "llvm_ad_rgb", name: str | None = None, texel_breaks: bool = True):
         params = dict(plugin or {"type": "envmap"})
         self.texel_breaks = bool(texel_breaks)
-        # with texel_breaks the map's rows, cones about +y, are cuts of the sphere's first parameter
-        self.pole = "y" if self.texel_breaks else "z"
         if params.get("type") != "envmap":
             raise ValueError("'plugin' must be an envmap plugin dict ({'type': 'envmap', ...}), "
                              f"got {plugin!r}")
@@ -82,6 +80,12 @@ class EnvmapSampler(MitsubaSampler):
         if self.image is not None:
             d["bitmap"] = mi.Bitmap(self.image)
         return mi.load_dict(d)
+
+    @property
+    def pole(self) -> str:
+        """The sphere's pole the check measures theta from: with ``texel_breaks``, +y, where
+        the map's rows (cones about +y) are cuts of the first parameter."""
+        return "y" if self.texel_breaks else "z"
 
     @property
     def breaks(self) -> tuple[np.ndarray, np.ndarray] | None:
