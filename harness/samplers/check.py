@@ -283,10 +283,9 @@ def check_sampler(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.ndarray
     whose rows are cones about +y wants ``Domain("sphere", pole="y")``).  The cubature then
     splits its boxes there rather than halving toward each step to its depth limit: on the
     zoo's 16 x 32 envmap 62 % of the setup's pdf calls (22.6 million against 36.7), and its
-    mass exact to its bound (undeclared, a texel edge that falls within 3.5 % of a
-    box's width from its end or its middle escapes every rule that judges the box, and the
-    mass is 1.7e-4 off, 26 times its bound: :func:`harness.samplers.cubature.box_integrals`).
-    A break where the pdf does not step only costs time.
+    mass exact to its bound (undeclared, a texel edge within 3.5 % of a box's width from its
+    end or middle escapes every rule judging the box, and the mass is 1.7e-4 off, 26 times its
+    bound: :func:`harness.samplers.cubature.box_integrals`).  A needless break costs time only.
     """
     dom = as_domain(domain)
     n = _sample_count(sample_count)
