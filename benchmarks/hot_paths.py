@@ -14,8 +14,8 @@ point from each of its two samplers and evaluates f at both).
 
 All three implementations run the core's estimator math in float64: the same samplers (the
 piecewise-constant 2D sampler inverts the marginal CDF over rows, then the row's conditional
-CDF, on the table the core builds: f at the cell centres + 1e-3; directions are built whole,
-azimuth included), the same pdfs and the same sums (f/p; MIS: sum_i f(X_i) / sum_j p_j(X_i)).
+CDF, on the table the core builds: f at the cell centres + 1e-3), the same pdfs and the same
+sums (f/p; MIS: sum_i f(X_i) / sum_j p_j(X_i)).
 The numpy and drjit versions share one implementation of that math (written against a small
 array interface, `NumpyOps` / `DrjitOps`), checked against the core's own samplers and
 integrands on the same uniforms before anything is timed.
@@ -30,8 +30,10 @@ integrands on the same uniforms before anything is timed.
          tables, a branchless binary search over the CDFs, dr.sum (symbolic mode).  drjit has no
          Sobol' generator; its column runs the core's construction written in drjit's integer
          ops (the same Joe-Kuo direction numbers, Burley's Owen scrambling, the core's seeds):
-         the same points as the core, bit for bit.  drjit's tracer drops work nothing reads
-         (the x, y of a direction, whose f and pdfs use only cos theta): counted in its favour
+         the same points as the core, bit for bit.
+On ggx_lobe f and every pdf read a direction's cos theta alone: all three draw z alone (the
+core's polar path, Integrand.polar and Sampler.polar; drjit's tracer would drop the rest
+anyway), the same bits as the whole directions' z.
 Not in the peers: the core's screening of points, pdfs and contributions and its higher
 moments (these samplers never produce a point the core would exclude).
 
@@ -191,31 +193,46 @@ def ggx_d(ops: Any, z: Any) -> Any:
     return ops.select(z > 0, a2 / (math.pi * t * t), 0.0)
 
 
-def ggx_lobe(ops: Any, w: tuple[Any, Any, Any]) -> Any:
-    """GgxLobe::eval, D(w) cos(theta); equally GGX's pdf of w."""
-    return ggx_d(ops, w[2]) * w[2]
+# f and both pdfs read a direction's cos theta (z) alone, so the estimators draw z alone, as the
+# core's polar path does and drjit's tracer would anyway; the whole directions (sample_*) are
+# built for the cross-check against the core's samplers.
+def ggx_lobe(ops: Any, z: Any) -> Any:
+    """GgxLobe::eval at a direction of cosine z, D(w) cos(theta); equally GGX's pdf there."""
+    return ggx_d(ops, z) * z
 
 
-def cosine_pdf(ops: Any, w: tuple[Any, Any, Any]) -> Any:
-    return ops.select(w[2] > 0, w[2] * INV_PI, 0.0)
+def cosine_pdf(ops: Any, z: Any) -> Any:
+    return ops.select(z > 0, z * INV_PI, 0.0)
+
+
+def cosine_cos(ops: Any, u0: Any) -> Any:
+    """sampling.h's cosine_hemisphere_cos: z of the cosine lobe's direction from u0."""
+    return ops.sqrt(ops.maximum(0.0, 1 - u0))
+
+
+def ggx_tan2(u0: Any) -> Any:
+    return ALPHA * ALPHA * u0 / (1 - u0)
+
+
+def ggx_cos(ops: Any, u0: Any) -> Any:
+    """sampling.h's ggx_cos: z of GGX's direction from u0 (tan^2 theta = alpha^2 u0 / (1 - u0))."""
+    return 1 / ops.sqrt(1 + ggx_tan2(u0))
 
 
 def sample_cosine(ops: Any, u0: Any, u1: Any) -> tuple[tuple[Any, Any, Any], Any]:
     """sample_cosine_hemisphere: the direction and its pdf."""
     r = ops.sqrt(u0)
     s, c = ops.sincos_2pi(u1)
-    w = (r * c, r * s, ops.sqrt(ops.maximum(0.0, 1 - u0)))
-    return w, cosine_pdf(ops, w)
+    z = cosine_cos(ops, u0)
+    return (r * c, r * s, z), cosine_pdf(ops, z)
 
 
 def sample_ggx(ops: Any, u0: Any, u1: Any) -> tuple[tuple[Any, Any, Any], Any]:
-    """sample_ggx (tan^2 theta = alpha^2 u0 / (1 - u0)): the direction and its pdf."""
-    t2 = ALPHA * ALPHA * u0 / (1 - u0)
-    z = 1 / ops.sqrt(1 + t2)
-    r = ops.sqrt(t2) * z
+    """sample_ggx: the direction and its pdf."""
+    z = ggx_cos(ops, u0)
+    r = ops.sqrt(ggx_tan2(u0)) * z
     s, c = ops.sincos_2pi(u1)
-    w = (r * c, r * s, z)
-    return w, ggx_lobe(ops, w)
+    return (r * c, r * s, z), ggx_lobe(ops, z)
 
 
 def neumaier(values: np.ndarray) -> float:
@@ -299,21 +316,21 @@ def box_uniform(ops: Any, table: PiecewiseConstant2D, u: Any) -> Any:
 
 
 def ggx_importance(ops: Any, table: PiecewiseConstant2D, u: Any) -> Any:
-    w, p = sample_ggx(ops, u[0], u[1])
-    return ggx_lobe(ops, w) / p
+    z = ggx_cos(ops, u[0])
+    return ggx_lobe(ops, z) / ggx_lobe(ops, z)
 
 
 def cosine_importance(ops: Any, table: PiecewiseConstant2D, u: Any) -> Any:
-    w, p = sample_cosine(ops, u[0], u[1])
-    return ggx_lobe(ops, w) / p
+    z = cosine_cos(ops, u[0])
+    return ggx_lobe(ops, z) / cosine_pdf(ops, z)
 
 
 def cosine_ggx_balance(ops: Any, table: PiecewiseConstant2D, u: Any) -> Any:
     """Cosine from u[0:2], GGX from u[2:4]: sum_i f(X_i) / (p_cos(X_i) + p_ggx(X_i))."""
-    w, p = sample_cosine(ops, u[0], u[1])
-    first = ggx_lobe(ops, w) / (p + ggx_lobe(ops, w))
-    w, p = sample_ggx(ops, u[2], u[3])
-    return first + ggx_lobe(ops, w) / (cosine_pdf(ops, w) + p)
+    z = cosine_cos(ops, u[0])
+    first = ggx_lobe(ops, z) / (cosine_pdf(ops, z) + ggx_lobe(ops, z))
+    z = ggx_cos(ops, u[2])
+    return first + ggx_lobe(ops, z) / (cosine_pdf(ops, z) + ggx_lobe(ops, z))
 
 
 @dataclass(frozen=True)
@@ -456,7 +473,7 @@ def cross_check(rest: Any, table: PiecewiseConstant2D, ops: Any) -> dict[str, fl
         w, p = core.sample(u)
         cw = tuple(ops.from_numpy(w[:, j]) for j in range(3))
         ws, ps = sample(ops, *uu)
-        ours = [*ws, ps, pdf(ops, cw), ggx_lobe(ops, cw)]
+        ours = [*ws, ps, pdf(ops, cw[2]), ggx_lobe(ops, cw[2])]
         truth = [w[:, 0], w[:, 1], w[:, 2], p, core.pdf(w), rest.integrand("ggx_lobe").eval(w)]
         out[name] = worst_difference([ops.to_numpy(a) for a in ours], truth)
     return out

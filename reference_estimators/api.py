@@ -52,6 +52,8 @@ class Sampler:
     udim = property(lambda self: self._core.udim, doc="canonical uniforms per point")
     method = property(lambda self: self._core.method)
     invertible = property(lambda self: self._core.invertible)
+    polar = property(lambda self: self._core.polar,
+                     doc="whether the pdf reads a direction's cos(theta) alone (estimates draw no azimuth)")
 
     def sample(self, u: Any) -> tuple[np.ndarray, np.ndarray]:
         """Points and their pdf values from canonical uniforms u in [0, 1] of shape (N, udim)

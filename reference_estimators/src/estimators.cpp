@@ -51,14 +51,31 @@ struct Scratch {
     }
 };
 
+// Whether importance sampling or MIS of f may take the polar path: f and the pdf of every
+// sampler read a direction's z = cos(theta) alone (Integrand::polar, Sampler::polar), so the
+// azimuth (a sincos a sample) and the points' x and y are never formed, stored or reloaded
+// (drjit leaves out what nothing reads too).  The same bits as the general path.
+bool polar_path(const Integrand &f, const Technique &t) {
+    if (!f.polar) return false;
+    std::vector<const Sampler *> used;
+    if (t.kind == TechniqueKind::Mis)
+        for (const SamplerPtr &s : t.mis) used.push_back(s.get());
+    else if (t.kind == TechniqueKind::Importance || t.kind == TechniqueKind::Uniform)
+        used.push_back(t.sampler.get());
+    for (const Sampler *s : used)
+        if (!s || !s->polar || s->method != SamplingMethod::Inversion) return false;
+    return !used.empty();
+}
+
 // What one estimate needs besides the technique: its point set and dimensions.
 struct Kernel {
     const Integrand &f;
     const Technique &t;
     PointSetContext points;
     int ud, xd;
+    bool polar;   // polar_path(f, t)
     Kernel(const Integrand &f_, const Technique &t_, uint64_t n, const StreamKey &key)
-        : f(f_), t(t_), ud(t_.udim(f_)), xd(f_.domain.dim) {
+        : f(f_), t(t_), ud(t_.udim(f_)), xd(f_.domain.dim), polar(polar_path(f_, t_)) {
         points.kind = t_.points;
         points.n = n;
         points.key = key;
@@ -135,6 +152,74 @@ void add_power(const double *p, double beta, double *acc, size_t m) {
 // The stages of block_contributions, in order: profile_stages stops after each in turn.
 enum class Stage { Sampled, Screened, Weighted, Contributions };
 
+// y += w_a f / p_a for one MIS technique a: f / w (balance heuristic, w = sum_j p_j), else
+// q f / w (q = p_a^(beta - 1), w = sum_j p_j^beta); 0 where f is 0.  In explicit vector lanes
+// with a select (GCC kept the scalar loop, branching on f).
+void add_mis_terms(bool balance, Scratch &s, size_t m) {
+    if (balance)
+        simd::update(s.f.data(), s.w.data(), s.y.data(), m, [](auto fv, auto w, auto y) {
+            using V = decltype(fv);
+            return y + (fv == V{} ? V{} : fv / w);
+        });
+    else
+        simd::map4(s.q.data(), s.f.data(), s.w.data(), s.y.data(), m, [](auto q, auto fv, auto w, auto y) {
+            using V = decltype(q);
+            return y + (fv == V{} ? V{} : q * fv / w);
+        });
+}
+
+// Whether a block's contributions hold nothing to report: all finite and, unless f may be
+// negative, none below 0 (screen_and_accumulate then notes no example, so needs no points).
+bool nothing_to_report(const Integrand &f, const double *y, size_t m) {
+    const BlockScan scan = scan_block(y, m);
+    return !scan.maybe_nonfinite() && !(f.nonnegative && scan.min < 0);
+}
+
+// Importance sampling on the polar path (Kernel::polar): z and the pdf from u0
+// (Sampler::sample_polar: the general path's w2 and pdf, the same bits), f from z
+// (Integrand::eval_polar), y = f / p; up to the stage `last`.  False for a block with
+// something to report (a point or pdf the screening fails, a contribution not finite or
+// negative): the caller redoes it on the general path from the same uniforms, whose examples
+// name whole points.
+bool polar_importance(const Integrand &f, const Sampler &smp, size_t m, Scratch &s, Stage last) {
+    if (smp.sample_polar(s.u.data(), smp.udim, s.q.data(), s.p.data(), m) != 0) return false;
+    if (last < Stage::Contributions) return true;
+    f.eval_polar(s.q.data(), s.f.data(), m);
+    for (size_t i = 0; i < m; ++i) s.y[i] = s.f[i] / s.p[i];
+    return nothing_to_report(f, s.y.data(), m);
+}
+
+// MIS on the polar path (Kernel::polar), as the general path below computes it (the same
+// order of operations, the same bits) with directions' z alone: each technique's z and pdf
+// from its u0 (Sampler::sample_polar), the others' pdfs at z (Sampler::pdf_polar), f at z.
+// False for a block with something to report, as polar_importance.
+bool polar_mis(const Integrand &f, const Technique &t, int ud, size_t m, Scratch &s, Stage last) {
+    const double beta = t.mis_power;
+    const bool balance = beta == 1;
+    double *z = s.x.data();
+    std::fill(s.y.begin(), s.y.begin() + m, 0.0);
+    int col = 0;
+    for (size_t a = 0; a < t.mis.size(); ++a) {
+        const Sampler &sa = *t.mis[a];
+        if (sa.sample_polar(s.u.data() + col, size_t(ud), z, s.p.data(), m) != 0) return false;
+        col += sa.udim;
+        if (last <= Stage::Screened) continue;
+        std::fill(s.w.begin(), s.w.begin() + m, 0.0);
+        for (size_t b = 0; b < t.mis.size(); ++b) {
+            if (b != a) t.mis[b]->pdf_polar(z, s.q.data(), m);
+            add_power(b == a ? s.p.data() : s.q.data(), beta, s.w.data(), m);
+        }
+        if (!balance) {
+            std::fill(s.q.begin(), s.q.begin() + m, 0.0);
+            add_power(s.p.data(), beta - 1, s.q.data(), m);
+        }
+        if (last == Stage::Weighted) continue;
+        f.eval_polar(z, s.f.data(), m);
+        add_mis_terms(balance, s, m);
+    }
+    return last < Stage::Contributions || nothing_to_report(f, s.y.data(), m);
+}
+
 // Fills s.y[0..m) with the contributions of samples first..first+m of this chunk; samples
 // the estimator cannot use are recorded in diag and flagged in s.drop (returns their count).
 // With `last` before Contributions, a technique that draws points from samplers stops after
@@ -177,6 +262,9 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
             smp.draw(stream, s.x.data(), s.p.data(), m, first, diag);
             if (last == Stage::Sampled) return 0;
             dropped = check_samples(smp.domain, s.x.data(), s.p.data(), m, first, diag, s.drop.data());
+        } else if (k.polar && polar_importance(f, smp, m, s, last)) {
+            if (last < Stage::Contributions) return 0;
+            break;
         } else if (last == Stage::Sampled) {  // the profile's prefix: the points alone, unchecked
             smp.sample(s.u.data(), s.x.data(), s.p.data(), m);
             return 0;
@@ -259,6 +347,10 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
     }
     case TechniqueKind::Mis: {
         // One sample from each technique i; w_i = p_i^beta / sum_j p_j^beta at X_i.
+        if (k.polar && polar_mis(f, t, ud, m, s, last)) {
+            if (last < Stage::Contributions) return 0;
+            break;
+        }
         const double beta = t.mis_power;
         std::fill(s.y.begin(), s.y.begin() + m, 0.0);
         std::fill(s.drop.begin(), s.drop.begin() + m, 0);
@@ -291,17 +383,7 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
             }
             if (last == Stage::Weighted) continue;
             f.eval(xi_pts, s.f.data(), m);
-            // in explicit vector lanes with a select (GCC kept the scalar loop, branching on f)
-            if (balance)
-                simd::update(s.f.data(), s.w.data(), s.y.data(), m, [](auto fv, auto w, auto y) {
-                    using V = decltype(fv);
-                    return y + (fv == V{} ? V{} : fv / w);
-                });
-            else
-                simd::map4(s.q.data(), s.f.data(), s.w.data(), s.y.data(), m, [](auto q, auto fv, auto w, auto y) {
-                    using V = decltype(q);
-                    return y + (fv == V{} ? V{} : q * fv / w);
-                });
+            add_mis_terms(balance, s, m);
             if (bad)
                 for (size_t i = 0; i < m; ++i)
                     if (s.sub_drop[i] && !s.drop[i]) { s.drop[i] = 1; ++dropped; }

@@ -8,6 +8,11 @@
 #include "sampling.h"
 
 namespace re {
+
+void Integrand::eval_polar(const double *, double *, size_t) const {
+    throw std::logic_error("integrand '" + name + "' is not polar (it reads more of a point than cos(theta))");
+}
+
 namespace {
 
 constexpr double kSqrtPi = 1.7724538509055160273;
@@ -182,15 +187,20 @@ class CosinePower final : public Integrand {
         domain = Domain::hemisphere();
         reference = 2 * M_PI / (k + 1);
         description = "cos^" + std::to_string(k) + "(theta) over the hemisphere";
+        polar = true;
     }
     void eval(const double *w, double *f, size_t n) const override {
-        for (size_t i = 0; i < n; ++i) {
-            double z = w[3 * i + 2], v = 1;
-            for (int j = 0; j < k_; ++j) v *= z;
-            f[i] = z >= 0 ? v : 0.0;
-        }
+        for (size_t i = 0; i < n; ++i) f[i] = value(w[3 * i + 2]);
+    }
+    void eval_polar(const double *z, double *f, size_t n) const override {
+        for (size_t i = 0; i < n; ++i) f[i] = value(z[i]);
     }
   private:
+    double value(double z) const {
+        double v = 1;
+        for (int j = 0; j < k_; ++j) v *= z;
+        return z >= 0 ? v : 0.0;
+    }
     int k_;
 };
 
@@ -203,10 +213,14 @@ class GgxLobe final : public Integrand {
         std::ostringstream s;
         s << "GGX D(w) cos(theta), alpha = " << alpha << ": a sharp lobe that integrates to 1";
         description = s.str();
+        polar = true;
     }
     void eval(const double *w, double *f, size_t n) const override {
         // in vector lanes: the scalar loop did not vectorise (stride 3)
         simd::map3(w, f, n, [a = a_](auto, auto, auto z) { return ggx_pdf(z, a); });
+    }
+    void eval_polar(const double *z, double *f, size_t n) const override {
+        simd::map(z, f, n, [a = a_](auto zv) { return ggx_pdf(zv, a); });
     }
   private:
     double a_;
@@ -219,9 +233,13 @@ class SphericalCap final : public Integrand {
         domain = Domain::sphere();
         reference = 2 * M_PI * (1 - cos_c);
         description = "indicator of the cap theta < 30 deg on the sphere: a discontinuity";
+        polar = true;
     }
     void eval(const double *w, double *f, size_t n) const override {
         for (size_t i = 0; i < n; ++i) f[i] = w[3 * i + 2] >= c_ ? 1.0 : 0.0;
+    }
+    void eval_polar(const double *z, double *f, size_t n) const override {
+        for (size_t i = 0; i < n; ++i) f[i] = z[i] >= c_ ? 1.0 : 0.0;
     }
   private:
     double c_;

@@ -22,6 +22,12 @@ class Integrand {
     bool nonnegative = true;    // a negative value is then an error, not a feature
     // f[n] from x[n * domain.dim]; f is 0 outside the domain.
     virtual void eval(const double *x, double *f, size_t n) const = 0;
+    // On the sphere or hemisphere, whether f depends on a direction through its z = cos(theta)
+    // alone; eval_polar is then f[n] at directions of cosine z[n] (eval's bits at any of them),
+    // and importance sampling and MIS by `polar` samplers draw no azimuth (Sampler::polar).
+    // Others throw std::logic_error.
+    bool polar = false;
+    virtual void eval_polar(const double *z, double *f, size_t n) const;
 };
 using IntegrandPtr = std::shared_ptr<const Integrand>;
 

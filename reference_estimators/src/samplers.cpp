@@ -31,6 +31,13 @@ bool Sampler::sample_valid(const double *u, double *x, double *p, size_t n) cons
     return count_invalid_pdfs(p, n) == 0 && domain.count_outside(x, n) == 0;
 }
 
+size_t Sampler::sample_polar(const double *, size_t, double *, double *, size_t) const {
+    throw std::logic_error("sampler '" + name + "' draws no polar part alone (not a polar direction sampler)");
+}
+void Sampler::pdf_polar(const double *, double *, size_t) const {
+    throw std::logic_error("sampler '" + name + "' has no polar pdf (not a polar direction sampler)");
+}
+
 void Sampler::draw(UniformStream &stream, double *x, double *pdf, size_t n, uint64_t, Diagnostics &diag) const {
     constexpr size_t kBlock = 256;
     std::vector<double> u(kBlock * udim);
@@ -86,6 +93,7 @@ class Pointwise : public Sampler {
 template <class D, bool hemisphere>
 class Directional : public Pointwise<D> {
   public:
+    Directional() { this->polar = true; }   // every one's pdf is density(z)
     template <class V>
     V sample_v(V u0, V u1, V &w0, V &w1, V &w2) const {
         self().draw(u0, u1, w0, w1, w2);
@@ -106,8 +114,44 @@ class Directional : public Pointwise<D> {
     void pdf(const double *x, double *p, size_t n) const override {
         simd::map3(x, p, n, [this](auto w0, auto w1, auto w2) { return pdf_v(w0, w1, w2); });
     }
+    // The polar part alone (Sampler::sample_polar): D's cos_theta(u0), sample()'s w2, and its
+    // density, screened in the lanes as sample_lanes screens.
+    size_t sample_polar(const double *u, size_t stride, double *z, double *p, size_t n) const override {
+        constexpr size_t W = simd::kWidth;
+        simd::i64v bad = {};
+        size_t i = 0;
+        for (; i + W <= n; i += W) {
+            simd::f64v u0;
+            for (size_t l = 0; l < W; ++l) u0[l] = u[(i + l) * stride];
+            const simd::f64v zv = self().cos_theta(u0), pv = self().density(zv);
+            simd::store(z + i, zv);
+            simd::store(p + i, pv);
+            bad += (polar_in(zv) & valid_pdf(pv)) ? simd::i64v{} : simd::i64v{} + 1;
+        }
+        size_t count = 0;
+        for (size_t l = 0; l < W; ++l) count += size_t(bad[l]);
+        for (; i < n; ++i) {
+            z[i] = self().cos_theta(u[i * stride]);
+            p[i] = self().density(z[i]);
+            count += !(polar_in(z[i]) && valid_pdf(p[i]));
+        }
+        return count;
+    }
+    void pdf_polar(const double *z, double *p, size_t n) const override {
+        simd::map(z, p, n, [this](auto zv) {
+            using V = decltype(zv);
+            return polar_in(zv) ? self().density(zv) : V{};
+        });
+    }
   private:
     const D &self() const { return static_cast<const D &>(*this); }
+    // whether some direction of the domain has cosine z, by on_sphere_v's tolerance (x = y = 0)
+    template <class V>
+    static auto polar_in(V z) {
+        auto in = (z * z - 1.0 <= 1e-5);
+        if (hemisphere) in &= z >= V{};
+        return in;
+    }
     // sample(), kWidth directions at a time; with `screen`, also the number of them off the
     // domain or with a pdf not in (0, max double], counted in the lanes before they are
     // stored (the tests of Domain::count_outside and count_invalid_pdfs: a separate pass
@@ -244,6 +288,8 @@ class UniformHemisphere final : public Directional<UniformHemisphere, true> {
     template <class V>
     void draw(V u0, V u1, V &w0, V &w1, V &w2) const { sample_uniform_hemisphere(u0, u1, w0, w1, w2); }
     template <class V>
+    V cos_theta(V u0) const { return uniform_hemisphere_cos(u0); }
+    template <class V>
     V density(V z) const { return uniform_hemisphere_pdf(z); }
     void invert_one(const double *w, double *u) const {
         bool in = domain.contains(w);
@@ -258,6 +304,8 @@ class UniformSphere final : public Directional<UniformSphere, false> {
     template <class V>
     void draw(V u0, V u1, V &w0, V &w1, V &w2) const { sample_uniform_sphere(u0, u1, w0, w1, w2); }
     template <class V>
+    V cos_theta(V u0) const { return uniform_sphere_cos(u0); }
+    template <class V>
     V density(V z) const { return uniform_sphere_pdf(z); }
     void invert_one(const double *w, double *u) const {
         bool in = domain.contains(w);
@@ -271,6 +319,8 @@ class CosineHemisphere final : public Directional<CosineHemisphere, true> {
     CosineHemisphere() { name = "cosine_hemisphere"; domain = Domain::hemisphere(); udim = 2; }
     template <class V>
     void draw(V u0, V u1, V &w0, V &w1, V &w2) const { sample_cosine_hemisphere(u0, u1, w0, w1, w2); }
+    template <class V>
+    V cos_theta(V u0) const { return cosine_hemisphere_cos(u0); }
     template <class V>
     V density(V z) const { return cosine_hemisphere_pdf(z); }
     void invert_one(const double *w, double *u) const {
@@ -288,6 +338,8 @@ class UniformCone final : public Directional<UniformCone, false> {
     template <class V>
     void draw(V u0, V u1, V &w0, V &w1, V &w2) const { sample_uniform_cone(u0, u1, c_, w0, w1, w2); }
     template <class V>
+    V cos_theta(V u0) const { return uniform_cone_cos(u0, c_); }
+    template <class V>
     V density(V z) const { return uniform_cone_pdf(z, c_); }
     void invert_one(const double *w, double *u) const {
         bool in = domain.contains(w) && w[2] >= c_;
@@ -303,6 +355,8 @@ class Ggx final : public Directional<Ggx, true> {
     explicit Ggx(double alpha) : a_(alpha) { name = "ggx"; params = {{"alpha", alpha}}; domain = Domain::hemisphere(); udim = 2; }
     template <class V>
     void draw(V u0, V u1, V &w0, V &w1, V &w2) const { sample_ggx(u0, u1, a_, w0, w1, w2); }
+    template <class V>
+    V cos_theta(V u0) const { return ggx_cos(u0, a_); }
     template <class V>
     V density(V z) const { return ggx_pdf(z, a_); }
     void invert_one(const double *w, double *u) const {

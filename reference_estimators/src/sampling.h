@@ -74,9 +74,24 @@ inline double invert_trimmed_logistic(double x, double mu, double s, double a, d
 template <class D>
 RE_INLINE D non_negative(D v) { return v > D{} ? v : D{}; }
 
+// The z = cos(theta) of each direction sampler's point, from u0 alone: sample_x's w2, the
+// same bits (the estimators' polar path draws z alone for integrands that read nothing else).
+template <class D>
+RE_INLINE D uniform_hemisphere_cos(D u0) { return u0; }
+template <class D>
+RE_INLINE D uniform_sphere_cos(D u0) { return 1.0 - 2.0 * u0; }
+template <class D>
+RE_INLINE D cosine_hemisphere_cos(D u0) { return simd::sqrt(non_negative(1.0 - u0)); }
+template <class D>
+RE_INLINE D uniform_cone_cos(D u0, double cos_max) { return (1.0 - u0) + u0 * cos_max; }
+template <class D>
+RE_INLINE D ggx_tan2(D u0, double alpha) { return alpha * alpha * u0 / (1.0 - u0); }
+template <class D>
+RE_INLINE D ggx_cos(D u0, double alpha) { return 1.0 / simd::sqrt(1.0 + ggx_tan2(u0, alpha)); }
+
 template <class D>
 RE_INLINE void sample_uniform_hemisphere(D u0, D u1, D &w0, D &w1, D &w2) {
-    D z = u0, r = simd::sqrt(non_negative(1.0 - z * z)), s, c;
+    D z = uniform_hemisphere_cos(u0), r = simd::sqrt(non_negative(1.0 - z * z)), s, c;
     fm::sincos_2pi(u1, s, c);
     w0 = r * c; w1 = r * s; w2 = z;
 }
@@ -85,7 +100,7 @@ RE_INLINE D uniform_hemisphere_pdf(D z) { return z >= D{} ? D{} + 0.5 * kInvPi :
 
 template <class D>
 RE_INLINE void sample_uniform_sphere(D u0, D u1, D &w0, D &w1, D &w2) {
-    D z = 1.0 - 2.0 * u0, r = simd::sqrt(non_negative(1.0 - z * z)), s, c;
+    D z = uniform_sphere_cos(u0), r = simd::sqrt(non_negative(1.0 - z * z)), s, c;
     fm::sincos_2pi(u1, s, c);
     w0 = r * c; w1 = r * s; w2 = z;
 }
@@ -96,7 +111,7 @@ template <class D>
 RE_INLINE void sample_cosine_hemisphere(D u0, D u1, D &w0, D &w1, D &w2) {
     D r = simd::sqrt(u0), s, c;
     fm::sincos_2pi(u1, s, c);
-    w0 = r * c; w1 = r * s; w2 = simd::sqrt(non_negative(1.0 - u0));
+    w0 = r * c; w1 = r * s; w2 = cosine_hemisphere_cos(u0);
 }
 template <class D>
 RE_INLINE D cosine_hemisphere_pdf(D z) { return z > D{} ? z * kInvPi : D{}; }
@@ -104,7 +119,7 @@ RE_INLINE D cosine_hemisphere_pdf(D z) { return z > D{} ? z * kInvPi : D{}; }
 // Uniform in the cone of directions with cos(theta) >= cos_max around +z.
 template <class D>
 RE_INLINE void sample_uniform_cone(D u0, D u1, double cos_max, D &w0, D &w1, D &w2) {
-    D z = (1.0 - u0) + u0 * cos_max, r = simd::sqrt(non_negative(1.0 - z * z)), s, c;
+    D z = uniform_cone_cos(u0, cos_max), r = simd::sqrt(non_negative(1.0 - z * z)), s, c;
     fm::sincos_2pi(u1, s, c);
     w0 = r * c; w1 = r * s; w2 = z;
 }
@@ -124,7 +139,7 @@ RE_INLINE D ggx_d(D z, double alpha) {
 }
 template <class D>
 RE_INLINE void sample_ggx(D u0, D u1, double alpha, D &w0, D &w1, D &w2) {
-    D t2 = alpha * alpha * u0 / (1.0 - u0);
+    D t2 = ggx_tan2(u0, alpha);
     D z = 1.0 / simd::sqrt(1.0 + t2), r = simd::sqrt(t2) * z, s, c;
     fm::sincos_2pi(u1, s, c);
     w0 = r * c; w1 = r * s; w2 = z;

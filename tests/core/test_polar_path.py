@@ -1,0 +1,98 @@
+"""The estimators' polar path: importance sampling and MIS of an integrand that reads a
+direction's cos(theta) alone, by samplers whose pdf does too, draw no azimuth.  It must give
+the general path's bits, and hand every block with something to report back to it."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import reference_estimators as rest
+
+N = rest.CHUNK_SIZE + 4099     # a partial chunk and a partial block, the scalar tails included
+
+# (integrand, technique, the samplers it draws from with their parameters)
+CASES = [
+    ("ggx_lobe", "importance:ggx", [("ggx", {"alpha": 0.01})]),
+    ("ggx_lobe", "importance:cosine_hemisphere", [("cosine_hemisphere", {})]),
+    ("ggx_lobe", "uniform", [("uniform_hemisphere", {})]),
+    ("ggx_lobe", "mis_balance:cosine_hemisphere+ggx", [("cosine_hemisphere", {}), ("ggx", {"alpha": 0.01})]),
+    ("ggx_lobe", "mis_power:cosine_hemisphere+ggx", [("cosine_hemisphere", {}), ("ggx", {"alpha": 0.01})]),
+    ("cosine_power", "importance:cosine_hemisphere", [("cosine_hemisphere", {})]),
+    ("cosine_power", "importance:cosine_hemisphere/sobol", [("cosine_hemisphere", {})]),
+    ("cosine_power", "uniform", [("uniform_hemisphere", {})]),
+    ("spherical_cap", "uniform", [("uniform_sphere", {})]),
+]
+
+
+def general_contributions(f: str, technique: str, samplers: list, power: float, **keys) -> np.ndarray:
+    """The contributions computed as the general path does, from whole points: the samplers'
+    sample() and pdf() and the integrand's eval() on the uniforms the estimate consumes."""
+    kind = "sobol" if technique.endswith("/sobol") else "random"
+    u = rest.points(N, 2 * len(samplers), kind, **keys)
+    fi = rest.integrand(f)
+    ss = [rest.sampler(name, **params) for name, params in samplers]
+    if len(ss) == 1:
+        x, p = ss[0].sample(u)
+        return fi.eval(x) / p
+    y = np.zeros(N)
+    for a, sa in enumerate(ss):
+        x, p = sa.sample(u[:, 2 * a:2 * a + 2])
+        w = np.zeros(N)
+        for b, sb in enumerate(ss):
+            w += (p if b == a else sb.pdf(x)) ** power
+        fx = fi.eval(x)
+        # the balance heuristic's f / w, else p^(beta - 1) f / w, in the core's order
+        y += np.where(fx == 0, 0.0, fx / w if power == 1 else p ** (power - 1) * fx / w)
+    return y
+
+
+@pytest.mark.parametrize("f, technique, samplers", CASES, ids=[f"{c[0]}-{c[1]}" for c in CASES])
+def test_polar_path_gives_the_general_paths_bits(f, technique, samplers):
+    keys = dict(seed=7, case_id=3, replica=1)
+    power = 2.0 if technique.startswith("mis_power") else 1.0
+    y = rest.contributions(f, technique, N, threads=2, **keys)
+    np.testing.assert_array_equal(y, general_contributions(f, technique, samplers, power, **keys))
+    e = rest.integrate(f, technique, N, threads=2, **keys)
+    assert e.n == N and e.ok
+    assert e.mean == rest.accumulate(y).mean
+
+
+def test_a_block_with_bad_pdfs_is_reported_with_whole_points():
+    """GGX at alpha = 1e-170 has pdf NaN everywhere (alpha^2 underflows): every sample is
+    reported as the general path reports it, its example naming the direction, not z alone."""
+    s = rest.sampler("ggx", alpha=1e-170)
+    u = rest.points(3000, 2, seed=2)
+    x, _ = s.sample(u)
+    e = rest.integrate("ggx_lobe", rest.importance(s), 3000, seed=2)
+    assert e.counts["bad_pdf"] == 3000 and e.n == 0
+    for example in e.examples:
+        assert example["issue"] == "bad_pdf" and len(example["point"]) == 3
+        np.testing.assert_array_equal(example["point"], x[example["index"]])
+
+
+def test_an_mis_block_with_bad_pdfs_is_reported_with_whole_points():
+    """MIS of the cosine lobe and GGX at alpha = 1e-170: the cosine lobe's block is clean, its
+    weights NaN (GGX's pdf), and GGX's own points have pdf NaN: the block goes back to the
+    general path, which drops every sample for its GGX point and names that direction."""
+    t = rest.mis([rest.sampler("cosine_hemisphere"), rest.sampler("ggx", alpha=1e-170)])
+    u = rest.points(3000, 4, seed=4)
+    x, _ = rest.sampler("ggx", alpha=1e-170).sample(u[:, 2:])
+    e = rest.integrate("ggx_lobe", t, 3000, seed=4)
+    assert e.counts["bad_pdf"] == 3000 and e.n == 0
+    for example in e.examples:
+        np.testing.assert_array_equal(example["point"], x[example["index"]])
+    assert np.isnan(rest.contributions("ggx_lobe", t, 3000, seed=4)).all()
+
+
+def test_which_integrands_and_samplers_take_the_polar_path():
+    """The catalogue's integrands that read cos(theta) alone and the direction samplers whose
+    pdf does; every other integrand and sampler keeps the general path."""
+    polar = {f.name for f in rest.catalogue() if f.polar}
+    assert polar == {"cosine_power", "ggx_lobe", "spherical_cap"}
+    tables = ("piecewise_constant_1d", "piecewise_constant_2d")    # need a table: not directions
+    names = {s["name"] for s in rest.samplers()} - set(tables)
+    polar_samplers = {name for name in names if rest.sampler(name).polar}
+    directions = {"uniform_hemisphere", "uniform_sphere", "cosine_hemisphere", "uniform_cone", "ggx"}
+    assert polar_samplers == directions
+    assert not any(rest.sampler(t, table=np.ones((2, 2)) if t.endswith("2d") else np.ones(2)).polar
+                   for t in tables)
