@@ -19,9 +19,9 @@ sphere.
 The CDFs are tabulated once per claimed pdf (:class:`Transform`, sample-independent) from box
 integrals of q (:func:`harness.samplers.cubature.grouped_integrals`: each leaf's quarters judged
 against the leaf, :func:`harness.samplers.cubature.box_integrals` where they disagree):
-piecewise linear through the quarter points of leaves refined until the deviation of the CDF
-from linearity at the quarter points (exact for a linear density, and within a factor 2 of
-the largest deviation for any density monotone on the leaf) is below ``eps``; the bound
+piecewise linear through the quarter points of leaves refined until a bound on the
+interpolation's error within the quarters, for a density monotone on the leaf
+(:func:`_interpolation_bound`), is below ``eps``; the bound
 reached, plus the cubature's own error, is :attr:`Transform.error`, a bound on |table - CDF|
 in units of the strip's mass, and the tests carry it: a statistic is computed as if every u
 were that much off in its favour.
@@ -48,6 +48,9 @@ __all__ = ["AxisCdf", "Transform", "cramer_von_mises", "cramer_von_mises_columns
 STRIPS = 32
 SUBSTRIPS = 4
 _MARGINAL_PIECES = 32   # boxes across the square for the marginal of s0
+_CONDITIONAL_LEAVES = 16  # leaves along s1 a strip of the conditional starts with (refined
+                        # where needed: 64 left the zoo's smooth conditionals at bounds of 1e-12
+                        # to 1e-6, far below eps, for a quarter of the transform's pdf calls)
 _COARSE_PIECES = 4      # its refinement's, where they agree with those on the starting leaves
 _MAX_STEP_CUTS = 8      # cuts at density steps per strip of the conditional
 _POLE_GRADING = 2.0 ** -np.arange(1, 25)   # cuts of the first and last strips toward s0 = 0, 1
@@ -117,15 +120,16 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
               coarse: np.ndarray | None = None, breaks: Breaks = None,
               expect: np.ndarray | None = None) -> AxisCdf:
     """The CDF of q along ``axis`` within each strip: strip g spans all of [0, 1] along
-    ``axis`` (cut into ``leaves`` leaves to start) and, on the square, the pieces
-    pieces[g, j] = (lo, hi) across it (arrays (S, P, 2); each leaf quarter is integrated as one
-    box per piece, so the cubature starts where the mass is).  Leaves are halved while the
-    CDF deviates from linearity by more than eps (times the strip's mass) at a quarter point
-    or a quarter holds more than ``max_share`` of it, or until _MAX_DEPTH, _MIN_WIDTH or
-    _MAX_BOXES or _MAX_TABLE_EVALS, or until the cubature error spent in a strip (summed over
-    every box integrated, refined-away ones included: the effort's measure, which refinement
-    only adds to) exceeds ``useless`` (times the strip's mass): a strip whose cubature has
-    missed by that much in all is a step or singularity that more halving does not resolve.
+    ``axis`` (cut into ``leaves`` leaves to start) and, on the square, the pieces pieces[g, j]
+    = (lo, hi) across it (arrays (S, P, 2); each leaf quarter is integrated as one box per
+    piece, so the cubature starts where the mass is).  Leaves are halved while the bound on the
+    interpolation's error within their quarters (:func:`_interpolation_bound`) exceeds eps
+    (times the strip's mass) or a quarter holds more than ``max_share`` of it, or until
+    _MAX_DEPTH, _MIN_WIDTH or _MAX_BOXES or _MAX_TABLE_EVALS, or until the cubature error
+    spent in a strip (summed over every box integrated, refined-away ones included: the
+    effort's measure, which refinement only adds to) exceeds ``useless`` (times the strip's
+    mass): a strip whose cubature has missed by that much in all is a step or singularity that
+    more halving does not resolve.
     The table's bound counts only the leaves it keeps: their interpolation bound and their
     boxes' cubature error (a refined-away leaf's integral is not in the table, nor its error).
     The cubature stops at q's rounding ``floor`` (relative).  ``breaks``: per axis, where q
@@ -230,10 +234,7 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
             pieces, used, npiece = fine
     done: list[tuple[np.ndarray, ...]] = []
     for depth in range(_MAX_DEPTH + 1):
-        m = qs.sum(axis=1)
-        cum = np.cumsum(qs, axis=1)[:, :3]
-        gap = np.max(np.abs(cum - m[:, None] * np.array([0.25, 0.5, 0.75])), axis=1)
-        bound = np.minimum(2 * gap, qs.max(axis=1))     # a quarter's mass bounds any CDF within it
+        bound = _interpolation_bound(qs)
         fine = (bound <= eps * strip_mass[strip]) & (qs.max(axis=1) <= max_share * strip_mass[strip])
         spent_all = (spent > _MAX_BOXES) | (counted.evals > _MAX_TABLE_EVALS)
         hopeless = spent_err[strip] > useless * strip_mass[strip]
@@ -263,6 +264,39 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
     # and the rounding of the cumulated sums (an ulp of the total per addition)
     error = float(np.max((worst + np.bincount(strip, errs, minlength=nstrip)) / norm)) + sub_q.size * 2.0**-52
     return AxisCdf(sub_strip, sub_lo, sub_hi, before / norm[sub_strip], sub_q / norm[sub_strip], total, error)
+
+
+def _interpolation_bound(qs: np.ndarray) -> np.ndarray:
+    """A bound on |linear interpolation - CDF| within each leaf's quarters, from the leaves'
+    quarter masses qs (L, 4), for a density monotone on the leaf, and always at most the
+    largest quarter's mass (a quarter's mass bounds any CDF within it).
+
+    Two bounds, the smaller taken.  The leaf's: twice the CDF's largest deviation from its
+    chord over the leaf at the quarter points (the CDF is convex or concave; within a factor 2
+    of the largest deviation, and a quarter's own chord is nearer).  The quarters': with the
+    density monotone, on quarter i it lies between its neighbours' mean densities d[i - 1] and
+    d[i + 1] (the leaf's ends: 0, and no bound above), and a density between L and U with mean
+    d on a quarter of width w leaves its CDF at most w (d - L)(U - d) / (U - L) from the
+    quarter's chord (the step from L to U that keeps the mean: the extreme case), w (d - L)
+    where U is unbounded.  On a smooth density the quarters' bound is a quarter of the leaf's
+    (the end quarters' slopes, p' w^2 against 4 p' w^2), so about half the leaves reach a given
+    eps.  Quarter densities that are not monotone (a density with an extremum on the leaf) keep
+    the leaf's bound."""
+    m = qs.sum(axis=1)
+    cum = np.cumsum(qs, axis=1)[:, :3]
+    gap = np.max(np.abs(cum - m[:, None] * np.array([0.25, 0.5, 0.75])), axis=1)
+    leaf = np.minimum(2 * gap, qs.max(axis=1))
+    steps = np.diff(qs, axis=1)
+    rising, falling = np.all(steps >= 0, axis=1), np.all(steps <= 0, axis=1)
+    # in units of a quarter's width w (masses are w d): the rising case, and the falling one
+    # as the rising case of the quarters reversed
+    d = np.where(falling[:, None], qs[:, ::-1], qs)
+    low = np.concatenate([np.zeros((d.shape[0], 1)), d[:, :3]], axis=1)
+    high = np.concatenate([d[:, 1:], np.full((d.shape[0], 1), np.inf)], axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        inner = (d - low) * (high - d) / (high - low)
+    quarters = np.where(np.isinf(high), d - low, np.where(high > low, inner, 0.0))
+    return np.where(rising | falling, np.minimum(leaf, quarters.max(axis=1)), leaf)
 
 
 def _snapped_levels(marginal: AxisCdf, count: int) -> tuple[np.ndarray, np.ndarray]:
@@ -392,8 +426,8 @@ class Transform:
         pieces = _cut_at_steps(levels[::SUBSTRIPS], levels, marginal)
         probability = np.diff(cdf[::SUBSTRIPS])
         share = marginal.strip_mass[0] * probability
-        conditional = _tabulate(q, 2, 1, pieces, 64, eps, floor=floor, useless=useless, breaks=breaks,
-                                expect=share)
+        conditional = _tabulate(q, 2, 1, pieces, _CONDITIONAL_LEAVES, eps, floor=floor, useless=useless,
+                                breaks=breaks, expect=share)
         missed = np.abs(conditional.strip_mass - share) / np.maximum(share, 1e-300)
         error_u1 = conditional.error + float(missed.max())
         conditional = dataclasses.replace(conditional, error=error_u1)
