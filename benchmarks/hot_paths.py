@@ -57,8 +57,9 @@ stages are differences of its pipeline's prefixes (reference_estimators.profile_
 uniforms; the samplers' points and pdfs; their screening; for MIS every technique's pdf at
 every point; the integrand and the estimator's arithmetic; the contributions' screening and
 accumulation), each prefix timed alone, so a stage near 0 can come out slightly negative on
-a noisy machine; drjit's are its uniforms (a kernel that draws and sums them) and the rest of
-its whole kernel.
+a noisy machine (on the polar path, ggx_lobe's rows, the samplers screen z and the pdf in their
+own pass: the screening stage is in the sampling one and reads 0); drjit's are its uniforms
+(a kernel that draws and sums them) and the rest of its whole kernel.
 
     .venv/bin/python benchmarks/hot_paths.py [--samples 2e7] [--repeat 3] [--no-drjit]
 """
