@@ -358,7 +358,7 @@ NB_MODULE(_core, m) {
     m.def("fm_log", [](InArray x) {
         double *y;
         OutArray r = new_array(x.size(), 0, &y);
-        for (size_t i = 0; i < x.size(); ++i) y[i] = fm::log(x.data()[i]);
+        simd::map(x.data(), y, x.size(), [](auto v) { return fm::log(v); });
         return r;
     });
     m.def("fm_sincos_2pi", [](InArray x) {

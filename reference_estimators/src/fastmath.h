@@ -91,36 +91,42 @@ RE_INLINE D exp(D x) {
 // log(x): x = (1 + f) 2^e with 1 + f in [sqrt(1/2), sqrt(2)) and f exact; with s = f/(2+f),
 // log(1+f) = 2 atanh(s) = f - (f^2/2 - s (f^2/2 + R)), R = 2 s^2/3 + 2 s^4/5 + ... to s^22
 // (truncation < 1e-18): the leading term f carries no rounding error (the arrangement of
-// fdlibm's e_log.c, with a Taylor series instead of its minimax coefficients).
-inline double log(double x) {
-    bool sub = x < 0x1p-1022;
-    double xs = sub ? x * 0x1p54 : x;
-    uint64_t b = double_as_bits(xs);
-    int64_t e = int64_t((b >> 52) & 0x7ff) - 1023;
-    double m = bits_as_double((b & 0x000fffffffffffffULL) | 0x3ff0000000000000ULL);
-    bool big = m > 1.4142135623730951;
+// fdlibm's e_log.c, with a Taylor series instead of its minimax coefficients).  For double or
+// simd::f64v, the same bits lane by lane.
+template <class D>
+RE_INLINE D log(D x) {
+    using simd::fma;
+    const auto sub = x < D{} + 0x1p-1022;
+    const D xs = sub ? x * 0x1p54 : x;
+    const auto b = simd::bits(xs);
+    // the exponent field and its bias as a double: 1.5 2^52 + e holds e in its low bits
+    // (exact for |e| < 2^51), so the conversion is two integer-free steps on every ISA
+    D m = simd::from_bits((b & 0x000fffffffffffffULL) | 0x3ff0000000000000ULL);
+    D de = simd::from_bits(((b >> 52) & 0x7ffu) + simd::bits(0x1.8p52)) - (0x1.8p52 + 1023.0);
+    const auto big = m > D{} + 1.4142135623730951;
     m = big ? m * 0.5 : m;
-    e = big ? e + 1 : e;
-    e = sub ? e - 54 : e;
-    double f = m - 1.0;  // exact (Sterbenz)
-    double s = f / (2.0 + f), z = s * s;
-    double r = 2.0 / 23.0;
-    r = std::fma(r, z, 2.0 / 21.0);
-    r = std::fma(r, z, 2.0 / 19.0);
-    r = std::fma(r, z, 2.0 / 17.0);
-    r = std::fma(r, z, 2.0 / 15.0);
-    r = std::fma(r, z, 2.0 / 13.0);
-    r = std::fma(r, z, 2.0 / 11.0);
-    r = std::fma(r, z, 2.0 / 9.0);
-    r = std::fma(r, z, 2.0 / 7.0);
-    r = std::fma(r, z, 2.0 / 5.0);
-    r = std::fma(r, z, 2.0 / 3.0);
+    de = big ? de + 1.0 : de;
+    de = sub ? de - 54.0 : de;
+    const D f = m - 1.0;  // exact (Sterbenz)
+    const D s = f / (2.0 + f), z = s * s;
+    D r = D{} + 2.0 / 23.0;
+    r = fma(r, z, D{} + 2.0 / 21.0);
+    r = fma(r, z, D{} + 2.0 / 19.0);
+    r = fma(r, z, D{} + 2.0 / 17.0);
+    r = fma(r, z, D{} + 2.0 / 15.0);
+    r = fma(r, z, D{} + 2.0 / 13.0);
+    r = fma(r, z, D{} + 2.0 / 11.0);
+    r = fma(r, z, D{} + 2.0 / 9.0);
+    r = fma(r, z, D{} + 2.0 / 7.0);
+    r = fma(r, z, D{} + 2.0 / 5.0);
+    r = fma(r, z, D{} + 2.0 / 3.0);
     r *= z;
-    double hfsq = 0.5 * f * f, de = double(e);
-    double y = de * 6.93147180369123816490e-01 - ((hfsq - (s * (hfsq + r) + de * 1.90821492927058770002e-10)) - f);
-    y = x == std::numeric_limits<double>::infinity() ? x : y;
-    y = x == 0.0 ? -std::numeric_limits<double>::infinity() : y;
-    y = x < 0.0 ? std::numeric_limits<double>::quiet_NaN() : y;
+    const D hfsq = 0.5 * f * f;
+    D y = de * 6.93147180369123816490e-01 - ((hfsq - (s * (hfsq + r) + de * 1.90821492927058770002e-10)) - f);
+    const D inf = D{} + std::numeric_limits<double>::infinity();
+    y = x == inf ? x : y;
+    y = x == D{} ? -inf : y;
+    y = x < D{} ? D{} + std::numeric_limits<double>::quiet_NaN() : y;
     return x != x ? x : y;
 }
 

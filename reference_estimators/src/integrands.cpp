@@ -114,10 +114,10 @@ class PowerLaw final : public Integrand {
         reference = c / (k + 1);
     }
     void eval(const double *x, double *f, size_t n) const override {
-        for (size_t i = 0; i < n; ++i) {
-            double v = c_ * fm::exp(k_ * fm::log(x[i]));
-            f[i] = (x[i] > 0 && x[i] <= 1) ? v : 0.0;
-        }
+        simd::map(x, f, n, [c = c_, k = k_](auto v) {
+            using V = decltype(v);
+            return (v > V{}) & (v <= V{} + 1.0) ? c * fm::exp(k * fm::log(v)) : V{};
+        });
     }
   private:
     double c_, k_;

@@ -13,52 +13,69 @@ namespace re {
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kInvPi = 0.31830988618379067154;
 
+// The one-dimensional samplers' sample_x and x_pdf are templates over D = double or
+// simd::f64v (the same bits lane by lane: the batch loops run them on whole vectors, the
+// scalar triples on one value); their inversions are scalar.
+
 // --- exponential: p(x) = a exp(-a x) on [0, inf) ------------------------------------------
-inline double sample_exponential(double u, double a) { return -fm::log(1.0 - u) / a; }
-inline double exponential_pdf(double x, double a) { return x >= 0 ? a * fm::exp(-a * x) : 0.0; }
+template <class D>
+RE_INLINE D sample_exponential(D u, double a) { return -fm::log(1.0 - u) / a; }
+template <class D>
+RE_INLINE D exponential_pdf(D x, double a) { return x >= D{} ? a * fm::exp(-a * x) : D{}; }
 inline double invert_exponential(double x, double a) { return x >= 0 ? -std::expm1(-a * x) : kNaN; }
 
 // --- linear: p(x) proportional to (1-x) a + x b on [0, 1], a, b >= 0 -----------------------
-inline double linear_pdf(double x, double a, double b) {
-    return (x >= 0 && x <= 1) ? 2 * ((1 - x) * a + x * b) / (a + b) : 0.0;
+template <class D>
+RE_INLINE D linear_pdf(D x, double a, double b) {
+    return (x >= D{}) & (x <= D{} + 1.0) ? 2 * ((1.0 - x) * a + x * b) / (a + b) : D{};
 }
-inline double sample_linear(double u, double a, double b) {
-    // The root of the CDF quadratic in the form without cancellation (pbrt-v4, SampleLinear).
-    if (u == 0 && a == 0) return 0;
-    double x = u * (a + b) / (a + std::sqrt((1 - u) * a * a + u * b * b));
-    return x < 0x1.fffffffffffffp-1 ? x : 0x1.fffffffffffffp-1;
+template <class D>
+RE_INLINE D sample_linear(D u, double a, double b) {
+    // The root of the CDF quadratic in the form without cancellation (pbrt-v4, SampleLinear);
+    // u = 0 with a = 0 (0 / 0 there) is 0.
+    const D x = u * (a + b) / (a + simd::sqrt((1.0 - u) * a * a + u * b * b));
+    const D below_one = D{} + 0x1.fffffffffffffp-1;
+    const D y = x < below_one ? x : below_one;
+    return a == 0 ? (u == D{} ? D{} : y) : y;
 }
 inline double invert_linear(double x, double a, double b) {
     return (x >= 0 && x <= 1) ? x * (a * (2 - x) + b * x) / (a + b) : kNaN;
 }
 
 // --- power: p(x) = (k+1) x^k on (0, 1], k > -1 (integrable singularity at 0 for k < 0) ----
-inline double sample_power(double u, double k) { return fm::exp(fm::log(u) / (k + 1)); }
-inline double power_pdf(double x, double k) {
-    return (x > 0 && x <= 1) ? (k + 1) * fm::exp(k * fm::log(x)) : 0.0;
+template <class D>
+RE_INLINE D sample_power(D u, double k) { return fm::exp(fm::log(u) / (k + 1)); }
+template <class D>
+RE_INLINE D power_pdf(D x, double k) {
+    return (x > D{}) & (x <= D{} + 1.0) ? (k + 1) * fm::exp(k * fm::log(x)) : D{};
 }
 inline double invert_power(double x, double k) {
     return (x > 0 && x <= 1) ? std::pow(x, k + 1) : kNaN;
 }
 
 // --- Lomax (Pareto II) with shape s: p(x) = s (1+x)^-(s+1) on [0, inf) ----------------------
-inline double sample_lomax(double u, double s) { return fm::exp(-fm::log(1.0 - u) / s) - 1.0; }
-inline double lomax_pdf(double x, double s) { return x >= 0 ? s * fm::exp(-(s + 1) * fm::log(1.0 + x)) : 0.0; }
+template <class D>
+RE_INLINE D sample_lomax(D u, double s) { return fm::exp(-fm::log(1.0 - u) / s) - 1.0; }
+template <class D>
+RE_INLINE D lomax_pdf(D x, double s) { return x >= D{} ? s * fm::exp(-(s + 1) * fm::log(1.0 + x)) : D{}; }
 inline double invert_lomax(double x, double s) { return x >= 0 ? -std::expm1(-s * std::log1p(x)) : kNaN; }
 
 // --- logistic(mu, s) trimmed to [a, b] (pbrt-v4's TrimmedLogistic) --------------------------
-inline double logistic_cdf(double x, double mu, double s) { return 1.0 / (1.0 + fm::exp(-(x - mu) / s)); }
-inline double trimmed_logistic_pdf(double x, double mu, double s, double a, double b) {
-    if (!(x >= a && x <= b)) return 0.0;
-    double z = (x - mu) / s, e = fm::exp(-std::fabs(z));
-    double p = e / (s * (1 + e) * (1 + e));
-    return p / (logistic_cdf(b, mu, s) - logistic_cdf(a, mu, s));
+template <class D>
+RE_INLINE D logistic_cdf(D x, double mu, double s) { return 1.0 / (1.0 + fm::exp(-(x - mu) / s)); }
+template <class D>
+RE_INLINE D trimmed_logistic_pdf(D x, double mu, double s, double a, double b) {
+    const D z = (x - mu) / s, e = fm::exp(-fm::abs(z));
+    const D p = e / (s * (1.0 + e) * (1.0 + e));
+    const double mass = logistic_cdf(b, mu, s) - logistic_cdf(a, mu, s);
+    return (x >= D{} + a) & (x <= D{} + b) ? p / mass : D{};
 }
-inline double sample_trimmed_logistic(double u, double mu, double s, double a, double b) {
-    double ca = logistic_cdf(a, mu, s), cb = logistic_cdf(b, mu, s);
-    double c = ca + u * (cb - ca);
-    double x = mu + s * (fm::log(c) - fm::log(1.0 - c));
-    return x < a ? a : (x > b ? b : x);
+template <class D>
+RE_INLINE D sample_trimmed_logistic(D u, double mu, double s, double a, double b) {
+    const double ca = logistic_cdf(a, mu, s), cb = logistic_cdf(b, mu, s);
+    const D c = ca + u * (cb - ca);
+    const D x = mu + s * (fm::log(c) - fm::log(1.0 - c));
+    return x < D{} + a ? D{} + a : (x > D{} + b ? D{} + b : x);
 }
 inline double invert_trimmed_logistic(double x, double mu, double s, double a, double b) {
     if (!(x >= a && x <= b)) return kNaN;
