@@ -57,11 +57,12 @@ class Polynomial final : public Integrand {
         description = "5x^4 - 4x^3 + 0.1 on [0,1]; negative on part of the domain";
     }
     void eval(const double *x, double *f, size_t n) const override {
-        for (size_t i = 0; i < n; ++i) {
-            double v = 0;
-            for (size_t k = c_.size(); k-- > 0;) v = v * x[i] + c_[k];
-            f[i] = in_unit(x[i]) ? v : 0.0;
-        }
+        simd::map(x, f, n, [&c = c_](auto v) {   // Horner, in vector lanes
+            using V = decltype(v);
+            V y{};
+            for (size_t k = c.size(); k-- > 0;) y = y * v + c[k];
+            return on_unit(v, y);
+        });
     }
   private:
     std::vector<double> c_;
@@ -145,11 +146,11 @@ class Offset final : public Integrand {
         description = "1e8 + sin(2 pi x): variance 1/2 under a huge mean; E[f^2]-E[f]^2 loses every digit";
     }
     void eval(const double *x, double *f, size_t n) const override {
-        for (size_t i = 0; i < n; ++i) {
-            double s, c;
-            fm::sincos_2pi(x[i], s, c);
-            f[i] = in_unit(x[i]) ? c_ + s : 0.0;
-        }
+        simd::map(x, f, n, [c0 = c_](auto v) {
+            decltype(v) s, c;
+            fm::sincos_2pi(v, s, c);
+            return on_unit(v, c0 + s);
+        });
     }
   private:
     double c_;
