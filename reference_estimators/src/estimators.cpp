@@ -152,6 +152,24 @@ void add_power(const double *p, double beta, double *acc, size_t m) {
 // The stages of block_contributions, in order: profile_stages stops after each in turn.
 enum class Stage { Sampled, Screened, Weighted, Contributions };
 
+// The sums of MIS technique a's block: s.w = sum_j p_j^beta at its points (p_a is s.p, the
+// others' pdfs from other_pdf(sampler j, out)) and, unless beta = 1, s.q = p_a^(beta - 1), so
+// that w_a f / p_a = p_a^(beta - 1) f / sum_j p_j^beta (the balance heuristic's p_a^0 = 1 is
+// left out: 1 * f is f, the same bits, a pass fewer).
+template <class OtherPdf>
+void mis_weights(const Technique &t, size_t a, Scratch &s, size_t m, OtherPdf other_pdf) {
+    const double beta = t.mis_power;
+    std::fill(s.w.begin(), s.w.begin() + m, 0.0);
+    for (size_t b = 0; b < t.mis.size(); ++b) {
+        if (b != a) other_pdf(*t.mis[b], s.q.data());
+        add_power(b == a ? s.p.data() : s.q.data(), beta, s.w.data(), m);
+    }
+    if (beta != 1) {
+        std::fill(s.q.begin(), s.q.begin() + m, 0.0);
+        add_power(s.p.data(), beta - 1, s.q.data(), m);
+    }
+}
+
 // y += w_a f / p_a for one MIS technique a: f / w (balance heuristic, w = sum_j p_j), else
 // q f / w (q = p_a^(beta - 1), w = sum_j p_j^beta); 0 where f is 0.  In explicit vector lanes
 // with a select (GCC kept the scalar loop, branching on f).
@@ -194,8 +212,6 @@ bool polar_importance(const Integrand &f, const Sampler &smp, size_t m, Scratch 
 // from its u0 (Sampler::sample_polar), the others' pdfs at z (Sampler::pdf_polar), f at z.
 // False for a block with something to report, as polar_importance.
 bool polar_mis(const Integrand &f, const Technique &t, int ud, size_t m, Scratch &s, Stage last) {
-    const double beta = t.mis_power;
-    const bool balance = beta == 1;
     double *z = s.x.data();
     std::fill(s.y.begin(), s.y.begin() + m, 0.0);
     int col = 0;
@@ -204,18 +220,10 @@ bool polar_mis(const Integrand &f, const Technique &t, int ud, size_t m, Scratch
         if (sa.sample_polar(s.u.data() + col, size_t(ud), z, s.p.data(), m) != 0) return false;
         col += sa.udim;
         if (last <= Stage::Screened) continue;
-        std::fill(s.w.begin(), s.w.begin() + m, 0.0);
-        for (size_t b = 0; b < t.mis.size(); ++b) {
-            if (b != a) t.mis[b]->pdf_polar(z, s.q.data(), m);
-            add_power(b == a ? s.p.data() : s.q.data(), beta, s.w.data(), m);
-        }
-        if (!balance) {
-            std::fill(s.q.begin(), s.q.begin() + m, 0.0);
-            add_power(s.p.data(), beta - 1, s.q.data(), m);
-        }
+        mis_weights(t, a, s, m, [&](const Sampler &sb, double *q) { sb.pdf_polar(z, q, m); });
         if (last == Stage::Weighted) continue;
         f.eval_polar(z, s.f.data(), m);
-        add_mis_terms(balance, s, m);
+        add_mis_terms(t.mis_power == 1, s, m);
     }
     return last < Stage::Contributions || nothing_to_report(f, s.y.data(), m);
 }
@@ -351,7 +359,6 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
             if (last < Stage::Contributions) return 0;
             break;
         }
-        const double beta = t.mis_power;
         std::fill(s.y.begin(), s.y.begin() + m, 0.0);
         std::fill(s.drop.begin(), s.drop.begin() + m, 0);
         int col = 0;
@@ -368,22 +375,10 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
             }
             size_t bad = sample_and_check(sa, s.cols.data(), xi_pts, s.p.data(), m, first, diag, s.sub_drop.data());
             if (last == Stage::Screened) continue;
-            // denominator: sum over all techniques of p_j(X_a)^beta
-            for (size_t i = 0; i < m; ++i) s.w[i] = 0;
-            for (size_t b = 0; b < t.mis.size(); ++b) {
-                if (b != a) t.mis[b]->pdf(xi_pts, s.q.data(), m);
-                add_power(b == a ? s.p.data() : s.q.data(), beta, s.w.data(), m);
-            }
-            // w_a f / p_a = p_a^(beta-1) f / sum_j p_j^beta; the balance heuristic's p_a^0 = 1
-            // is left out (1 * f is f: the same bits, a pass fewer)
-            const bool balance = beta == 1;
-            if (!balance) {
-                std::fill(s.q.begin(), s.q.begin() + m, 0.0);
-                add_power(s.p.data(), beta - 1, s.q.data(), m);
-            }
+            mis_weights(t, a, s, m, [&](const Sampler &sb, double *q) { sb.pdf(xi_pts, q, m); });
             if (last == Stage::Weighted) continue;
             f.eval(xi_pts, s.f.data(), m);
-            add_mis_terms(balance, s, m);
+            add_mis_terms(t.mis_power == 1, s, m);
             if (bad)
                 for (size_t i = 0; i < m; ++i)
                     if (s.sub_drop[i] && !s.drop[i]) { s.drop[i] = 1; ++dropped; }
