@@ -16,10 +16,11 @@ enum class DomainKind { Box, HalfLine, Hemisphere, Sphere };
 // branch-free, so that the direction samplers' pdf loops vectorise (Domain::contains switches
 // on the kind at run time).
 // on_sphere for double or simd::f64v coordinates (a bool, or a lane mask).
+constexpr double kUnitTolerance = 1e-5;   // on |w|^2 - 1
 template <class V>
 RE_INLINE auto on_sphere_v(V w0, V w1, V w2) {
     const V d = w0 * w0 + w1 * w1 + w2 * w2 - 1.0;
-    return (d <= 1e-5) & (d >= -1e-5);   // |d| <= 1e-5; NaN: false
+    return (d <= kUnitTolerance) & (d >= -kUnitTolerance);   // NaN: false
 }
 inline bool on_sphere(const double *w) { return on_sphere_v(w[0], w[1], w[2]); }
 

@@ -9,15 +9,12 @@
 #pragma once
 #include <cmath>
 #include <cstdint>
-#include <cstring>
 #include <limits>
 
 #include "simd.h"
 
 namespace re::fm {
 
-inline double bits_as_double(uint64_t b) { double d; std::memcpy(&d, &b, 8); return d; }
-inline uint64_t double_as_bits(double d) { uint64_t b; std::memcpy(&b, &d, 8); return b; }
 
 // 2^(j/16), j = 0..15, each the correctly rounded double (computed with Python's decimal
 // module at 60 digits).

@@ -172,10 +172,11 @@ class Directional : public Pointwise<D> {
     }
   private:
     const D &self() const { return static_cast<const D &>(*this); }
-    // whether some direction of the domain has cosine z, by on_sphere_v's tolerance (x = y = 0)
+    // whether some direction of the domain has cosine z: z^2 - 1 within on_sphere_v's tolerance
+    // above (x^2 + y^2 makes up any shortfall below)
     template <class V>
     static auto polar_in(V z) {
-        auto in = (z * z - 1.0 <= 1e-5);
+        auto in = (z * z - 1.0 <= kUnitTolerance);
         if (hemisphere) in &= z >= V{};
         return in;
     }

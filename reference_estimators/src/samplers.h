@@ -46,11 +46,11 @@ class Sampler {
     // Direction samplers whose pdf depends on a direction through its z = cos(theta) alone
     // (`polar`): sample_polar gives z[n] and pdf[n] of the points sample() draws from uniforms
     // whose u0 for point i is u[i * stride] (z = their x[3 i + 2], the same bits, without the
-    // azimuth; u1 is not read) and returns how many of them
-    // fail the screening sample_valid applies, on z alone (z^2 - 1 <= 1e-5, the sphere's own
-    // tolerance, and z >= 0 on the hemisphere; the pdf in (0, max double]); pdf_polar is pdf()
-    // at directions of cosine z[n] (0 where no direction of the domain has it).  The estimators'
-    // path for integrands that read z alone (Integrand::polar).  Others throw std::logic_error.
+    // azimuth; u1 is not read) and returns how many of them fail the screening sample_valid
+    // applies, on z alone (z^2 - 1 <= kUnitTolerance, and z >= 0 on the hemisphere; the pdf in
+    // (0, max double]); pdf_polar is pdf() at directions of cosine z[n] (0 where no direction
+    // of the domain has it).  The estimators' path for integrands that read z alone
+    // (Integrand::polar).  Others throw std::logic_error.
     bool polar = false;
     virtual size_t sample_polar(const double *u, size_t stride, double *z, double *pdf, size_t n) const;
     virtual void pdf_polar(const double *z, double *pdf, size_t n) const;
