@@ -31,11 +31,12 @@ import numpy as np
 
 import reference_estimators as rest
 
+from harness.samplers.cramer_von_mises import cramer_von_mises_from_sums
 from harness.samplers.cubature import cell_integrals, rounding_floor
 from harness.samplers.domains import Domain, MomentColumns, ParamDensity, as_domain, checked_breaks
 from harness.samplers.reported import reported_pdf_failure
 from harness.samplers.result import SamplerCheck
-from harness.samplers.transform import STRIPS, Transform, cramer_von_mises_from_sums
+from harness.samplers.transform import STRIPS, Transform
 from harness.stats import distributions, holm
 from harness.stats.results import Failure
 from harness.usercode import UserCodeError, array_result, call, callable_name
