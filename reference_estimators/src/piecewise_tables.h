@@ -109,11 +109,17 @@ struct PiecewiseTables {
     // u[j * ustride], its bin to o[j]; the search chosen once for all of them.
     template <class K, class O>
     void bins_of_u(const K *k, const double *u, O *o, size_t n, size_t ustride) const {
-        constexpr Search kCount = Search::Count, kLevels = Search::CountLevels, kHalving = Search::Halving;
+        constexpr Search kLevels = Search::CountLevels, kHalving = Search::Halving;
         if (!counted)
             gaps ? search<kHalving, true>(k, u, o, n, ustride) : search<kHalving, false>(k, u, o, n, ustride);
         else if (levels.size() == 1)
-            gaps ? search<kCount, true>(k, u, o, n, ustride) : search<kCount, false>(k, u, o, n, ustride);
+            switch (width[0] / simd::kWidth - 1) {   // the vectors counted: 1 to 4 unrolled
+                case 1: count_search<1>(k, u, o, n, ustride); break;
+                case 2: count_search<2>(k, u, o, n, ustride); break;
+                case 3: count_search<3>(k, u, o, n, ustride); break;
+                case 4: count_search<4>(k, u, o, n, ustride); break;
+                default: count_search<0>(k, u, o, n, ustride);
+            }
         else
             gaps ? search<kLevels, true>(k, u, o, n, ustride) : search<kLevels, false>(k, u, o, n, ustride);
     }
@@ -122,6 +128,12 @@ struct PiecewiseTables {
     // multiplication where that is exact.
     double position(double x) const { return (inv_width > 0 ? (x - a) * inv_width : (x - a) / (b - a)) * double(bins); }
     size_t bin_of_x(double x) const { return std::min(size_t(position(x)), bins - 1); }
+    // bin_of_x in vector lanes, as doubles, for positions in [0, 2^53) (where size_t(p) is
+    // floor(p)); a NaN lane stays NaN.
+    simd::f64v bins_of_x(simd::f64v x) const {
+        const simd::f64v p = inv_width > 0 ? (x - a) * inv_width * double(bins) : (x - a) / (b - a) * double(bins);
+        return simd::min_or_second(double(bins - 1) - simd::f64v{}, simd::floor(p));
+    }
     bool in_bin(double x, size_t o) const { return x >= edge[o] && x < edge[o + 1]; }
     // Table k's density and CDF at x in [a, b].
     double density(size_t k, double x) const { return f[k * bins + bin_of_x(x)] * scale[k]; }
@@ -138,9 +150,11 @@ struct PiecewiseTables {
     // sample_one for n points, point j from table k[j] (table 0 when k is null) with the
     // uniform u[j * ustride], its x to x[j * xstride] and its density to p[j]; the bin x lies
     // in to landed[j] if asked.  In blocks of four passes: the points' bins (one pass, so that
-    // the out-of-order core overlaps many points' halving searches), those bins' CDF entries
-    // (scalar loads: vector gathers were slower, on AMD's Zen 3 and Zen 4 alike), the points
-    // in vector lanes, then the rare step back into a bin and the strided stores.
+    // the out-of-order core overlaps many points' halving searches; the bins' entries loaded
+    // in the same loop ran the 2-D table sampler 1.4x slower), those bins' CDF entries (scalar
+    // loads: vector gathers were slower, on AMD's Zen 3 and Zen 4 alike), the points in vector
+    // lanes, then the checks that they landed in their bins (in vector lanes) and the strided
+    // stores.
     // The same bits as sample_one.
     void sample_many(const int64_t *k, const double *u, size_t ustride, size_t n, double *x, size_t xstride,
                      double *p, int64_t *landed = nullptr) const {
@@ -164,29 +178,52 @@ struct PiecewiseTables {
                 simd::store(xj + j, unplaced(simd::load(uj + j), simd::load(lo + j), simd::load(hi + j),
                                              simd::load(o + j)));
             for (; j < m; ++j) xj[j] = unplaced(uj[j], lo[j], hi[j], o[j]);
-            for (j = 0; j < m; ++j) {
-                const double xs = placed(xj[j], bin[j]);
-                x[(a0 + j) * xstride] = xs;
-                // bin[j], unless bin j holds no double (placed then went past it)
-                if (landed) landed[a0 + j] = int64_t(in_bin(xs, bin[j]) ? bin[j] : bin_of_x(xs));
+            // a vector whose points all lie in their bins is stored as it is (x lies in bin o
+            // exactly where bin_of_x(x) == o: edge's definition), the rare other one point by
+            // point through placed: the scalar check a point had cost a sample a tenth of its time
+            const auto place = [&](size_t i) {
+                const double xs = placed(xj[i], bin[i]);
+                x[(a0 + i) * xstride] = xs;
+                // bin[i], unless bin i holds no double (placed then went past it)
+                if (landed) landed[a0 + i] = int64_t(in_bin(xs, bin[i]) ? bin[i] : bin_of_x(xs));
+            };
+            for (j = 0; j + simd::kWidth <= m; j += simd::kWidth) {
+                const simd::f64v xv = simd::load(xj + j);
+                if (!simd::all_equal(bins_of_x(xv), simd::load(o + j))) {
+                    for (size_t l = 0; l < simd::kWidth; ++l) place(j + l);
+                    continue;
+                }
+                for (size_t l = 0; l < simd::kWidth; ++l) x[(a0 + j + l) * xstride] = xv[l];
+                if (landed)
+                    for (size_t l = 0; l < simd::kWidth; ++l) landed[a0 + j + l] = int64_t(bin[j + l]);
             }
+            for (; j < m; ++j) place(j);
         }
     }
 
   private:
     static constexpr size_t kTopVectors = 8;
 
+    // The one-level count over a top level of kTop vectors (0: as many as it holds), its loop
+    // unrolled where kTop is known: a 16-bin table's two vectors had cost a loop branch a
+    // point (hot_paths.py's 16 x 16 table row ran 1.06x faster unrolled).
+    template <size_t kTop, class K, class O>
+    void count_search(const K *k, const double *u, O *o, size_t n, size_t ustride) const {
+        gaps ? search<Search::Count, true, kTop>(k, u, o, n, ustride)
+             : search<Search::Count, false, kTop>(k, u, o, n, ustride);
+    }
     // bins_of_u's searches: by counting, in one level (Count) or several (CountLevels), or a
     // branch-free halving search (a mispredicted branch a step cost more than the rest; it
     // moves lo only onto values <= u, so lo is the bin or 0 already); then past empty bins
     // where a table has any (has_gaps).
     enum class Search { Count, CountLevels, Halving };
-    template <Search how, bool has_gaps, class K, class O>
+    template <Search how, bool has_gaps, size_t kTop = 0, class K, class O>
     void search(const K *k, const double *u, O *o, size_t n, size_t ustride) const {
         constexpr size_t W = simd::kWidth;
         const size_t top = levels.empty() ? 0 : levels.size() - 1, top_width = levels.empty() ? 0 : width[top];
         const double *top_level = levels.empty() ? nullptr : levels[top].data();
-        const size_t top_count = levels.empty() ? 0 : top_width - W;   // its entries, less the padding vector
+        // its entries, less the padding vector
+        const size_t top_count = kTop ? kTop * W : levels.empty() ? 0 : top_width - W;
         for (size_t j = 0; j < n; ++j) {
             const size_t t = k ? size_t(k[j]) : 0;
             const double uj = u[j * ustride];

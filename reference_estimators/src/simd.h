@@ -89,6 +89,19 @@ RE_INLINE f64v min_or_second(f64v a, f64v b) {
 #endif
 }
 
+// Whether a == b in every lane (false where either holds a NaN): one compare and a mask test.
+RE_INLINE bool all_equal(f64v a, f64v b) {
+#if defined(__AVX512F__)
+    return _mm512_cmp_pd_mask((__m512d)a, (__m512d)b, _CMP_EQ_OQ) == 0xff;
+#elif defined(__AVX__)
+    return _mm256_movemask_pd(_mm256_cmp_pd((__m256d)a, (__m256d)b, _CMP_EQ_OQ)) == 0xf;
+#else
+    bool all = true;
+    for (size_t w = 0; w < kWidth; ++w) all &= a[w] == b[w];
+    return all;
+#endif
+}
+
 // sqrt, correctly rounded (IEEE), so the lanes equal std::sqrt's.
 RE_INLINE double sqrt(double x) { return std::sqrt(x); }
 RE_INLINE f64v sqrt(f64v x) {
