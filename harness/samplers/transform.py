@@ -53,6 +53,8 @@ _COARSE_PIECES = 4      # its refinement's, where they agree with those on the s
 _MAX_STEP_CUTS = 8      # cuts at density steps per strip of the conditional
 _POLE_GRADING = 2.0 ** -np.arange(1, 25)   # cuts of the first and last strips toward s0 = 0, 1
 _MAX_DEPTH = 40         # leaf halvings along the axis: leaves down to 2^-40 of the start
+_GRADED = 2.0           # an end quarter this many times its neighbour's mass: graded cuts (_split)
+_GRADING = 2.0 ** -np.arange(4, 0, -1)    # 1/16, 1/8, 1/4, 1/2 of a graded leaf from its end
 _MIN_WIDTH = 2.0**-30   # nor below this width: a domain map loses its precision near a pole
 _MAX_BOXES = 300_000    # box integrals a tabulation may spend (then it stops with its bound)
 _MAX_EVALS = 6_000_000  # pdf evaluations one round of box integrals may spend: a float32 pdf's
@@ -120,7 +122,8 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
     """The CDF of q along ``axis`` within each strip: strip g spans all of [0, 1] along
     ``axis`` (cut into ``leaves`` leaves to start) and, on the square, the pieces pieces[g, j]
     = (lo, hi) across it (arrays (S, P, 2); each leaf quarter is integrated as one box per
-    piece, so the cubature starts where the mass is).  Leaves are halved while the bound on the
+    piece, so the cubature starts where the mass is).  Leaves are halved (:func:`_split`: graded
+    toward an end of the axis that holds their mass) while the bound on the
     interpolation's error within their quarters (:func:`_interpolation_bound`) exceeds eps
     (times the strip's mass) or a quarter holds more than ``max_share`` of it, or until
     _MAX_DEPTH, _MIN_WIDTH or _MAX_BOXES or _MAX_TABLE_EVALS, or until the cubature error
@@ -240,9 +243,7 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
         done.append((strip[ok], a[ok], b[ok], qs[ok], bound[ok], errs[ok]))
         if ok.all():
             break
-        s, lo, hi = strip[~ok], a[~ok], b[~ok]
-        mid = split_points(lo, hi, None if breaks is None else breaks[axis])
-        strip, a, b = np.repeat(s, 2), np.stack([lo, mid], 1).reshape(-1), np.stack([mid, hi], 1).reshape(-1)
+        strip, a, b = _split(strip[~ok], a[~ok], b[~ok], qs[~ok], None if breaks is None else breaks[axis])
         qs, errs, boxes = quarters(strip, a, b, strip_tol)
         spent_err += np.bincount(strip, errs, minlength=nstrip)
         spent += boxes
@@ -262,6 +263,32 @@ def _tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: 
     # and the rounding of the cumulated sums (an ulp of the total per addition)
     error = float(np.max((worst + np.bincount(strip, errs, minlength=nstrip)) / norm)) + sub_q.size * 2.0**-52
     return AxisCdf(sub_strip, sub_lo, sub_hi, before / norm[sub_strip], sub_q / norm[sub_strip], total, error)
+
+
+def _split(strip: np.ndarray, lo: np.ndarray, hi: np.ndarray, qs: np.ndarray,
+           breaks: np.ndarray | None) -> tuple[np.ndarray, ...]:
+    """The leaves [lo, hi) of strips ``strip`` (arrays (L,)) split for refinement, their
+    quarter masses qs (L, 4): (strip, lo, hi) of the children, each leaf's in order.  A leaf is
+    halved, or cut at a break inside (:func:`harness.samplers.cubature.split_points`); one at
+    an end of the axis (0 or 1) whose end quarter holds more than _GRADED times its neighbour's
+    mass (a pole's singularity, a lobe at the pole) is cut at 1/16, 1/8, 1/4 and 1/2 of its
+    width from that end at once: halving it took a level of the refinement per halving (each a
+    pass over the cubature's boxes, the singular one refined to the cubature's depth limit
+    again) down to _MIN_WIDTH, about 23 levels at a lat-long map's poles."""
+    mid = split_points(lo, hi, breaks)
+    plain = mid == (lo + hi) / 2                     # no break inside
+    low = plain & (lo == 0) & (qs[:, 0] > _GRADED * qs[:, 1])
+    high = plain & (hi == 1) & ~low & (qs[:, 3] > _GRADED * qs[:, 2])
+    graded = low | high
+    w = (hi - lo)[:, None]
+    cuts = np.full((lo.size, 6), np.nan)
+    cuts[:, 0] = lo
+    cuts[~graded, 1], cuts[~graded, 2] = mid[~graded], hi[~graded]
+    cuts[low, 1:5] = lo[low, None] + w[low] * _GRADING
+    cuts[high, 1:5] = hi[high, None] - w[high] * _GRADING[::-1]
+    cuts[graded, 5] = hi[graded]
+    children = ~np.isnan(cuts[:, 1:])
+    return np.repeat(strip, children.sum(axis=1)), cuts[:, :-1][children], cuts[:, 1:][children]
 
 
 def _interpolation_bound(qs: np.ndarray) -> np.ndarray:

@@ -16,7 +16,7 @@ import reference_estimators as rest
 from harness.samplers import SamplerTest, as_domain, zoo
 from harness.samplers.check import SAMPLE_CASE
 from harness.samplers.cramer_von_mises import cramer_von_mises, cramer_von_mises_from_sums, cvm_sf
-from harness.samplers.transform import STRIPS, Transform, _interpolation_bound
+from harness.samplers.transform import STRIPS, Transform, _interpolation_bound, _split
 
 
 @pytest.mark.parametrize("w2, p", [(0.347, 0.10), (0.461, 0.05), (0.581, 0.025), (0.743, 0.01),
@@ -150,10 +150,52 @@ def test_a_singularity_or_step_along_the_axis_keeps_the_coarse_pieces(monkeypatc
     million pdf evaluations in its marginal where 5 do)."""
     fine, fine_calls = _marginal_with(monkeypatch, 32, q)
     coarse, coarse_calls = _marginal_with(monkeypatch, 4, q)
-    # arcsine 32.3 -> 10.7 million calls, step 7.9 -> 4.7 (31.0 and 6.8 when they were refused)
+    # arcsine 8.0 -> 2.0 million calls, step 2.9 -> 1.0 (graded cuts at the poles, _split; halved,
+    # the arcsine's were 12.7 -> 2.6)
     assert coarse_calls <= fine_calls / fewer, (coarse_calls, fine_calls)
     assert np.array_equal(coarse.lo, fine.lo) and coarse.error <= 1.01 * fine.error
     assert np.max(np.abs(np.append(coarse.start, 1.0) - cdf(np.append(coarse.lo, 1.0)))) <= coarse.error
+
+
+def test_leaves_are_graded_toward_an_end_of_the_axis_that_holds_their_mass_and_halved_elsewhere():
+    w = 0.125
+    strip = np.array([0, 0, 1, 1, 2, 3])
+    lo = np.array([0.0, 1 - w, 0.25, 0.0, 0.0, 1 - w])
+    hi = np.array([w, 1.0, 0.5, w, 0.25, 1.0])
+    qs = np.array([[10, 1, 1, 1],      # singular at s = 0: graded toward 0
+                   [1, 1, 1, 10],      # at s = 1: toward 1
+                   [10, 1, 1, 1],      # not at an end: halved
+                   [1.9, 1, 1, 1],     # at an end, its end quarter under twice its neighbour: halved
+                   [10, 1, 1, 1],      # graded but for the break inside: cut there
+                   [1, 1, 10, 1.0]])   # its largest quarter not the end one: halved
+    s, a, b = _split(strip, lo, hi, qs, np.array([0.2]))
+    assert a.tolist() == [0, w / 16, w / 8, w / 4, w / 2, 1 - w, 1 - w / 2, 1 - w / 4, 1 - w / 8, 1 - w / 16,
+                          0.25, 0.375, 0, w / 2, 0, 0.2, 1 - w, 1 - w / 2]
+    count = [5, 5, 2, 2, 2, 2]
+    assert s.tolist() == np.repeat(strip, count).tolist()
+    # the children tile their leaves, in order, the ends exactly
+    first = np.cumsum([0] + count)
+    for i, j, leaf_lo, leaf_hi in zip(first[:-1], first[1:], lo, hi):
+        assert a[i] == leaf_lo and b[j - 1] == leaf_hi and np.array_equal(b[i:j - 1], a[i + 1:j])
+
+
+def test_graded_cuts_keep_the_halved_tables_leaves_for_fewer_pdf_calls(monkeypatch):
+    """The pole density (arcsine along s0): graded cuts skip the levels of refinement that
+    halving spends reaching _MIN_WIDTH at each end (a pass each, the singular box refined to the
+    cubature's depth limit again each time), and keep the same leaves: a quarter's integral is
+    its own boxes' whatever level made it, so the table is the halved one's bit for bit."""
+    import harness.samplers.transform as tr
+
+    def arcsine(sp):
+        return 1 / (math.pi * np.sqrt(sp[:, 0] * (1 - sp[:, 0])))
+
+    graded, graded_calls = _marginal_with(monkeypatch, 4, arcsine)
+    monkeypatch.setattr(tr, "_GRADED", math.inf)
+    halved, halved_calls = _marginal_with(monkeypatch, 4, arcsine)
+    # 2.6 -> 2.0 million calls (with the fine pieces throughout, 12.7 -> 8.0)
+    assert graded_calls <= halved_calls / 1.25, (graded_calls, halved_calls)
+    assert all(np.array_equal(getattr(graded, f), getattr(halved, f)) for f in ("lo", "hi", "start", "mass"))
+    assert graded.error == halved.error
 
 
 def test_a_singularity_and_a_narrow_lobe_on_the_interval_are_tabulated_within_the_bound():
