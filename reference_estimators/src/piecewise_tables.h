@@ -148,8 +148,8 @@ struct PiecewiseTables {
     double sample_one(size_t k, double u, double *x) const { return point_in(k, bin_of_u(k, u), u, x); }
 
     // sample_one for n points, point j from table k[j] (table 0 when k is null) with the
-    // uniform u[j * ustride], its x to x[j * xstride] and its density to p[j]; the bin x lies
-    // in to landed[j] if asked.  In blocks of four passes: the points' bins (one pass, so that
+    // uniform u[j * ustride], its x to x[j * xstride] and its density to p[j] (unless p is
+    // null); the bin x lies in to landed[j] if asked.  In blocks of four passes: the points' bins (one pass, so that
     // the out-of-order core overlaps many points' halving searches; the bins' entries loaded
     // in the same loop ran the 2-D table sampler 1.4x slower), those bins' CDF entries (scalar
     // loads: vector gathers were slower, on AMD's Zen 3 and Zen 4 alike), the points in vector
@@ -171,7 +171,7 @@ struct PiecewiseTables {
                 lo[j] = c[bj];
                 hi[j] = c[bj + 1];
                 o[j] = double(bj);
-                p[a0 + j] = f[t * bins + bj] * scale[t];
+                if (p) p[a0 + j] = f[t * bins + bj] * scale[t];
             }
             size_t j = 0;
             for (; j + simd::kWidth <= m; j += simd::kWidth)

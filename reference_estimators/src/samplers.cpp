@@ -452,17 +452,21 @@ class PiecewiseConstant2D final : public Pointwise<PiecewiseConstant2D> {
                 cell_pdf_.push_back(marginal_.f[r] * marginal_.scale[0]
                                     * (conditional_.f[r * cols + c] * conditional_.scale[r]));
     }
-    // In blocks: the marginal's y and density for every point, then each point's row, then
-    // the conditionals' x and density (PiecewiseTables::sample_many's passes).
+    // In blocks: the marginal's y for every point, then each point's row, then the
+    // conditionals' x and each point's column (PiecewiseTables::sample_many's passes), the
+    // density read off the cells' table: the marginal's and the conditional's densities
+    // multiplied as sample_one multiplies them, for the bins the point lies in, which on
+    // [0, 1]^2 are the bins its uniforms chose (each bin of a table under 2^50 bins holds doubles).
+    // (gaussian2d's 16 x 16 table: 96 -> 102 Msamples/s a thread, without the two densities.)
     void sample(const double *u, double *x, double *p, size_t n) const override {
         constexpr size_t kBlock = 256;
-        int64_t row[kBlock];
-        double px[kBlock];
+        int64_t row[kBlock], col[kBlock];
+        const size_t cols = conditional_.bins;
         for (size_t a = 0; a < n; a += kBlock) {
             const size_t m = std::min(kBlock, n - a);
-            marginal_.sample_many(nullptr, u + 2 * a + 1, 2, m, x + 2 * a + 1, 2, p + a, row);
-            conditional_.sample_many(row, u + 2 * a, 2, m, x + 2 * a, 2, px);
-            for (size_t j = 0; j < m; ++j) p[a + j] *= px[j];
+            marginal_.sample_many(nullptr, u + 2 * a + 1, 2, m, x + 2 * a + 1, 2, nullptr, row);
+            conditional_.sample_many(row, u + 2 * a, 2, m, x + 2 * a, 2, nullptr, col);
+            for (size_t j = 0; j < m; ++j) p[a + j] = cell_pdf_[size_t(row[j]) * cols + size_t(col[j])];
         }
     }
     double sample_one(const double *u, double *x) const {
