@@ -272,11 +272,15 @@ def _split(strip: np.ndarray, lo: np.ndarray, hi: np.ndarray, qs: np.ndarray,
     halved, or cut at a break inside (:func:`harness.samplers.cubature.split_points`); one at
     an end of the axis (0 or 1) whose end quarter holds more than _GRADED times its neighbour's
     mass (a pole's singularity, a lobe at the pole) is cut at 1/16, 1/8, 1/4 and 1/2 of its
-    width from that end at once: halving it took a level of the refinement per halving (each a
-    pass over the cubature's boxes, the singular one refined to the cubature's depth limit
-    again) down to _MIN_WIDTH, about 23 levels at a lat-long map's poles."""
+    width from that end at once (unless that makes a child narrower than _MIN_WIDTH): halving
+    it took a level of the refinement per halving (each a pass over the cubature's boxes, the
+    singular one refined to the cubature's depth limit again) down to _MIN_WIDTH, about 23
+    levels at a lat-long map's poles.  The leaves kept are those halving keeps (a quarter's
+    integral is its own boxes', whatever level made it) unless a strip stops on its effort
+    (_MAX_BOXES, a useless bound), which the skipped levels no longer add to."""
     mid = split_points(lo, hi, breaks)
-    plain = mid == (lo + hi) / 2                     # no break inside
+    # no break inside, and no child narrower than _MIN_WIDTH
+    plain = (mid == (lo + hi) / 2) & (hi - lo >= _MIN_WIDTH / _GRADING[0])
     low = plain & (lo == 0) & (qs[:, 0] > _GRADED * qs[:, 1])
     high = plain & (hi == 1) & ~low & (qs[:, 3] > _GRADED * qs[:, 2])
     graded = low | high
