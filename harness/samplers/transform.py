@@ -52,7 +52,7 @@ _CONDITIONAL_LEAVES = 16  # leaves along s1 a strip of the conditional starts wi
 _COARSE_PIECES = 4      # its refinement's, where they agree with those on the starting leaves
 _MAX_STEP_CUTS = 8      # cuts at density steps per strip of the conditional
 _POLE_GRADING = 2.0 ** -np.arange(1, 25)   # cuts of the first and last strips toward s0 = 0, 1
-_MAX_DEPTH = 40         # leaf halvings along the axis: leaves down to 2^-40 of the start
+_MAX_DEPTH = 40         # refinement levels along the axis (a level halves a leaf, or grades it: _split)
 _GRADED = 2.0           # an end quarter this many times its neighbour's mass: graded cuts (_split)
 _GRADING = 2.0 ** -np.arange(4, 0, -1)    # 1/16, 1/8, 1/4, 1/2 of a graded leaf from its end
 _MIN_WIDTH = 2.0**-30   # nor below this width: a domain map loses its precision near a pole
@@ -275,9 +275,12 @@ def _split(strip: np.ndarray, lo: np.ndarray, hi: np.ndarray, qs: np.ndarray,
     width from that end at once (unless that makes a child narrower than _MIN_WIDTH): halving
     it took a level of the refinement per halving (each a pass over the cubature's boxes, the
     singular one refined to the cubature's depth limit again) down to _MIN_WIDTH, about 23
-    levels at a lat-long map's poles.  The leaves kept are those halving keeps (a quarter's
-    integral is its own boxes', whatever level made it) unless a strip stops on its effort
-    (_MAX_BOXES, a useless bound), which the skipped levels no longer add to."""
+    levels at a lat-long map's poles.  Where halving would have refined down to the graded
+    leaves (it always does at a singular end, to _MIN_WIDTH) the leaves kept are halving's (a
+    quarter's integral is its own boxes', whatever level made it), unless a strip stops on its
+    effort (_MAX_BOXES, a useless bound), which the skipped levels no longer add to; where it
+    would have stopped sooner (a lobe at the end holding little of the strip), graded leaves
+    are finer than needed: a valid table with a smaller bound, for a few more leaves."""
     mid = split_points(lo, hi, breaks)
     # no break inside, and no child narrower than _MIN_WIDTH
     plain = (mid == (lo + hi) / 2) & (hi - lo >= _MIN_WIDTH / _GRADING[0])

@@ -129,7 +129,8 @@ struct PiecewiseTables {
     double position(double x) const { return (inv_width > 0 ? (x - a) * inv_width : (x - a) / (b - a)) * double(bins); }
     size_t bin_of_x(double x) const { return std::min(size_t(position(x)), bins - 1); }
     // bin_of_x in vector lanes, as doubles, for positions in [0, 2^53) (where size_t(p) is
-    // floor(p)); a NaN lane stays NaN.
+    // floor(p)); a NaN lane stays NaN and a negative position gives a negative value: neither
+    // is a bin (sample_many's landing check sends those points through placed).
     simd::f64v bins_of_x(simd::f64v x) const {
         const simd::f64v p = inv_width > 0 ? (x - a) * inv_width * double(bins) : (x - a) / (b - a) * double(bins);
         return simd::min_or_second(double(bins - 1) - simd::f64v{}, simd::floor(p));
@@ -149,12 +150,12 @@ struct PiecewiseTables {
 
     // sample_one for n points, point j from table k[j] (table 0 when k is null) with the
     // uniform u[j * ustride], its x to x[j * xstride] and its density to p[j] (unless p is
-    // null); the bin x lies in to landed[j] if asked.  In blocks of four passes: the points' bins (one pass, so that
-    // the out-of-order core overlaps many points' halving searches; the bins' entries loaded
-    // in the same loop ran the 2-D table sampler 1.4x slower), those bins' CDF entries (scalar
-    // loads: vector gathers were slower, on AMD's Zen 3 and Zen 4 alike), the points in vector
-    // lanes, then the checks that they landed in their bins (in vector lanes) and the strided
-    // stores.
+    // null); the bin x lies in to landed[j] if asked.  In blocks of four passes: the points'
+    // bins (one pass, so that the out-of-order core overlaps many points' searches; the bins'
+    // entries loaded in the same loop ran the 2-D table sampler 1.4x slower), those bins' CDF
+    // entries (scalar loads: vector gathers were slower, on AMD's Zen 3 and Zen 4 alike), the
+    // points in vector lanes, then the checks that they landed in their bins (in vector lanes)
+    // and the strided stores.
     // The same bits as sample_one.
     void sample_many(const int64_t *k, const double *u, size_t ustride, size_t n, double *x, size_t xstride,
                      double *p, int64_t *landed = nullptr) const {
@@ -179,8 +180,9 @@ struct PiecewiseTables {
                                              simd::load(o + j)));
             for (; j < m; ++j) xj[j] = unplaced(uj[j], lo[j], hi[j], o[j]);
             // a vector whose points all lie in their bins is stored as it is (x lies in bin o
-            // exactly where bin_of_x(x) == o: edge's definition), the rare other one point by
-            // point through placed: the scalar check a point had cost a sample a tenth of its time
+            // exactly where bin_of_x(x) == o, edge's definition; bins_of_x gives it in lanes),
+            // the rare other one point by point through placed: the scalar check a point had
+            // cost a sample a tenth of its time
             const auto place = [&](size_t i) {
                 const double xs = placed(xj[i], bin[i]);
                 x[(a0 + i) * xstride] = xs;
@@ -205,8 +207,8 @@ struct PiecewiseTables {
     static constexpr size_t kTopVectors = 8;
 
     // The one-level count over a top level of kTop vectors (0: as many as it holds), its loop
-    // unrolled where kTop is known: a 16-bin table's two vectors had cost a loop branch a
-    // point (hot_paths.py's 16 x 16 table row ran 1.06x faster unrolled).
+    // unrolled where kTop is known: a 16-bin table's two vectors (AVX-512; four on AVX2) had
+    // cost a loop branch a point (hot_paths.py's 16 x 16 table row ran 1.06x faster unrolled).
     template <size_t kTop, class K, class O>
     void count_search(const K *k, const double *u, O *o, size_t n, size_t ustride) const {
         gaps ? search<Search::Count, true, kTop>(k, u, o, n, ustride)

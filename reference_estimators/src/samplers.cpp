@@ -456,7 +456,8 @@ class PiecewiseConstant2D final : public Pointwise<PiecewiseConstant2D> {
     // conditionals' x and each point's column (PiecewiseTables::sample_many's passes), the
     // density read off the cells' table: the marginal's and the conditional's densities
     // multiplied as sample_one multiplies them, for the bins the point lies in, which on
-    // [0, 1]^2 are the bins its uniforms chose (each bin of a table under 2^50 bins holds doubles).
+    // [0, 1]^2 are the bins its uniforms in [0, 1] chose (each bin of a table under 2^50 bins
+    // holds doubles; the bindings refuse other uniforms).
     // (gaussian2d's 16 x 16 table: 96 -> 102 Msamples/s a thread, without the two densities.)
     void sample(const double *u, double *x, double *p, size_t n) const override {
         constexpr size_t kBlock = 256;

@@ -89,7 +89,8 @@ RE_INLINE f64v min_or_second(f64v a, f64v b) {
 #endif
 }
 
-// Whether a == b in every lane (false where either holds a NaN): one compare and a mask test.
+// Whether a == b in every lane (false where either holds a NaN): on AVX and AVX-512 one
+// compare and a mask test.
 RE_INLINE bool all_equal(f64v a, f64v b) {
 #if defined(__AVX512F__)
     return _mm512_cmp_pd_mask((__m512d)a, (__m512d)b, _CMP_EQ_OQ) == 0xff;

@@ -200,6 +200,27 @@ def test_graded_cuts_keep_the_halved_tables_leaves_for_fewer_pdf_calls(monkeypat
     assert graded.error == halved.error
 
 
+def test_a_light_lobe_at_the_end_gets_finer_graded_leaves_within_their_bound(monkeypatch):
+    """A lobe at s = 0 holding 3e-5 of the mass: graded cuts make leaves at the end that halving
+    would have stopped short of (its leaf [0, w/2) was fine already), so the table differs from
+    the halved one: finer, with a bound as small or smaller, and within it of the exact CDF."""
+    import harness.samplers.transform as tr
+
+    def lobe(sp):
+        return 1 + 30 * np.exp(-sp[:, 0] / 1e-6)
+
+    def cdf(x):
+        return (x + 30e-6 * -np.expm1(-x / 1e-6)) / (1 + 30e-6)
+
+    graded = Transform.build(lobe, 1, 1_000_000).marginal
+    monkeypatch.setattr(tr, "_GRADED", math.inf)
+    halved = Transform.build(lobe, 1, 1_000_000).marginal
+    assert graded.lo.size > halved.lo.size and graded.error <= halved.error   # 4144 and 4136 leaves
+    for table in (graded, halved):
+        edges = np.append(table.lo, 1.0)
+        assert np.max(np.abs(np.append(table.start, 1.0) - cdf(edges))) <= table.error
+
+
 def test_a_singularity_and_a_narrow_lobe_on_the_interval_are_tabulated_within_the_bound():
     n = 100_000
     for name, params, cdf in [("power", {"k": -0.5}, np.sqrt),
