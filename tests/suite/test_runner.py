@@ -23,14 +23,16 @@ from harness.suite.run import run_suite
 
 HARNESS = str(Path(sys.executable).with_name("harness"))
 
-# A suite of several seconds: long enough for kills to land mid-run, short enough for CI (about
-# 14 s on two threads on 2026-12-04: 2^28 samples, since the trimmed-logistic and MIS cases ran
-# 8x and 1.6x faster in vector lanes and 2^25 had left too little work for 20 kills).
+# A suite of several seconds: long enough for 20 kills to land mid-run (each run is killed up to
+# 0.4 s after its first commit), short enough for CI: 2^28 samples, more on a machine where
+# they take under LEAST_SECONDS (sized_suite).  2^28 took about 14 s on two threads on
+# 2026-12-04, since the trimmed-logistic and MIS cases ran 8x and 1.6x faster in vector lanes
+# and 2^25 had left too little work for 20 kills.
 SUITE = """
 [suite]
 name = "killme"
 seed = 3
-samples = 268_435_456
+samples = {samples}
 batches = 16
 replicas = 8
 budgets = [262144, 1048576, 4194304]
@@ -82,20 +84,41 @@ def measurements(db: Path):
     return df.drop(columns=["detail"]).sort_values(["case_key", "measurement"]).reset_index(drop=True)
 
 
-@pytest.fixture(scope="module")
-def suite_file(tmp_path_factory) -> Path:
-    p = tmp_path_factory.mktemp("suite") / "killme.toml"
-    p.write_text(SUITE)
-    return p
+LEAST_SECONDS = 12.0   # the suite's uninterrupted run on two threads, at least, for the kills
 
 
 @pytest.fixture(scope="module")
-def reference_db(suite_file, tmp_path_factory) -> Path:
-    db = tmp_path_factory.mktemp("ref") / "ref.sqlite"
-    r = subprocess.run([HARNESS, "run", str(suite_file), "--db", str(db), "--threads", "2"],
-                       capture_output=True, text=True, timeout=600)
-    assert r.returncode == 0, r.stdout + r.stderr
-    return db
+def sized_suite(tmp_path_factory) -> tuple[Path, Path, int]:
+    """(the suite file, its uninterrupted run's database, its samples): 2^28 samples, scaled by
+    powers of two until that run lasts LEAST_SECONDS on this machine (2^28 took about 14 s on
+    2026-12-04's), so that a faster machine or core still leaves the kills work to interrupt."""
+    samples = 2**28
+    while True:
+        d = tmp_path_factory.mktemp("suite")
+        (d / "killme.toml").write_text(SUITE.format(samples=samples))
+        start = time.monotonic()
+        r = subprocess.run([HARNESS, "run", str(d / "killme.toml"), "--db", str(d / "ref.sqlite"),
+                            "--threads", "2"], capture_output=True, text=True, timeout=600)
+        assert r.returncode == 0, r.stdout + r.stderr
+        seconds = time.monotonic() - start
+        if seconds >= LEAST_SECONDS:
+            return d / "killme.toml", d / "ref.sqlite", samples
+        samples *= 2 ** math.ceil(math.log2(LEAST_SECONDS / seconds))
+
+
+@pytest.fixture(scope="module")
+def suite_file(sized_suite) -> Path:
+    return sized_suite[0]
+
+
+@pytest.fixture(scope="module")
+def reference_db(sized_suite) -> Path:
+    return sized_suite[1]
+
+
+@pytest.fixture(scope="module")
+def suite_samples(sized_suite) -> int:
+    return sized_suite[2]
 
 
 def test_a_finished_suite_reruns_without_computing(suite_file, reference_db, tmp_path):
@@ -121,7 +144,7 @@ def test_kill_minus_nine_at_random_points_then_resume(suite_file, reference_db, 
         proc = subprocess.Popen([HARNESS, "run", str(suite_file), "--db", str(db), "--threads", "2"],
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         # kill at a random moment after this run's first commit (whatever start-up costs on this
-        # machine): each run then does at most ~0.5 s of the suite's ~14 s of work
+        # machine): each run then does at most ~0.5 s of the suite's 12 s or more of work
         deadline = time.monotonic() + 30
         while proc.poll() is None and time.monotonic() < deadline:
             if stored_count(db) > before:
@@ -160,14 +183,14 @@ def test_dask_local_cluster_gives_bitwise_the_same_units(suite_file, reference_d
     assert without_timing(units_table(db)) == without_timing(units_table(reference_db))
 
 
-def test_load_gives_each_measurement_with_uncertainty_and_n(reference_db):
+def test_load_gives_each_measurement_with_uncertainty_and_n(reference_db, suite_samples):
     df = harness.load(reference_db)
     assert {"integrand", "technique", "measurement", "value", "lo", "hi", "n", "pvalue", "alpha",
             "verdict"} <= set(df)
     assert set(df["measurement"]) == {"bias", "variance", "convergence_slope", "log10_efficiency",
                                       "log10_efficiency_clock", "efficiency_ratio", "rmse"}
     bias = df[df["measurement"] == "bias"]
-    assert len(bias) == 4 and (bias["n"] == 268_435_456).all() and (bias["lo"] < bias["hi"]).all()
+    assert len(bias) == 4 and (bias["n"] == suite_samples).all() and (bias["lo"] < bias["hi"]).all()
     assert set(bias["verdict"]) == {"unbiased"}
     slope = df[(df["measurement"] == "convergence_slope") & (df["technique"] == "uniform")].iloc[0]
     assert slope["lo"] < -0.5 < slope["hi"]
