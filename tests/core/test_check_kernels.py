@@ -417,27 +417,33 @@ def test_piecewise_linear_lookup_matches_its_definition(strips, leaves):
     np.testing.assert_array_equal(got, lookup_reference(*table, g, x))
 
 
-@pytest.mark.parametrize("square", [False, True])
-def test_rosenblatt_matches_the_lookups_it_replaces(square):
+@pytest.mark.parametrize("square, on_leaves", [(False, False), (True, False), (True, True)])
+def test_rosenblatt_matches_the_lookups_it_replaces(square, on_leaves):
+    """Strips by a search among the edges, or, where the edges lie on the marginal's leaves
+    (as the sampler check's do), by the leaf s0 falls in: searchsorted's strips either way."""
     rng = np.random.default_rng(5)
     marginal = random_table(rng, 1, 3000)
     conditional = random_table(rng, 32, 200) if square else None
-    edges = np.concatenate([[0.0], np.sort(rng.random(31)), [1.0]])
+    inner = np.sort(rng.choice(marginal[0][1:], 31, replace=False)) if on_leaves else np.sort(rng.random(31))
+    edges = np.concatenate([[0.0], inner, [1.0]])
     s = rng.random((N, 2 if square else 1))
     s[:5, 0] = [0.0, 1.0, edges[7], np.nextafter(edges[7], 0), edges[-2]]
     if square:
-        s[5, 0], s[6, 0] = -0.5, 1.5
+        s[5:9, 0] = [-0.5, 1.5, np.nextafter(edges[-2], 0), -np.inf]
+        s[9:9 + edges.size, 0] = edges
     u, strip = rest.rosenblatt(marginal, conditional, edges, s)
     ref_u, ref_strip = rosenblatt_reference(marginal, conditional, edges, s)
     np.testing.assert_array_equal(strip, ref_strip)
     np.testing.assert_array_equal(u, ref_u)
 
 
-def test_rosenblatt_puts_a_nan_point_in_the_last_strip_as_searchsorted_does():
+@pytest.mark.parametrize("on_leaves", [False, True])
+def test_rosenblatt_puts_a_nan_point_in_the_last_strip_as_searchsorted_does(on_leaves):
     rng = np.random.default_rng(6)
     marginal, conditional = random_table(rng, 1, 10), random_table(rng, 4, 10)
-    edges = np.array([0.0, 0.25, 0.5, 0.75, 1.0])
-    s = np.array([[np.nan, 0.5], [0.5, np.nan]])
+    inner = marginal[0][[2, 4, 6]] if on_leaves else [0.25, 0.5, 0.75]
+    edges = np.array([0.0, *inner, 1.0])
+    s = np.array([[np.nan, 0.5], [edges[2], np.nan]])
     u, strip = rest.rosenblatt(marginal, conditional, edges, s)
     assert list(strip) == [3, 2] and np.isnan(u[0, 0]) and np.isnan(u[1, 1])
 
