@@ -15,7 +15,6 @@
 
 namespace re::fm {
 
-
 // 2^(j/16), j = 0..15, each the correctly rounded double (computed with Python's decimal
 // module at 60 digits).
 alignas(64) inline constexpr double kExp2Table[16] = {

@@ -126,14 +126,14 @@ struct PiecewiseTables {
 
     // x's position on [a, b] in units of bins: (x - a) / (b - a) * bins, the division a
     // multiplication where that is exact.
-    double position(double x) const { return (inv_width > 0 ? (x - a) * inv_width : (x - a) / (b - a)) * double(bins); }
+    template <class D>
+    D position(D x) const { return (inv_width > 0 ? (x - a) * inv_width : (x - a) / (b - a)) * double(bins); }
     size_t bin_of_x(double x) const { return std::min(size_t(position(x)), bins - 1); }
     // bin_of_x in vector lanes, as doubles, for positions in [0, 2^53) (where size_t(p) is
     // floor(p)); a NaN lane stays NaN and a negative position gives a negative value: neither
     // is a bin (sample_many's landing check sends those points through placed).
     simd::f64v bins_of_x(simd::f64v x) const {
-        const simd::f64v p = inv_width > 0 ? (x - a) * inv_width * double(bins) : (x - a) / (b - a) * double(bins);
-        return simd::min_or_second(double(bins - 1) - simd::f64v{}, simd::floor(p));
+        return simd::min_or_second(double(bins - 1) - simd::f64v{}, simd::floor(position(x)));
     }
     bool in_bin(double x, size_t o) const { return x >= edge[o] && x < edge[o + 1]; }
     // Table k's density and CDF at x in [a, b].

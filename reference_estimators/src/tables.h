@@ -123,24 +123,20 @@ class PiecewiseLinearTable {
                : lookup_leaves<false>(g, x, xstride, n, out, ostride, leaves);
     }
 
-    // Per leaf (strip 0's; n - 2 for the others and the sentinel, a NaN x's), the interval of
-    // the sorted `edges` (n of them) that every x the lookup maps to it lies in: the last edge
-    // e <= x, clamped to 0 .. n - 2.  Empty where strip 0 is empty or an edge lies inside the
-    // span a leaf answers for (the interval then depends on x, not on its leaf).
-    std::vector<int64_t> intervals_of_leaves(const double *edges, size_t n) const {
-        const int64_t first = offsets_[0], end = offsets_[1], last = int64_t(n) - 2;
-        if (end <= first || n < 2) return {};
-        auto interval = [&](double x) {
-            const int64_t g = int64_t(std::upper_bound(edges, edges + n, x) - edges) - 1;
-            return g < 0 ? 0 : (g > last ? last : g);
-        };
-        std::vector<int64_t> of(leaves_.size(), last);
+    // fn (non-decreasing in x, NaN aside) per leaf: for each of strip 0's leaves its value on
+    // every x the lookup maps to that leaf, and fn(NaN) for the others and the sentinel (a NaN
+    // x's).  Empty where strip 0 is empty or fn is not constant on some leaf's span.
+    template <class Fn>
+    std::vector<int64_t> per_leaf(Fn fn) const {
+        const int64_t first = offsets_[0], end = offsets_[1];
+        if (end <= first) return {};
+        std::vector<int64_t> of(leaves_.size(), fn(__builtin_nan("")));
         for (int64_t i = first; i < end; ++i) {
             // leaf i answers for [lo_i, lo_{i+1}), the first from -inf, the last to +inf
             const double from = i == first ? -__builtin_inf() : leaves_[size_t(i)].lo;
             const double to = i + 1 == end ? __builtin_inf() : std::nextafter(leaves_[size_t(i) + 1].lo, -__builtin_inf());
-            if (interval(from) != interval(to)) return {};
-            of[size_t(i)] = interval(from);
+            if (fn(from) != fn(to)) return {};
+            of[size_t(i)] = fn(from);
         }
         return of;
     }
@@ -233,7 +229,8 @@ class RosenblattTransform {
     RosenblattTransform(const PiecewiseLinearTable &marginal, const PiecewiseLinearTable *conditional,
                         const double *edges, size_t nedges)
         : marginal_(marginal), conditional_(conditional), above_(edges, nedges), last_(int64_t(nedges) - 2),
-          strip_of_leaf_(conditional ? marginal.intervals_of_leaves(edges, nedges) : std::vector<int64_t>{}) {}
+          strip_of_leaf_(conditional ? marginal.per_leaf([this](double s0) { return strip_of(s0); })
+                                     : std::vector<int64_t>{}) {}
 
     // Points a .. b - 1 of s (n, k): u0 to u0[j * stride], on the square u1 to u1[j * stride],
     // and the strip to strip[j - a] (0 on an interval).
@@ -250,24 +247,26 @@ class RosenblattTransform {
             std::fill(strip, strip + (b - a), int64_t(0));
             return;
         }
-        if (by_leaf) {
+        if (by_leaf)
             for (size_t j = a; j < b; ++j) strip[j - a] = strip_of_leaf_[size_t(strip[j - a])];
-        } else {
-            for (size_t j = a; j < b; ++j) {
-                const double s0 = s[k * j];
-                const int64_t g = s0 == s0 ? int64_t(above_(s0)) - 1 : last_;
-                strip[j - a] = g < 0 ? 0 : (g > last_ ? last_ : g);
-            }
-        }
+        else
+            for (size_t j = a; j < b; ++j) strip[j - a] = strip_of(s[k * j]);
         conditional_->lookup(strip, s + k * a + 1, k, b - a, u1 + a * stride, stride);
     }
 
   private:
+    // The strip of s0: the last edge e <= s0, clamped to 0 .. last_ (NaN: last_, as numpy's
+    // searchsorted).
+    int64_t strip_of(double s0) const {
+        const int64_t g = s0 == s0 ? int64_t(above_(s0)) - 1 : last_;
+        return g < 0 ? 0 : (g > last_ ? last_ : g);
+    }
+
     const PiecewiseLinearTable &marginal_;
     const PiecewiseLinearTable *conditional_;
     BucketedUpperBound above_;
     int64_t last_;
-    std::vector<int64_t> strip_of_leaf_;   // PiecewiseLinearTable::intervals_of_leaves, or empty
+    std::vector<int64_t> strip_of_leaf_;   // strip_of per marginal leaf (PiecewiseLinearTable::per_leaf), or empty
 };
 
 // Points a chunk of the sampler check's batch kernels (this transform, the histogram, the
