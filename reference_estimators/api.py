@@ -54,6 +54,10 @@ class Sampler:
     invertible = property(lambda self: self._core.invertible)
     polar = property(lambda self: self._core.polar,
                      doc="whether the pdf reads a direction's cos(theta) alone (estimates draw no azimuth)")
+    polar_function = property(lambda self: self._core.polar_function,
+                              doc="the function of cos(theta) the pdf is, by name ('' for none); an "
+                                  "integrand with the same polar_function is this pdf, bit for bit, and "
+                                  "estimates compute it once")
 
     def sample(self, u: Any) -> tuple[np.ndarray, np.ndarray]:
         """Points and their pdf values from canonical uniforms u in [0, 1] of shape (N, udim)

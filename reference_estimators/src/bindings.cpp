@@ -76,6 +76,8 @@ NB_MODULE(_core, m) {
         .def_ro("reference", &Integrand::reference)
         .def_ro("nonnegative", &Integrand::nonnegative)
         .def_ro("polar", &Integrand::polar, "whether f reads a direction's cos(theta) alone")
+        .def_ro("polar_function", &Integrand::polar_function,
+                "the function of cos(theta) f is, by name ('' for none): a sampler's pdf of the same name is f")
         .def_prop_ro("domain", [](const Integrand &f) { return f.domain.kind_name(); })
         .def_prop_ro("dim", [](const Integrand &f) { return f.domain.dim; })
         .def_prop_ro("measure", [](const Integrand &f) { return f.domain.measure(); })
@@ -98,6 +100,8 @@ NB_MODULE(_core, m) {
         .def_ro("udim", &Sampler::udim)
         .def_ro("invertible", &Sampler::invertible)
         .def_ro("polar", &Sampler::polar, "whether the pdf reads a direction's cos(theta) alone")
+        .def_ro("polar_function", &Sampler::polar_function,
+                "the function of cos(theta) the pdf is, by name ('' for none): an integrand of the same name is it")
         .def_prop_ro("method", [](const Sampler &s) { return s.method == SamplingMethod::Inversion ? "inversion" : "rejection"; })
         .def_prop_ro("domain", [](const Sampler &s) { return s.domain.kind_name(); })
         .def_prop_ro("dim", [](const Sampler &s) { return s.domain.dim; })

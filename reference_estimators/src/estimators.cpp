@@ -67,15 +67,32 @@ bool polar_path(const Integrand &f, const Technique &t) {
     return !used.empty();
 }
 
+// The sampler among the technique's (its sampler: 0; MIS: the index of one of t.mis) whose pdf
+// is f on the polar path: the same named function of z (Sampler::polar_function) on the same
+// domain, so f at any point is that pdf there, bit for bit; -1 for none.
+int polar_pdf_equal_to_f(const Integrand &f, const Technique &t) {
+    auto same = [&](const Sampler &s) {
+        return !f.polar_function.empty() && s.polar_function == f.polar_function && s.domain.kind == f.domain.kind;
+    };
+    if (t.kind == TechniqueKind::Mis) {
+        for (size_t b = 0; b < t.mis.size(); ++b)
+            if (same(*t.mis[b])) return int(b);
+        return -1;
+    }
+    return t.sampler && same(*t.sampler) ? 0 : -1;
+}
+
 // What one estimate needs besides the technique: its point set and dimensions.
 struct Kernel {
     const Integrand &f;
     const Technique &t;
     PointSetContext points;
     int ud, xd;
-    bool polar;   // polar_path(f, t)
+    bool polar;     // polar_path(f, t)
+    int f_is_pdf;   // on the polar path, polar_pdf_equal_to_f(f, t), else -1
     Kernel(const Integrand &f_, const Technique &t_, uint64_t n, const StreamKey &key)
-        : f(f_), t(t_), ud(t_.udim(f_)), xd(f_.domain.dim), polar(polar_path(f_, t_)) {
+        : f(f_), t(t_), ud(t_.udim(f_)), xd(f_.domain.dim), polar(polar_path(f_, t_)),
+          f_is_pdf(polar ? polar_pdf_equal_to_f(f_, t_) : -1) {
         points.kind = t_.points;
         points.n = n;
         points.key = key;
@@ -153,16 +170,17 @@ void add_power(const double *p, double beta, double *acc, size_t m) {
 enum class Stage { Sampled, Screened, Weighted, Contributions };
 
 // The sums of MIS technique a's block: s.w = sum_j p_j^beta at its points (p_a is s.p, the
-// others' pdfs from other_pdf(sampler j, out)) and, unless beta = 1, s.q = p_a^(beta - 1), so
-// that w_a f / p_a = p_a^(beta - 1) f / sum_j p_j^beta (the balance heuristic's p_a^0 = 1 is
-// left out: 1 * f is f, the same bits, a pass fewer).
+// others' pdfs from other_pdf(sampler j, out), sampler `into_f`'s into s.f: f is that pdf) and,
+// unless beta = 1, s.q = p_a^(beta - 1), so that w_a f / p_a = p_a^(beta - 1) f / sum_j p_j^beta
+// (the balance heuristic's p_a^0 = 1 is left out: 1 * f is f, the same bits, a pass fewer).
 template <class OtherPdf>
-void mis_weights(const Technique &t, size_t a, Scratch &s, size_t m, OtherPdf other_pdf) {
+void mis_weights(const Technique &t, size_t a, Scratch &s, size_t m, OtherPdf other_pdf, int into_f = -1) {
     const double beta = t.mis_power;
     std::fill(s.w.begin(), s.w.begin() + m, 0.0);
     for (size_t b = 0; b < t.mis.size(); ++b) {
-        if (b != a) other_pdf(*t.mis[b], s.q.data());
-        add_power(b == a ? s.p.data() : s.q.data(), beta, s.w.data(), m);
+        double *q = int(b) == into_f ? s.f.data() : s.q.data();
+        if (b != a) other_pdf(*t.mis[b], q);
+        add_power(b == a ? s.p.data() : q, beta, s.w.data(), m);
     }
     if (beta != 1) {
         std::fill(s.q.begin(), s.q.begin() + m, 0.0);
@@ -173,14 +191,14 @@ void mis_weights(const Technique &t, size_t a, Scratch &s, size_t m, OtherPdf ot
 // y += w_a f / p_a for one MIS technique a: f / w (balance heuristic, w = sum_j p_j), else
 // q f / w (q = p_a^(beta - 1), w = sum_j p_j^beta); 0 where f is 0.  In explicit vector lanes
 // with a select (GCC kept the scalar loop, branching on f).
-void add_mis_terms(bool balance, Scratch &s, size_t m) {
+void add_mis_terms(bool balance, const double *f, Scratch &s, size_t m) {
     if (balance)
-        simd::update(s.f.data(), s.w.data(), s.y.data(), m, [](auto fv, auto w, auto y) {
+        simd::update(f, s.w.data(), s.y.data(), m, [](auto fv, auto w, auto y) {
             using V = decltype(fv);
             return y + (fv == V{} ? V{} : fv / w);
         });
     else
-        simd::map4(s.q.data(), s.f.data(), s.w.data(), s.y.data(), m, [](auto q, auto fv, auto w, auto y) {
+        simd::map4(s.q.data(), f, s.w.data(), s.y.data(), m, [](auto q, auto fv, auto w, auto y) {
             using V = decltype(q);
             return y + (fv == V{} ? V{} : q * fv / w);
         });
@@ -195,23 +213,32 @@ bool nothing_to_report(const Integrand &f, const double *y, size_t m) {
 
 // Importance sampling on the polar path (Kernel::polar): z and the pdf from u0
 // (Sampler::sample_polar: the general path's w2 and pdf, the same bits), f from z
-// (Integrand::eval_polar), y = f / p; up to the stage `last`.  False for a block with
-// something to report (a point or pdf the screening fails, a contribution not finite or
-// negative): the caller redoes it on the general path from the same uniforms, whose examples
-// name whole points.
-bool polar_importance(const Integrand &f, const Sampler &smp, size_t m, Scratch &s, Stage last) {
+// (Integrand::eval_polar; the pdf itself where f is the sampler's pdf: Kernel::f_is_pdf),
+// y = f / p; up to the stage `last`.  False for a block with something to report (a point or
+// pdf the screening fails, a contribution not finite or negative): the caller redoes it on
+// the general path from the same uniforms, whose examples name whole points.
+bool polar_importance(const Kernel &k, size_t m, Scratch &s, Stage last) {
+    const Sampler &smp = *k.t.sampler;
     if (smp.sample_polar(s.u.data(), smp.udim, s.q.data(), s.p.data(), m) != 0) return false;
     if (last < Stage::Contributions) return true;
-    f.eval_polar(s.q.data(), s.f.data(), m);
-    for (size_t i = 0; i < m; ++i) s.y[i] = s.f[i] / s.p[i];
-    return nothing_to_report(f, s.y.data(), m);
+    const double *fv = s.p.data();
+    if (k.f_is_pdf != 0) {
+        k.f.eval_polar(s.q.data(), s.f.data(), m);
+        fv = s.f.data();
+    }
+    for (size_t i = 0; i < m; ++i) s.y[i] = fv[i] / s.p[i];
+    return nothing_to_report(k.f, s.y.data(), m);
 }
 
 // MIS on the polar path (Kernel::polar), as the general path below computes it (the same
 // order of operations, the same bits) with directions' z alone: each technique's z and pdf
-// from its u0 (Sampler::sample_polar), the others' pdfs at z (Sampler::pdf_polar), f at z.
-// False for a block with something to report, as polar_importance.
-bool polar_mis(const Integrand &f, const Technique &t, int ud, size_t m, Scratch &s, Stage last) {
+// from its u0 (Sampler::sample_polar), the others' pdfs at z (Sampler::pdf_polar), f at z
+// (the pdf of sampler Kernel::f_is_pdf where f is one, computed once).  False for a block
+// with something to report, as polar_importance.
+bool polar_mis(const Kernel &k, size_t m, Scratch &s, Stage last) {
+    const Integrand &f = k.f;
+    const Technique &t = k.t;
+    const int ud = k.ud;
     double *z = s.x.data();
     std::fill(s.y.begin(), s.y.begin() + m, 0.0);
     int col = 0;
@@ -220,10 +247,10 @@ bool polar_mis(const Integrand &f, const Technique &t, int ud, size_t m, Scratch
         if (sa.sample_polar(s.u.data() + col, size_t(ud), z, s.p.data(), m) != 0) return false;
         col += sa.udim;
         if (last <= Stage::Screened) continue;
-        mis_weights(t, a, s, m, [&](const Sampler &sb, double *q) { sb.pdf_polar(z, q, m); });
+        mis_weights(t, a, s, m, [&](const Sampler &sb, double *q) { sb.pdf_polar(z, q, m); }, k.f_is_pdf);
         if (last == Stage::Weighted) continue;
-        f.eval_polar(z, s.f.data(), m);
-        add_mis_terms(t.mis_power == 1, s, m);
+        if (k.f_is_pdf < 0) f.eval_polar(z, s.f.data(), m);   // else s.f holds it (mis_weights), or s.p
+        add_mis_terms(t.mis_power == 1, k.f_is_pdf == int(a) ? s.p.data() : s.f.data(), s, m);
     }
     return last < Stage::Contributions || nothing_to_report(f, s.y.data(), m);
 }
@@ -270,7 +297,7 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
             smp.draw(stream, s.x.data(), s.p.data(), m, first, diag);
             if (last == Stage::Sampled) return 0;
             dropped = check_samples(smp.domain, s.x.data(), s.p.data(), m, first, diag, s.drop.data());
-        } else if (k.polar && polar_importance(f, smp, m, s, last)) {
+        } else if (k.polar && polar_importance(k, m, s, last)) {
             if (last < Stage::Contributions) return 0;
             break;
         } else if (last == Stage::Sampled) {  // the profile's prefix: the points alone, unchecked
@@ -355,7 +382,7 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
     }
     case TechniqueKind::Mis: {
         // One sample from each technique i; w_i = p_i^beta / sum_j p_j^beta at X_i.
-        if (k.polar && polar_mis(f, t, ud, m, s, last)) {
+        if (k.polar && polar_mis(k, m, s, last)) {
             if (last < Stage::Contributions) return 0;
             break;
         }
@@ -378,7 +405,7 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
             mis_weights(t, a, s, m, [&](const Sampler &sb, double *q) { sb.pdf(xi_pts, q, m); });
             if (last == Stage::Weighted) continue;
             f.eval(xi_pts, s.f.data(), m);
-            add_mis_terms(t.mis_power == 1, s, m);
+            add_mis_terms(t.mis_power == 1, s.f.data(), s, m);
             if (bad)
                 for (size_t i = 0; i < m; ++i)
                     if (s.sub_drop[i] && !s.drop[i]) { s.drop[i] = 1; ++dropped; }

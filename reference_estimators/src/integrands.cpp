@@ -215,6 +215,7 @@ class GgxLobe final : public Integrand {
         s << "GGX D(w) cos(theta), alpha = " << alpha << ": a sharp lobe that integrates to 1";
         description = s.str();
         polar = true;
+        polar_function = ggx_pdf_name(alpha);
     }
     void eval(const double *w, double *f, size_t n) const override {
         // in vector lanes: the scalar loop did not vectorise (stride 3)

@@ -28,6 +28,9 @@ class Integrand {
     // Others throw std::logic_error.
     bool polar = false;
     virtual void eval_polar(const double *z, double *f, size_t n) const;
+    // The function of z that eval_polar computes, by name (empty: none named), for the polar
+    // path to merge it with a sampler's density of the same name (Sampler::polar_function).
+    std::string polar_function;
 };
 using IntegrandPtr = std::shared_ptr<const Integrand>;
 

@@ -387,7 +387,13 @@ class UniformCone final : public Directional<UniformCone, false> {
 
 class Ggx final : public Directional<Ggx, true> {
   public:
-    explicit Ggx(double alpha) : a_(alpha) { name = "ggx"; params = {{"alpha", alpha}}; domain = Domain::hemisphere(); udim = 2; }
+    explicit Ggx(double alpha) : a_(alpha) {
+        name = "ggx";
+        params = {{"alpha", alpha}};
+        domain = Domain::hemisphere();
+        udim = 2;
+        polar_function = ggx_pdf_name(alpha);
+    }
     template <class V>
     void draw(V u0, V u1, V &w0, V &w1, V &w2) const { sample_ggx(u0, u1, a_, w0, w1, w2); }
     template <class V>

@@ -54,6 +54,12 @@ class Sampler {
     bool polar = false;
     virtual size_t sample_polar(const double *u, size_t stride, double *z, double *pdf, size_t n) const;
     virtual void pdf_polar(const double *z, double *pdf, size_t n) const;
+    // The function of z that the pdf is on the sampler's domain, by name (empty: none named).
+    // An integrand whose polar_function has the same name computes the same bits at every z
+    // of that domain (both call one function with the same parameters, e.g. ggx_pdf_name):
+    // the polar path then reads f off the pdf it already has, as drjit merges the same
+    // expression computed twice (a division a point fewer on GGX).
+    std::string polar_function;
     std::string describe() const;
 };
 

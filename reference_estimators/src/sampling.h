@@ -4,7 +4,9 @@
 // The hot ones use re::fm so that loops over them vectorise.
 #pragma once
 #include <cmath>
+#include <cstdio>
 #include <limits>
+#include <string>
 
 #include "fastmath.h"
 
@@ -163,6 +165,12 @@ RE_INLINE void sample_ggx(D u0, D u1, double alpha, D &w0, D &w1, D &w2) {
 }
 template <class D>
 RE_INLINE D ggx_pdf(D z, double alpha) { return ggx_d(z, alpha) * z; }
+// ggx_pdf's name with its parameter (Sampler::polar_function), alpha in hexadecimal: every bit
+inline std::string ggx_pdf_name(double alpha) {
+    char s[48];
+    std::snprintf(s, sizeof s, "ggx_pdf(%a)", alpha);
+    return s;
+}
 
 // Inversions of the direction samplers: u from w (NaN outside the support).
 inline double azimuth_fraction(const double w[3]) {

@@ -1,6 +1,7 @@
 """The estimators' polar path: importance sampling and MIS of an integrand that reads a
-direction's cos(theta) alone, by samplers whose pdf does too, draw no azimuth.  It must give
-the general path's bits, and hand every block with something to report back to it."""
+direction's cos(theta) alone, by samplers whose pdf does too, draw no azimuth, and where f is
+one of the samplers' pdfs (the same polar_function) compute it once.  It must give the
+general path's bits, and hand every block with something to report back to it."""
 from __future__ import annotations
 
 import numpy as np
@@ -21,13 +22,27 @@ CASES = [
     ("cosine_power", "importance:cosine_hemisphere/sobol", [("cosine_hemisphere", {})]),
     ("cosine_power", "uniform", [("uniform_hemisphere", {})]),
     ("spherical_cap", "uniform", [("uniform_sphere", {})]),
+    # f is the pdf of the technique's first sampler (so the other's pdf at the first's points is
+    # not f), and f is no sampler's pdf (GGX of another roughness)
+    ("ggx_lobe", "mis_balance:ggx+cosine_hemisphere", [("ggx", {"alpha": 0.01}), ("cosine_hemisphere", {})]),
+    ("ggx_lobe", "mis_power:ggx(0.02)+cosine_hemisphere", [("ggx", {"alpha": 0.02}), ("cosine_hemisphere", {})]),
+    ("ggx_lobe", "importance:ggx(0.02)", [("ggx", {"alpha": 0.02})]),
 ]
 
 
-def general_contributions(f: str, technique: str, samplers: list, power: float, **keys) -> np.ndarray:
+def technique(f: str, name: str, samplers: list):
+    """The catalogue's technique of that name, else importance sampling or MIS (the name says
+    which heuristic) by the samplers."""
+    if name in rest.techniques(f):
+        return name
+    ss = [rest.sampler(n, **p) for n, p in samplers]
+    return rest.importance(ss[0]) if len(ss) == 1 else rest.mis(ss, "power" if "power" in name else "balance")
+
+
+def general_contributions(f: str, name: str, samplers: list, power: float, **keys) -> np.ndarray:
     """The contributions computed as the general path does, from whole points: the samplers'
     sample() and pdf() and the integrand's eval() on the uniforms the estimate consumes."""
-    kind = "sobol" if technique.endswith("/sobol") else "random"
+    kind = "sobol" if name.endswith("/sobol") else "random"
     u = rest.points(N, 2 * len(samplers), kind, **keys)
     fi = rest.integrand(f)
     ss = [rest.sampler(name, **params) for name, params in samplers]
@@ -46,13 +61,14 @@ def general_contributions(f: str, technique: str, samplers: list, power: float, 
     return y
 
 
-@pytest.mark.parametrize("f, technique, samplers", CASES, ids=[f"{c[0]}-{c[1]}" for c in CASES])
-def test_polar_path_gives_the_general_paths_bits(f, technique, samplers):
+@pytest.mark.parametrize("f, name, samplers", CASES, ids=[f"{c[0]}-{c[1]}" for c in CASES])
+def test_polar_path_gives_the_general_paths_bits(f, name, samplers):
     keys = dict(seed=7, case_id=3, replica=1)
-    power = 2.0 if technique.startswith("mis_power") else 1.0
-    y = rest.contributions(f, technique, N, threads=2, **keys)
-    np.testing.assert_array_equal(y, general_contributions(f, technique, samplers, power, **keys))
-    e = rest.integrate(f, technique, N, threads=2, **keys)
+    power = 2.0 if name.startswith("mis_power") else 1.0
+    t = technique(f, name, samplers)
+    y = rest.contributions(f, t, N, threads=2, **keys)
+    np.testing.assert_array_equal(y, general_contributions(f, name, samplers, power, **keys))
+    e = rest.integrate(f, t, N, threads=2, **keys)
     assert e.n == N and e.ok
     assert e.mean == rest.accumulate(y).mean
 
@@ -96,3 +112,18 @@ def test_which_integrands_and_samplers_take_the_polar_path():
     assert polar_samplers == directions
     assert not any(rest.sampler(t, table=np.ones((2, 2)) if t.endswith("2d") else np.ones(2)).polar
                    for t in tables)
+
+
+def test_which_pdfs_are_the_integrand():
+    """GGX's pdf is the GGX lobe of the same roughness (polar_function names it, every bit of
+    alpha included); no other sampler's pdf is a catalogue integrand, and a sampler's pdf of
+    another roughness is not the lobe."""
+    lobe = rest.integrand("ggx_lobe")
+    assert lobe.polar_function == rest.sampler("ggx", alpha=0.01).polar_function != ""
+    assert rest.sampler("ggx", alpha=np.nextafter(0.01, 1)).polar_function != lobe.polar_function
+    names = {s["name"] for s in rest.samplers()} - {"piecewise_constant_1d", "piecewise_constant_2d"}
+    assert {n for n in names if rest.sampler(n).polar_function} == {"ggx"}
+    assert {f.name for f in rest.catalogue() if f.polar_function} == {"ggx_lobe"}
+    z = np.concatenate([np.linspace(-1, 1, 20001), [0.0, -0.0, 1.0, 1 + 1e-15, 5e-324]])
+    w = np.column_stack([np.sqrt(np.maximum(0, 1 - z * z)), np.zeros_like(z), z])
+    np.testing.assert_array_equal(lobe.eval(w), rest.sampler("ggx", alpha=0.01).pdf(w))
