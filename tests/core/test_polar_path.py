@@ -25,7 +25,8 @@ CASES = [
     # f is the pdf of the technique's first sampler (so the other's pdf at the first's points is
     # not f), and f is no sampler's pdf (GGX of another roughness)
     ("ggx_lobe", "mis_balance:ggx+cosine_hemisphere", [("ggx", {"alpha": 0.01}), ("cosine_hemisphere", {})]),
-    ("ggx_lobe", "mis_power:ggx(0.02)+cosine_hemisphere", [("ggx", {"alpha": 0.02}), ("cosine_hemisphere", {})]),
+    ("ggx_lobe", "mis_power:ggx(0.02)+cosine_hemisphere",
+     [("ggx", {"alpha": 0.02}), ("cosine_hemisphere", {})]),
     ("ggx_lobe", "importance:ggx(0.02)", [("ggx", {"alpha": 0.02})]),
 ]
 
