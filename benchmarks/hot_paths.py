@@ -33,7 +33,10 @@ integrands on the same uniforms before anything is timed.
          the same points as the core, bit for bit.
 On ggx_lobe f and every pdf read a direction's cos theta alone: all three draw z alone (the
 core's polar path, Integrand.polar and Sampler.polar; drjit's tracer would drop the rest
-anyway), the same bits as the whole directions' z.
+anyway), the same bits as the whole directions' z.  The core's polar path also generates only
+the uniforms it reads (each sampler's u0, the even-numbered ones of its stream) and computes
+f once where it is a sampler's pdf (the GGX lobe and GGX's pdf: Sampler.polar_function), as
+drjit's tracer leaves out what nothing reads and merges equal expressions.
 Not in the peers: the core's screening of points, pdfs and contributions and its higher
 moments (these samplers never produce a point the core would exclude).
 
@@ -606,8 +609,9 @@ def print_stages(rest: Any, n: int, repeat: int, drjit: DrjitPeer | None, table:
     against its whole kernel."""
     print(f"\nstage profile, ns per sample and thread (best of {repeat}; a stage = the difference of two "
           "prefixes of the pipeline, each timed alone):")
-    print("  core: points = the uniforms (PCG32 or Sobol'); sampling = the samplers' points and pdfs; "
-          "screening = the points'\n  domain and pdf checks; MIS weights = every technique's pdf at every "
+    print("  core: points = the uniforms (PCG32 or Sobol'; the polar path's u0s alone); sampling = the "
+          "samplers' points and pdfs;\n  screening = the points' "
+          "domain and pdf checks; MIS weights = every technique's pdf at every "
           "point; integrand = f and the\n  estimator's arithmetic; accumulation = the contributions' "
           "screening, compensated sum and M2..M4")
     print("  drjit: uniforms = PCG32.next_float64 (or the Sobol' points) summed; rest = its whole kernel "

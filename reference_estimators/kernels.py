@@ -14,7 +14,7 @@ import numpy as np
 from . import _core
 from .api import _count, _seed
 
-__all__ = ["pcg32_outputs", "uniforms", "fast_exp", "fast_log", "fast_sincos_2pi"]
+__all__ = ["pcg32_outputs", "uniforms", "uniforms_in_pieces", "fast_exp", "fast_log", "fast_sincos_2pi"]
 
 
 def pcg32_outputs(n: int, *, seed: int = 0, case_id: int = 0, replica: int = 0, chunk: int = 0) -> np.ndarray:
@@ -29,6 +29,15 @@ def uniforms(n: int, *, seed: int = 0, case_id: int = 0, replica: int = 0, chunk
     with b the top 52 bits of PCG32 outputs 2k (high word) and 2k+1 (low word), so every
     value lies strictly inside (0, 1)."""
     return _core.uniforms(_count(n, "n"), *_key(seed, case_id, replica, chunk))
+
+
+def uniforms_in_pieces(counts: list[int], evens: list[bool], *, seed: int = 0) -> np.ndarray:
+    """The stream (chunk 0 of ``seed``) read as the estimators read it: consecutive pieces of
+    counts[i] uniforms, all of them, or (evens[i], counts[i] even) the even-numbered ones
+    alone, the u0 of (u0, u1) pairs that the polar path reads.  Concatenated, they must be
+    :func:`uniforms`' values at the same positions, whatever the pieces."""
+    sizes = [_count(c, "count") for c in counts]
+    return _core.uniforms_in_pieces(sizes, [bool(e) for e in evens], _seed(seed))
 
 
 def fast_exp(x: Any) -> np.ndarray:

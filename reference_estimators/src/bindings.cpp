@@ -344,6 +344,24 @@ NB_MODULE(_core, m) {
         s.fill(u, size_t(n));
         return r;
     }, "n"_a, "seed"_a = 0, "case_id"_a = 0, "replica"_a = 0, "chunk"_a = 0);
+    m.def("uniforms_in_pieces", [](const std::vector<int64_t> &counts, const std::vector<bool> &evens, uint64_t seed) {
+        if (counts.size() != evens.size()) throw std::invalid_argument("counts and evens differ in length");
+        size_t total = 0;
+        for (size_t i = 0; i < counts.size(); ++i) {
+            check_n(counts[i]);
+            if (evens[i] && counts[i] % 2) throw std::invalid_argument("a piece of even-numbered uniforms needs an even count");
+            total += evens[i] ? size_t(counts[i]) / 2 : size_t(counts[i]);
+        }
+        double *u;
+        OutArray r = new_array(total, 0, &u);
+        UniformStream s({seed, 0, 0, 0});
+        for (size_t i = 0; i < counts.size(); ++i) {
+            if (evens[i]) s.fill_even(u, size_t(counts[i]));
+            else s.fill(u, size_t(counts[i]));
+            u += evens[i] ? size_t(counts[i]) / 2 : size_t(counts[i]);
+        }
+        return r;
+    }, "counts"_a, "evens"_a, "seed"_a = 0);
     m.def("pcg32_outputs", [](int64_t n, uint64_t seed, uint64_t case_id, uint64_t replica, uint64_t chunk) {
         check_n(n);
         Pcg32 g({seed, case_id, replica, chunk});

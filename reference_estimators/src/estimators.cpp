@@ -1,5 +1,6 @@
 #include "estimators.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -90,15 +91,34 @@ struct Kernel {
     int ud, xd;
     bool polar;     // polar_path(f, t)
     int f_is_pdf;   // on the polar path, polar_pdf_equal_to_f(f, t), else -1
+    // on the polar path from a random stream, where every sampler reads u0 of its (u0, u1)
+    // alone: the even-numbered uniforms are what it reads (draw_uniforms)
+    bool evens;
     Kernel(const Integrand &f_, const Technique &t_, uint64_t n, const StreamKey &key)
         : f(f_), t(t_), ud(t_.udim(f_)), xd(f_.domain.dim), polar(polar_path(f_, t_)),
-          f_is_pdf(polar ? polar_pdf_equal_to_f(f_, t_) : -1) {
+          f_is_pdf(polar ? polar_pdf_equal_to_f(f_, t_) : -1),
+          evens(polar && t_.points == PointSetKind::Random && ud == 2 * int(std::max<size_t>(t_.mis.size(), 1)) &&
+                std::all_of(t_.mis.begin(), t_.mis.end(), [](const SamplerPtr &s) { return s->udim == 2; }) &&
+                (t_.kind == TechniqueKind::Mis || t_.sampler->udim == 2)) {
         points.kind = t_.points;
         points.n = n;
         points.key = key;
     }
     Scratch scratch() const { return Scratch(ud, xd, t.evaluations()); }
 };
+
+// The block's uniforms u[m * ud] (fill_points), or on a polar path reading u0 alone
+// (Kernel::evens) with the stream row-aligned, the even-numbered ones alone u[m * ud / 2]:
+// each sampler's u0, sample i's of sampler a at u[i * ud / 2 + a] (fill_even: half the
+// generator's work, which drjit's tracer leaves out too).  Returns whether the evens alone.
+bool draw_uniforms(const Kernel &k, UniformStream &stream, uint64_t first, size_t m, double *u) {
+    if (k.evens && stream.row_aligned()) {   // (elsewhere the shortcut saves nothing)
+        stream.fill_even(u, m * size_t(k.ud));
+        return true;
+    }
+    fill_points(k.points, stream, first, m, k.ud, u);
+    return false;
+}
 
 // Copies columns [from, from + count) of the m x ud matrix u into out (m x count).
 // (the common widths by fixed-size copies: the generic double loop, its trip counts unknown,
@@ -212,14 +232,15 @@ bool nothing_to_report(const Integrand &f, const double *y, size_t m) {
 }
 
 // Importance sampling on the polar path (Kernel::polar): z and the pdf from u0
-// (Sampler::sample_polar: the general path's w2 and pdf, the same bits), f from z
+// (Sampler::sample_polar: the general path's w2 and pdf, the same bits; `evens`: s.u holds
+// the u0s alone, draw_uniforms), f from z
 // (Integrand::eval_polar; the pdf itself where f is the sampler's pdf: Kernel::f_is_pdf),
 // y = f / p; up to the stage `last`.  False for a block with something to report (a point or
 // pdf the screening fails, a contribution not finite or negative): the caller redoes it on
 // the general path from the same uniforms, whose examples name whole points.
-bool polar_importance(const Kernel &k, size_t m, Scratch &s, Stage last) {
+bool polar_importance(const Kernel &k, bool evens, size_t m, Scratch &s, Stage last) {
     const Sampler &smp = *k.t.sampler;
-    if (smp.sample_polar(s.u.data(), smp.udim, s.q.data(), s.p.data(), m) != 0) return false;
+    if (smp.sample_polar(s.u.data(), evens ? 1 : smp.udim, s.q.data(), s.p.data(), m) != 0) return false;
     if (last < Stage::Contributions) return true;
     const double *fv = s.p.data();
     if (k.f_is_pdf != 0) {
@@ -232,10 +253,11 @@ bool polar_importance(const Kernel &k, size_t m, Scratch &s, Stage last) {
 
 // MIS on the polar path (Kernel::polar), as the general path below computes it (the same
 // order of operations, the same bits) with directions' z alone: each technique's z and pdf
-// from its u0 (Sampler::sample_polar), the others' pdfs at z (Sampler::pdf_polar), f at z
-// (the pdf of sampler Kernel::f_is_pdf where f is one, computed once).  False for a block
-// with something to report, as polar_importance.
-bool polar_mis(const Kernel &k, size_t m, Scratch &s, Stage last) {
+// from its u0 (Sampler::sample_polar; `evens`: s.u holds the u0s alone, draw_uniforms), the
+// others' pdfs at z (Sampler::pdf_polar), f at z (the pdf of sampler Kernel::f_is_pdf where
+// f is one, computed once).  False for a block with something to report, as
+// polar_importance.
+bool polar_mis(const Kernel &k, bool evens, size_t m, Scratch &s, Stage last) {
     const Integrand &f = k.f;
     const Technique &t = k.t;
     const int ud = k.ud;
@@ -244,7 +266,8 @@ bool polar_mis(const Kernel &k, size_t m, Scratch &s, Stage last) {
     int col = 0;
     for (size_t a = 0; a < t.mis.size(); ++a) {
         const Sampler &sa = *t.mis[a];
-        if (sa.sample_polar(s.u.data() + col, size_t(ud), z, s.p.data(), m) != 0) return false;
+        if (sa.sample_polar(s.u.data() + (evens ? col / 2 : col), size_t(evens ? ud / 2 : ud), z, s.p.data(), m) != 0)
+            return false;
         col += sa.udim;
         if (last <= Stage::Screened) continue;
         mis_weights(t, a, s, m, [&](const Sampler &sb, double *q) { sb.pdf_polar(z, q, m); }, k.f_is_pdf);
@@ -266,7 +289,15 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
     const Sampler &smp = *t.sampler;
     const int xd = k.xd, ud = k.ud;
     const bool rejection = smp.method == SamplingMethod::Rejection;
-    if (!rejection) fill_points(k.points, stream, first, m, ud, s.u.data());
+    // where the polar path hands the block back, the general path needs all of its uniforms
+    std::optional<LaneGenerator> replay;
+    if (k.evens && stream.row_aligned()) replay = stream.position();
+    const bool evens = !rejection && draw_uniforms(k, stream, first, m, s.u.data());
+    auto all_uniforms = [&] {
+        if (!evens) return;
+        stream.rewind(*replay);
+        fill_points(k.points, stream, first, m, ud, s.u.data());
+    };
     s.points = s.x.data();
     size_t dropped = 0;
     diag.candidates += m;
@@ -297,13 +328,15 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
             smp.draw(stream, s.x.data(), s.p.data(), m, first, diag);
             if (last == Stage::Sampled) return 0;
             dropped = check_samples(smp.domain, s.x.data(), s.p.data(), m, first, diag, s.drop.data());
-        } else if (k.polar && polar_importance(k, m, s, last)) {
+        } else if (k.polar && polar_importance(k, evens, m, s, last)) {
             if (last < Stage::Contributions) return 0;
             break;
-        } else if (last == Stage::Sampled) {  // the profile's prefix: the points alone, unchecked
-            smp.sample(s.u.data(), s.x.data(), s.p.data(), m);
-            return 0;
         } else {
+            all_uniforms();
+            if (last == Stage::Sampled) {  // the profile's prefix: the points alone, unchecked
+                smp.sample(s.u.data(), s.x.data(), s.p.data(), m);
+                return 0;
+            }
             dropped = sample_and_check(smp, s.u.data(), s.x.data(), s.p.data(), m, first, diag, s.drop.data());
         }
         if (last < Stage::Contributions) return dropped;
@@ -382,10 +415,11 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
     }
     case TechniqueKind::Mis: {
         // One sample from each technique i; w_i = p_i^beta / sum_j p_j^beta at X_i.
-        if (k.polar && polar_mis(k, m, s, last)) {
+        if (k.polar && polar_mis(k, evens, m, s, last)) {
             if (last < Stage::Contributions) return 0;
             break;
         }
+        all_uniforms();
         std::fill(s.y.begin(), s.y.begin() + m, 0.0);
         std::fill(s.drop.begin(), s.drop.begin() + m, 0);
         int col = 0;
@@ -570,9 +604,9 @@ StageTimes profile_stages(const Integrand &f, const Technique &t, uint64_t n, co
             if (last) {
                 block_contributions(k, stream, m, first, s, diag, *last);
                 sink[c] += *last == Stage::Contributions ? s.y[m - 1] : s.p[m - 1];
-            } else if (!rejection) {
-                fill_points(k.points, stream, first, m, k.ud, s.u.data());
-                sink[c] += s.u[m * size_t(k.ud) - 1];
+            } else if (!rejection) {  // the uniforms the block reads
+                const bool evens = draw_uniforms(k, stream, first, m, s.u.data());
+                sink[c] += s.u[m * size_t(k.ud) / (evens ? 2 : 1) - 1];
             }
         });
         return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

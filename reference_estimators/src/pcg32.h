@@ -106,17 +106,34 @@ class LaneGenerator {
         }
     }
 
-    // Fills out[0..rows*L) with the next rows*L uniforms of the stream.  Written with
-    // GCC/Clang vector extensions: compilers do not vectorise PCG's output on their own.
-    // The 32-bit rotate runs on the 64-bit lanes viewed as pairs of 32-bit words (the low
-    // word of each lane is PCG's output, the high word is ignored), and one shuffle pairs the
-    // two outputs of a uniform into a 64-bit lane: no packing to 32-bit lanes and back.
-    void fill(double *out, size_t rows) {
+    // Fills out[0..rows*L) with the next rows*L uniforms of the stream.
+    void fill(double *out, size_t rows) { fill_lanes<false>(out, rows); }
+    // Fills out[0..rows*L/2) with the even-numbered ones of the next rows*L uniforms (the
+    // stream moves on by rows*L): the u0 of every sample that reads u0 of (u0, u1) alone (the
+    // estimators' polar path), at half the cost.  The even lanes alone make them; the odd
+    // lanes' states jump over the rows at once.
+    void fill_even(double *out, size_t rows) {
+        fill_lanes<true>(out, rows);
+        const LcgJump j = lcg_jump(2 * kLanes * uint64_t(rows), inc_);
+        for (int l = 1; l < kLanes; l += 2) state_[l] = j.mult * state_[l] + j.plus;
+    }
+
+  private:
+    // fill, or with `even` the even lanes' part of it (their states advanced, the odd ones'
+    // left).  Written with GCC/Clang vector extensions: compilers do not vectorise PCG's
+    // output on their own.  The 32-bit rotate runs on the 64-bit lanes viewed as pairs of
+    // 32-bit words (the low word of each lane is PCG's output, the high word is ignored), and
+    // one shuffle pairs the two outputs of a uniform into a 64-bit lane: no packing to 32-bit
+    // lanes and back.
+    template <bool even>
+    void fill_lanes(double *out, size_t rows) {
         typedef uint64_t u64v __attribute__((vector_size(8 * kVec)));
         typedef uint32_t u32v __attribute__((vector_size(8 * kVec)));
         typedef double f64v __attribute__((vector_size(8 * kVec)));
-        u64v s[kVecs];
-        std::memcpy(s, state_, sizeof s);
+        constexpr int vecs = even ? kVecs / 2 : kVecs, stride = even ? 2 : 1;
+        u64v s[vecs];
+        for (int v = 0; v < vecs; ++v)
+            for (int l = 0; l < kVec; ++l) s[v][l] = state_[(v * kVec + l) * stride];
         const u64v zero = {}, mult = zero + kPcgMult, inc = zero + inc_;
         const u64v jm = zero + jump_.mult, jp = zero + jump_.plus;
         const u64v exponent = zero + 0x4330000000000000ULL;
@@ -132,7 +149,7 @@ class LaneGenerator {
 #endif
         };
         for (size_t r = 0; r < rows; ++r) {
-            for (int v = 0; v < kVecs; ++v) {
+            for (int v = 0; v < vecs; ++v) {
                 u64v s1 = s[v] * mult + inc;
                 // Lane i = (output(s) << 32) | output(s1): low word from s1, high from s.
 #if defined(__AVX512F__)
@@ -166,13 +183,13 @@ class LaneGenerator {
 #else
                 d = (d - offset) * 0x1p-52;
 #endif
-                std::memcpy(out + r * kLanes + v * kVec, &d, sizeof d);
+                std::memcpy(out + r * (kLanes / stride) + v * kVec, &d, sizeof d);
             }
         }
-        std::memcpy(state_, s, sizeof s);
+        for (int v = 0; v < vecs; ++v)
+            for (int l = 0; l < kVec; ++l) state_[(v * kVec + l) * stride] = s[v][l];
     }
 
-  private:
     uint64_t state_[kLanes];
     uint64_t inc_;
     LcgJump jump_;
@@ -197,6 +214,29 @@ class UniformStream {
         gen_.fill(out + i, rows);
         i += rows * LaneGenerator::kLanes;
         while (i < count) out[i++] = next();
+    }
+    // Whether the stream stands at the start of a generator row (its buffer used up): where
+    // fill_even and rewind apply.
+    bool row_aligned() const { return pos_ == kBuf; }
+    // The even-numbered ones of the next `count` uniforms (count even) into out[0..count/2),
+    // the same bits as fill's (the lanes' shortcut where the stream is row-aligned).
+    void fill_even(double *out, size_t count) {
+        size_t i = 0;
+        if (row_aligned()) {
+            const size_t rows = count / LaneGenerator::kLanes;
+            gen_.fill_even(out, rows);
+            i = rows * LaneGenerator::kLanes;
+        }
+        for (; i < count; i += 2) {
+            out[i / 2] = next();
+            next();
+        }
+    }
+    // Where the stream stands (row-aligned), and back there: the same uniforms again.
+    LaneGenerator position() const { return gen_; }
+    void rewind(const LaneGenerator &at) {
+        gen_ = at;
+        pos_ = kBuf;
     }
 
   private:

@@ -61,6 +61,24 @@ def test_lane_generator_reproduces_the_scalar_stream(n):
     np.testing.assert_array_equal(kernels.uniforms(n, **stream(key)), expected)
 
 
+@pytest.mark.parametrize("pieces", [
+    [(4096, True)],                                           # row-aligned: the lanes' shortcut alone
+    [(4096, True), (4096, False), (64, True), (8194, True)],  # shortcut, whole rows, a pair left over
+    [(34, True), (100, False), (62, True), (4096, True)],     # a piece that ends mid-row, then unaligned
+    [(2, True), (30, True), (64, True), (6, False), (4098, True), (32, False)],
+])
+def test_even_uniforms_are_the_streams_own(pieces):
+    """The polar path's even-numbered uniforms (LaneGenerator::fill_even) are the stream's at
+    those positions, and the stream goes on from where a whole fill would leave it: aligned
+    or not, whole rows or a remainder, between whole fills."""
+    counts, evens = zip(*pieces)
+    got = kernels.uniforms_in_pieces(list(counts), list(evens), seed=11)
+    whole = kernels.uniforms(sum(counts), seed=11)
+    at = np.cumsum((0,) + counts)
+    expected = np.concatenate([whole[a:b:2] if e else whole[a:b] for a, b, e in zip(at[:-1], at[1:], evens)])
+    np.testing.assert_array_equal(got, expected)
+
+
 def test_uniforms_lie_strictly_inside_the_unit_interval():
     u = kernels.uniforms(1_000_000, seed=9)
     assert u.min() > 0.0 and u.max() < 1.0
