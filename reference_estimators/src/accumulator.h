@@ -278,9 +278,11 @@ struct Diagnostics {
 // nothing is wrong (a second one where a value is negative); the slow path runs only for blocks with something to report.  y is
 // compacted in place.  x (may be null) holds the points, for the examples; entry i is sample
 // index[i] when `index` is given (a block compacted before), else first_index + i.
+// (known: scan_block(y, count) where the caller has it already)
 inline void screen_and_accumulate(Moments &acc, Diagnostics &diag, double *y, const double *x, int dim,
-                                  size_t count, uint64_t first_index, bool higher, const uint64_t *index = nullptr) {
-    BlockScan scan = scan_block(y, count);
+                                  size_t count, uint64_t first_index, bool higher, const uint64_t *index = nullptr,
+                                  const BlockScan *known = nullptr) {
+    BlockScan scan = known ? *known : scan_block(y, count);
     auto point = [&](size_t i) { return x ? x + i * dim : nullptr; };
     auto sample = [&](size_t i) { return index ? index[i] : first_index + i; };
     const int d = x ? dim : 0;

@@ -43,6 +43,7 @@ struct Scratch {
     std::vector<unsigned char> drop, sub_drop;
     std::vector<size_t> live;
     double *points = nullptr;  // where this block's points are (x, or u on the unit box)
+    std::optional<BlockScan> scan;  // scan_block of the block's y where it was taken (the polar path's)
     // evals: f evaluations per contribution; the point buffer holds at least two blocks
     // (Russian roulette and MIS keep the drawn points after the block's own).
     Scratch(int udim, int xdim, int evals)
@@ -224,11 +225,12 @@ void add_mis_terms(bool balance, const double *f, Scratch &s, size_t m) {
         });
 }
 
-// Whether a block's contributions hold nothing to report: all finite and, unless f may be
+// Whether a block's contributions s.y hold nothing to report: all finite and, unless f may be
 // negative, none below 0 (screen_and_accumulate then notes no example, so needs no points).
-bool nothing_to_report(const Integrand &f, const double *y, size_t m) {
-    const BlockScan scan = scan_block(y, m);
-    return !scan.maybe_nonfinite() && !(f.nonnegative && scan.min < 0);
+// The scan is kept in s.scan for finish_block (a pass over the block fewer).
+bool nothing_to_report(const Integrand &f, Scratch &s, size_t m) {
+    s.scan = scan_block(s.y.data(), m);
+    return !s.scan->maybe_nonfinite() && !(f.nonnegative && s.scan->min < 0);
 }
 
 // Importance sampling on the polar path (Kernel::polar): z and the pdf from u0
@@ -248,7 +250,7 @@ bool polar_importance(const Kernel &k, bool evens, size_t m, Scratch &s, Stage l
         fv = s.f.data();
     }
     for (size_t i = 0; i < m; ++i) s.y[i] = fv[i] / s.p[i];
-    return nothing_to_report(k.f, s.y.data(), m);
+    return nothing_to_report(k.f, s, m);
 }
 
 // MIS on the polar path (Kernel::polar), as the general path below computes it (the same
@@ -275,7 +277,7 @@ bool polar_mis(const Kernel &k, bool evens, size_t m, Scratch &s, Stage last) {
         if (k.f_is_pdf < 0) f.eval_polar(z, s.f.data(), m);   // else s.f holds it (mis_weights), or s.p
         add_mis_terms(t.mis_power == 1, k.f_is_pdf == int(a) ? s.p.data() : s.f.data(), s, m);
     }
-    return last < Stage::Contributions || nothing_to_report(f, s.y.data(), m);
+    return last < Stage::Contributions || nothing_to_report(f, s, m);
 }
 
 // Fills s.y[0..m) with the contributions of samples first..first+m of this chunk; samples
@@ -299,6 +301,7 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
         fill_points(k.points, stream, first, m, ud, s.u.data());
     };
     s.points = s.x.data();
+    s.scan.reset();
     size_t dropped = 0;
     diag.candidates += m;
 
@@ -468,8 +471,10 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
         break;
     }
     }
-    if (t.clamp < std::numeric_limits<double>::infinity())
+    if (t.clamp < std::numeric_limits<double>::infinity()) {
         for (size_t i = 0; i < m; ++i) s.y[i] = std::min(s.y[i], t.clamp);
+        s.scan.reset();
+    }
     return dropped;
 }
 
@@ -515,11 +520,12 @@ Estimate run_chunks(uint64_t n, const RunOptions &opt, ChunkFn chunk_fn) {
 
 // Screens and accumulates one block, first dropping the samples marked in `drop` (already
 // recorded as outside the domain or with a bad pdf); the kept ones remember their sample
-// indices, so later examples in the block still name the right sample.
+// indices, so later examples in the block still name the right sample.  `scan`: y's
+// scan_block where block_contributions took it (Scratch::scan).
 void finish_block(double *y, double *x, int xd, size_t m, size_t dropped, const unsigned char *drop, uint64_t first,
-                  Moments &acc, Diagnostics &diag, bool higher) {
+                  Moments &acc, Diagnostics &diag, bool higher, const std::optional<BlockScan> &scan) {
     if (!dropped) {
-        screen_and_accumulate(acc, diag, y, x, xd, m, first, higher);
+        screen_and_accumulate(acc, diag, y, x, xd, m, first, higher, nullptr, scan ? &*scan : nullptr);
         return;
     }
     std::vector<uint64_t> index;
@@ -562,7 +568,8 @@ Estimate integrate(const Integrand &f, const Technique &t, uint64_t n, const Run
             if (collector) collector->feed(s.y.data(), m, dropped ? s.drop.data() : nullptr);
             if (median)
                 for (size_t i = 0; i < m; ++i) first_chunk.push_back(dropped && s.drop[i] ? std::nan("") : s.y[i]);
-            finish_block(s.y.data(), s.points, k.xd, m, dropped, s.drop.data(), first + b, acc, diag, opt.higher_moments);
+            finish_block(s.y.data(), s.points, k.xd, m, dropped, s.drop.data(), first + b, acc, diag, opt.higher_moments,
+                         s.scan);
         });
         if (collector) chunk_tails[c - c0] = collector->finish();
     });
@@ -673,7 +680,8 @@ Estimate estimate_from_samples(const Integrand &f, const double *x, const double
             size_t dropped = check_samples(sampler_domain, s.x.data(), s.p.data(), m, first + b, diag, s.drop.data());
             f.eval(s.x.data(), s.f.data(), m);
             for (size_t i = 0; i < m; ++i) s.y[i] = s.f[i] / s.p[i];
-            finish_block(s.y.data(), s.x.data(), xd, m, dropped, s.drop.data(), first + b, acc, diag, opt.higher_moments);
+            finish_block(s.y.data(), s.x.data(), xd, m, dropped, s.drop.data(), first + b, acc, diag, opt.higher_moments,
+                         std::nullopt);
         });
     });
 }
