@@ -128,3 +128,16 @@ def test_which_pdfs_are_the_integrand():
     z = np.concatenate([np.linspace(-1, 1, 20001), [0.0, -0.0, 1.0, 1 + 1e-15, 5e-324]])
     w = np.column_stack([np.sqrt(np.maximum(0, 1 - z * z)), np.zeros_like(z), z])
     np.testing.assert_array_equal(lobe.eval(w), rest.sampler("ggx", alpha=0.01).pdf(w))
+
+
+@pytest.mark.parametrize("name", ["importance:cosine_hemisphere", "mis_balance:cosine_hemisphere+ggx"])
+def test_a_clamped_polar_estimate_accumulates_the_clamped_contributions(name):
+    """The polar path hands its scan of each block to the accumulator; a clamp changes the
+    contributions after that scan, and the estimate must be that of the clamped values (the
+    same bits as accumulating them), not of the scanned ones."""
+    t = rest.clamped(rest.technique("ggx_lobe", name), 1.0)
+    y = rest.contributions("ggx_lobe", t, N, seed=9)
+    assert y.max() == 1.0 and (y < 1.0).any()
+    e = rest.integrate("ggx_lobe", t, N, seed=9, threads=2)
+    reference = rest.accumulate(y)
+    assert (e.mean, e.variance) == (reference.mean, reference.variance)
