@@ -225,6 +225,29 @@ void add_mis_terms(bool balance, const double *f, Scratch &s, size_t m) {
         });
 }
 
+// Whether MIS technique t weighs two samplers by the balance or the power heuristic:
+// add_pair_terms then does the work of mis_weights and add_mis_terms in one pass.
+bool mis_pair(const Technique &t) { return t.mis.size() == 2 && (t.mis_power == 1 || t.mis_power == 2); }
+
+// y += w_a f / p_a for technique a of a pair (mis_pair) in one pass, from its pdf pa and the
+// other's q at its points: f / ((0 + p_0) + p_1) (balance), (0 + p_a) f / ((0 + p_0^2) +
+// p_1^2) (power), 0 where f is 0: mis_weights' and add_mis_terms' operations in their order
+// (the same bits), where they took four to six passes over the block.
+void add_pair_terms(double beta, size_t a, const double *f, const double *pa, const double *q, double *y, size_t m) {
+    const double *p0 = a == 0 ? pa : q, *p1 = a == 0 ? q : pa;
+    if (beta == 1)
+        simd::map4(f, p0, p1, y, m, [](auto fx, auto q0, auto q1, auto acc) {
+            using V = decltype(fx);
+            return acc + (fx == V{} ? V{} : fx / ((V{} + q0) + q1));
+        });
+    else
+        simd::map4(f, p0, p1, y, m, [a](auto fx, auto q0, auto q1, auto acc) {
+            using V = decltype(fx);
+            const V own = a == 0 ? q0 : q1;
+            return acc + (fx == V{} ? V{} : (V{} + own) * fx / ((V{} + q0 * q0) + q1 * q1));
+        });
+}
+
 // Whether a block's contributions s.y hold nothing to report: all finite and, unless f may be
 // negative, none below 0 (screen_and_accumulate then notes no example, so needs no points).
 // The scan is kept in s.scan for finish_block (a pass over the block fewer).
@@ -257,12 +280,13 @@ bool polar_importance(const Kernel &k, bool evens, size_t m, Scratch &s, Stage l
 // order of operations, the same bits) with directions' z alone: each technique's z and pdf
 // from its u0 (Sampler::sample_polar; `evens`: s.u holds the u0s alone, draw_uniforms), the
 // others' pdfs at z (Sampler::pdf_polar), f at z (the pdf of sampler Kernel::f_is_pdf where
-// f is one, computed once).  False for a block with something to report, as
-// polar_importance.
+// f is one, computed once; a pair of techniques: add_pair_terms).  False for a block with
+// something to report, as polar_importance.
 bool polar_mis(const Kernel &k, bool evens, size_t m, Scratch &s, Stage last) {
     const Integrand &f = k.f;
     const Technique &t = k.t;
     const int ud = k.ud;
+    const bool pair = mis_pair(t);
     double *z = s.x.data();
     std::fill(s.y.begin(), s.y.begin() + m, 0.0);
     int col = 0;
@@ -272,10 +296,21 @@ bool polar_mis(const Kernel &k, bool evens, size_t m, Scratch &s, Stage last) {
             return false;
         col += sa.udim;
         if (last <= Stage::Screened) continue;
+        const double *fv = k.f_is_pdf == int(a) ? s.p.data() : s.f.data();
+        if (pair) {
+            // the other technique's pdf, into s.f where it is f
+            const size_t b = 1 - a;
+            double *q = k.f_is_pdf == int(b) ? s.f.data() : s.q.data();
+            t.mis[b]->pdf_polar(z, q, m);
+            if (last == Stage::Weighted) continue;
+            if (k.f_is_pdf < 0) f.eval_polar(z, s.f.data(), m);
+            add_pair_terms(t.mis_power, a, fv, s.p.data(), q, s.y.data(), m);
+            continue;
+        }
         mis_weights(t, a, s, m, [&](const Sampler &sb, double *q) { sb.pdf_polar(z, q, m); }, k.f_is_pdf);
         if (last == Stage::Weighted) continue;
         if (k.f_is_pdf < 0) f.eval_polar(z, s.f.data(), m);   // else s.f holds it (mis_weights), or s.p
-        add_mis_terms(t.mis_power == 1, k.f_is_pdf == int(a) ? s.p.data() : s.f.data(), s, m);
+        add_mis_terms(t.mis_power == 1, fv, s, m);
     }
     return last < Stage::Contributions || nothing_to_report(f, s, m);
 }
@@ -439,10 +474,17 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
             }
             size_t bad = sample_and_check(sa, s.cols.data(), xi_pts, s.p.data(), m, first, diag, s.sub_drop.data());
             if (last == Stage::Screened) continue;
-            mis_weights(t, a, s, m, [&](const Sampler &sb, double *q) { sb.pdf(xi_pts, q, m); });
-            if (last == Stage::Weighted) continue;
-            f.eval(xi_pts, s.f.data(), m);
-            add_mis_terms(t.mis_power == 1, s.f.data(), s, m);
+            if (mis_pair(t)) {
+                t.mis[1 - a]->pdf(xi_pts, s.q.data(), m);
+                if (last == Stage::Weighted) continue;
+                f.eval(xi_pts, s.f.data(), m);
+                add_pair_terms(t.mis_power, a, s.f.data(), s.p.data(), s.q.data(), s.y.data(), m);
+            } else {
+                mis_weights(t, a, s, m, [&](const Sampler &sb, double *q) { sb.pdf(xi_pts, q, m); });
+                if (last == Stage::Weighted) continue;
+                f.eval(xi_pts, s.f.data(), m);
+                add_mis_terms(t.mis_power == 1, s.f.data(), s, m);
+            }
             if (bad)
                 for (size_t i = 0; i < m; ++i)
                     if (s.sub_drop[i] && !s.drop[i]) { s.drop[i] = 1; ++dropped; }
