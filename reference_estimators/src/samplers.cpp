@@ -148,9 +148,7 @@ class Directional : public Pointwise<D> {
         simd::i64v bad = {};
         size_t i = 0;
         for (; i + W <= n; i += W) {
-            simd::f64v u0;
-            for (size_t l = 0; l < W; ++l) u0[l] = u[(i + l) * stride];
-            const simd::f64v zv = self().cos_theta(u0), pv = self().density(zv);
+            const simd::f64v zv = self().cos_theta(simd::load_strided(u + i * stride, stride)), pv = self().density(zv);
             simd::store(z + i, zv);
             simd::store(p + i, pv);
             bad += (polar_in(zv) & valid_pdf(pv)) ? simd::i64v{} : simd::i64v{} + 1;
@@ -191,7 +189,7 @@ class Directional : public Pointwise<D> {
         size_t i = 0;
         for (; i + W <= n; i += W) {
             simd::f64v u0, u1, w0, w1, w2;
-            for (size_t l = 0; l < W; ++l) { u0[l] = u[2 * (i + l)]; u1[l] = u[2 * (i + l) + 1]; }
+            simd::deinterleave(u + 2 * i, u0, u1);
             const simd::f64v pv = sample_v(u0, u1, w0, w1, w2);
             simd::store(p + i, pv);
             simd::store3(x + 3 * i, w0, w1, w2);

@@ -40,6 +40,33 @@ typedef uint64_t u64v __attribute__((vector_size(8 * kWidth)));
 
 RE_INLINE f64v load(const double *p) { f64v v; std::memcpy(&v, p, sizeof v); return v; }
 RE_INLINE void store(double *p, f64v v) { std::memcpy(p, &v, sizeof v); }
+// The pairs p[0..2 kWidth) split into their first and second members: two loads and two
+// shuffles (GCC loads a lane at a time for a stride it cannot see).
+RE_INLINE void deinterleave(const double *p, f64v &even, f64v &odd) {
+    const f64v a = load(p), b = load(p + kWidth);
+#if defined(__AVX512F__)
+    even = __builtin_shufflevector(a, b, 0, 2, 4, 6, 8, 10, 12, 14);
+    odd = __builtin_shufflevector(a, b, 1, 3, 5, 7, 9, 11, 13, 15);
+#elif defined(__AVX__)
+    even = __builtin_shufflevector(a, b, 0, 2, 4, 6);
+    odd = __builtin_shufflevector(a, b, 1, 3, 5, 7);
+#else
+    even = __builtin_shufflevector(a, b, 0, 2);
+    odd = __builtin_shufflevector(a, b, 1, 3);
+#endif
+}
+// p[0], p[stride], ..., p[(kWidth - 1) stride]: whole loads for strides 1 and 2 (deinterleave),
+// a lane at a time otherwise.
+RE_INLINE f64v load_strided(const double *p, size_t stride) {
+    if (stride == 1) return load(p);
+    f64v v, odd;
+    if (stride == 2) {
+        deinterleave(p, v, odd);
+        return v;
+    }
+    for (size_t l = 0; l < kWidth; ++l) v[l] = p[l * stride];
+    return v;
+}
 
 RE_INLINE uint64_t bits(double d) { uint64_t b; std::memcpy(&b, &d, 8); return b; }
 RE_INLINE u64v bits(f64v v) { return (u64v)v; }
