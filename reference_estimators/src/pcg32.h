@@ -131,9 +131,10 @@ class LaneGenerator {
         typedef uint32_t u32v __attribute__((vector_size(8 * kVec)));
         typedef double f64v __attribute__((vector_size(8 * kVec)));
         constexpr int vecs = even ? kVecs / 2 : kVecs, stride = even ? 2 : 1;
+        uint64_t lanes[vecs * kVec];
+        for (int l = 0; l < vecs * kVec; ++l) lanes[l] = state_[l * stride];
         u64v s[vecs];
-        for (int v = 0; v < vecs; ++v)
-            for (int l = 0; l < kVec; ++l) s[v][l] = state_[(v * kVec + l) * stride];
+        std::memcpy(s, lanes, sizeof s);
         const u64v zero = {}, mult = zero + kPcgMult, inc = zero + inc_;
         const u64v jm = zero + jump_.mult, jp = zero + jump_.plus;
         const u64v exponent = zero + 0x4330000000000000ULL;
@@ -186,8 +187,8 @@ class LaneGenerator {
                 std::memcpy(out + r * (kLanes / stride) + v * kVec, &d, sizeof d);
             }
         }
-        for (int v = 0; v < vecs; ++v)
-            for (int l = 0; l < kVec; ++l) state_[(v * kVec + l) * stride] = s[v][l];
+        std::memcpy(lanes, s, sizeof s);
+        for (int l = 0; l < vecs * kVec; ++l) state_[l * stride] = lanes[l];
     }
 
     uint64_t state_[kLanes];

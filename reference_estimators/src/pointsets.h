@@ -104,9 +104,11 @@ inline void sobol_lanes(const uint32_t *rlow, uint32_t hi, uint32_t seed, __m512
     r = _mm512_gf2p8affine_epi64_epi8(r, _mm512_set1_epi64(0x8040201008040201LL), 0);    // bits within bytes
     const __m512i bytes = _mm512_set4_epi32(0x0c0d0e0f, 0x08090a0b, 0x04050607, 0x00010203);
     r = _mm512_shuffle_epi8(r, bytes);                                                    // bytes within words
+    // (the all-lanes mask forms: the unmasked intrinsics trip GCC 12's -Wmaybe-uninitialized)
     const __m512d half = _mm512_set1_pd(0.5), scale = _mm512_set1_pd(0x1p-32);
-    u[0] = _mm512_mul_pd(_mm512_add_pd(_mm512_cvtepu32_pd(_mm512_castsi512_si256(r)), half), scale);
-    u[1] = _mm512_mul_pd(_mm512_add_pd(_mm512_cvtepu32_pd(_mm512_extracti64x4_epi64(r, 1)), half), scale);
+    const __m256i low = _mm512_maskz_extracti64x4_epi64(0xf, r, 0), high = _mm512_maskz_extracti64x4_epi64(0xf, r, 1);
+    u[0] = _mm512_mul_pd(_mm512_add_pd(_mm512_maskz_cvtepu32_pd(0xff, low), half), scale);
+    u[1] = _mm512_mul_pd(_mm512_add_pd(_mm512_maskz_cvtepu32_pd(0xff, high), half), scale);
 }
 
 // sobol_run for one dimension (stride 1) or two (rlow, hi, seed of each; out interleaved).

@@ -134,7 +134,8 @@ RE_INLINE bool all_equal(f64v a, f64v b) {
 RE_INLINE double sqrt(double x) { return std::sqrt(x); }
 RE_INLINE f64v sqrt(f64v x) {
 #if defined(__AVX512F__)
-    return (f64v)_mm512_sqrt_pd((__m512d)x);
+    // the all-lanes mask form: the unmasked intrinsic trips GCC 12's -Wmaybe-uninitialized
+    return (f64v)_mm512_maskz_sqrt_pd(0xff, (__m512d)x);
 #elif defined(__AVX__)
     return (f64v)_mm256_sqrt_pd((__m256d)x);
 #else
