@@ -117,14 +117,17 @@ struct BlockScan {
     double maxabs() const { return std::max(-min, max); }  // -inf for an empty block
 };
 
-RE_INLINE BlockScan scan_block(const double *y, size_t count) {
+// The scan of `count` values, value(i) giving the vector of values i .. i + kVecWidth and
+// value_one(i) value i alone (each called once per value, in order within its lane).
+template <class Value, class ValueOne>
+RE_INLINE BlockScan scan_values(size_t count, Value value, ValueOne value_one) {
     const size_t full = count / kLanes * kLanes;
     const f64v zero = {}, inf = zero + std::numeric_limits<double>::infinity();
     f64v s[kParts], lo[kParts], hi[kParts];
     for (size_t k = 0; k < kParts; ++k) { s[k] = zero; lo[k] = inf; hi[k] = -inf; }
     for (size_t i = 0; i < full; i += kLanes)
         for (size_t k = 0; k < kParts; ++k) {
-            f64v v = simd::load(y + i + k * kVecWidth);
+            f64v v = value(i + k * kVecWidth);
             s[k] += v;
             lo[k] = v < lo[k] ? v : lo[k];
             hi[k] = v > hi[k] ? v : hi[k];
@@ -134,11 +137,28 @@ RE_INLINE BlockScan scan_block(const double *y, size_t count) {
         for (size_t w = 0; w < kVecWidth; ++w) { r.min = std::min(r.min, lo[k][w]); r.max = std::max(r.max, hi[k][w]); }
     r.sum = lane_sum(s);
     for (size_t i = full; i < count; ++i) {
-        r.sum += y[i];
-        r.min = std::min(r.min, y[i]);
-        r.max = std::max(r.max, y[i]);
+        const double v = value_one(i);
+        r.sum += v;
+        r.min = std::min(r.min, v);
+        r.max = std::max(r.max, v);
     }
     return r;
+}
+
+RE_INLINE BlockScan scan_block(const double *y, size_t count) {
+    return scan_values(count, [y](size_t i) { return simd::load(y + i); }, [y](size_t i) { return y[i]; });
+}
+
+// y = f / p, and scan_block of it, in one pass (the same bits as the two).
+RE_INLINE BlockScan divide_and_scan(const double *f, const double *p, double *y, size_t count) {
+    return scan_values(
+        count,
+        [=](size_t i) {
+            const f64v v = simd::load(f + i) / simd::load(p + i);
+            simd::store(y + i, v);
+            return v;
+        },
+        [=](size_t i) { return y[i] = f[i] / p[i]; });
 }
 
 // Adds y[0..count) (finite, unscaled; `scan` is scan_block of them) as one block: two-pass

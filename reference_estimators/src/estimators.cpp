@@ -232,27 +232,43 @@ bool mis_pair(const Technique &t) { return t.mis.size() == 2 && (t.mis_power == 
 // y += w_a f / p_a for technique a of a pair (mis_pair) in one pass, from its pdf pa and the
 // other's q at its points: f / ((0 + p_0) + p_1) (balance), (0 + p_a) f / ((0 + p_0^2) +
 // p_1^2) (power), 0 where f is 0: mis_weights' and add_mis_terms' operations in their order
-// (the same bits), where they took four to six passes over the block.
-void add_pair_terms(double beta, size_t a, const double *f, const double *pa, const double *q, double *y, size_t m) {
+// (the same bits), where they took four to six passes over the block.  With `scan`, also
+// scan_block of the new y, in the same pass (the last technique's).
+std::optional<BlockScan> add_pair_terms(double beta, size_t a, const double *f, const double *pa, const double *q,
+                                        double *y, size_t m, bool scan = false) {
     const double *p0 = a == 0 ? pa : q, *p1 = a == 0 ? q : pa;
+    auto pass = [&](auto term) -> std::optional<BlockScan> {
+        if (!scan) {
+            simd::map4(f, p0, p1, y, m, term);
+            return std::nullopt;
+        }
+        return scan_values(
+            m,
+            [&](size_t i) {
+                const simd::f64v v = term(simd::load(f + i), simd::load(p0 + i), simd::load(p1 + i), simd::load(y + i));
+                simd::store(y + i, v);
+                return v;
+            },
+            [&](size_t i) { return y[i] = term(f[i], p0[i], p1[i], y[i]); });
+    };
     if (beta == 1)
-        simd::map4(f, p0, p1, y, m, [](auto fx, auto q0, auto q1, auto acc) {
+        return pass([](auto fx, auto q0, auto q1, auto acc) {
             using V = decltype(fx);
             return acc + (fx == V{} ? V{} : fx / ((V{} + q0) + q1));
         });
-    else
-        simd::map4(f, p0, p1, y, m, [a](auto fx, auto q0, auto q1, auto acc) {
-            using V = decltype(fx);
-            const V own = a == 0 ? q0 : q1;
-            return acc + (fx == V{} ? V{} : (V{} + own) * fx / ((V{} + q0 * q0) + q1 * q1));
-        });
+    return pass([a](auto fx, auto q0, auto q1, auto acc) {
+        using V = decltype(fx);
+        const V own = a == 0 ? q0 : q1;
+        return acc + (fx == V{} ? V{} : (V{} + own) * fx / ((V{} + q0 * q0) + q1 * q1));
+    });
 }
 
 // Whether a block's contributions s.y hold nothing to report: all finite and, unless f may be
 // negative, none below 0 (screen_and_accumulate then notes no example, so needs no points).
-// The scan is kept in s.scan for finish_block (a pass over the block fewer).
-bool nothing_to_report(const Integrand &f, Scratch &s, size_t m) {
-    s.scan = scan_block(s.y.data(), m);
+// The scan (scan_block of s.y, unless given) is kept in s.scan for finish_block (a pass over
+// the block fewer).
+bool nothing_to_report(const Integrand &f, Scratch &s, size_t m, std::optional<BlockScan> scan = std::nullopt) {
+    s.scan = scan ? *scan : scan_block(s.y.data(), m);
     return !s.scan->maybe_nonfinite() && !(f.nonnegative && s.scan->min < 0);
 }
 
@@ -272,8 +288,7 @@ bool polar_importance(const Kernel &k, bool evens, size_t m, Scratch &s, Stage l
         k.f.eval_polar(s.q.data(), s.f.data(), m);
         fv = s.f.data();
     }
-    for (size_t i = 0; i < m; ++i) s.y[i] = fv[i] / s.p[i];
-    return nothing_to_report(k.f, s, m);
+    return nothing_to_report(k.f, s, m, divide_and_scan(fv, s.p.data(), s.y.data(), m));
 }
 
 // MIS on the polar path (Kernel::polar), as the general path below computes it (the same
@@ -289,6 +304,7 @@ bool polar_mis(const Kernel &k, bool evens, size_t m, Scratch &s, Stage last) {
     const bool pair = mis_pair(t);
     double *z = s.x.data();
     std::fill(s.y.begin(), s.y.begin() + m, 0.0);
+    std::optional<BlockScan> scan;   // of y, by the last technique's pass (add_pair_terms)
     int col = 0;
     for (size_t a = 0; a < t.mis.size(); ++a) {
         const Sampler &sa = *t.mis[a];
@@ -304,7 +320,7 @@ bool polar_mis(const Kernel &k, bool evens, size_t m, Scratch &s, Stage last) {
             t.mis[b]->pdf_polar(z, q, m);
             if (last == Stage::Weighted) continue;
             if (k.f_is_pdf < 0) f.eval_polar(z, s.f.data(), m);
-            add_pair_terms(t.mis_power, a, fv, s.p.data(), q, s.y.data(), m);
+            scan = add_pair_terms(t.mis_power, a, fv, s.p.data(), q, s.y.data(), m, a == 1);
             continue;
         }
         mis_weights(t, a, s, m, [&](const Sampler &sb, double *q) { sb.pdf_polar(z, q, m); }, k.f_is_pdf);
@@ -312,7 +328,7 @@ bool polar_mis(const Kernel &k, bool evens, size_t m, Scratch &s, Stage last) {
         if (k.f_is_pdf < 0) f.eval_polar(z, s.f.data(), m);   // else s.f holds it (mis_weights), or s.p
         add_mis_terms(t.mis_power == 1, fv, s, m);
     }
-    return last < Stage::Contributions || nothing_to_report(f, s, m);
+    return last < Stage::Contributions || nothing_to_report(f, s, m, scan);
 }
 
 // Fills s.y[0..m) with the contributions of samples first..first+m of this chunk; samples
