@@ -111,14 +111,17 @@ struct Kernel {
 // The block's uniforms u[m * ud] (fill_points), or on a polar path reading u0 alone
 // (Kernel::evens) with the stream row-aligned, the even-numbered ones alone u[m * ud / 2]:
 // each sampler's u0, sample i's of sampler a at u[i * ud / 2 + a] (fill_even: half the
-// generator's work, which drjit's tracer leaves out too).  Returns whether the evens alone.
-bool draw_uniforms(const Kernel &k, UniformStream &stream, uint64_t first, size_t m, double *u) {
+// generator's work, which drjit's tracer leaves out too).  Returns, where it drew the evens
+// alone, where the stream stood before them (UniformStream::rewind draws them all again).
+std::optional<LaneGenerator> draw_uniforms(const Kernel &k, UniformStream &stream, uint64_t first, size_t m,
+                                           double *u) {
     if (k.evens && stream.row_aligned()) {   // (elsewhere the shortcut saves nothing)
+        const LaneGenerator before = stream.position();
         stream.fill_even(u, m * size_t(k.ud));
-        return true;
+        return before;
     }
     fill_points(k.points, stream, first, m, k.ud, u);
-    return false;
+    return std::nullopt;
 }
 
 // Copies columns [from, from + count) of the m x ud matrix u into out (m x count).
@@ -343,9 +346,9 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
     const int xd = k.xd, ud = k.ud;
     const bool rejection = smp.method == SamplingMethod::Rejection;
     // where the polar path hands the block back, the general path needs all of its uniforms
-    std::optional<LaneGenerator> replay;
-    if (k.evens && stream.row_aligned()) replay = stream.position();
-    const bool evens = !rejection && draw_uniforms(k, stream, first, m, s.u.data());
+    const std::optional<LaneGenerator> replay =
+        rejection ? std::nullopt : draw_uniforms(k, stream, first, m, s.u.data());
+    const bool evens = replay.has_value();
     auto all_uniforms = [&] {
         if (!evens) return;
         stream.rewind(*replay);
@@ -670,7 +673,7 @@ StageTimes profile_stages(const Integrand &f, const Technique &t, uint64_t n, co
                 block_contributions(k, stream, m, first, s, diag, *last);
                 sink[c] += *last == Stage::Contributions ? s.y[m - 1] : s.p[m - 1];
             } else if (!rejection) {  // the uniforms the block reads
-                const bool evens = draw_uniforms(k, stream, first, m, s.u.data());
+                const bool evens = draw_uniforms(k, stream, first, m, s.u.data()).has_value();
                 sink[c] += s.u[m * size_t(k.ud) / (evens ? 2 : 1) - 1];
             }
         });

@@ -143,7 +143,6 @@ inline uint32_t sobol_bits_reversed(uint64_t index, int dim, const SobolDirectio
     return r;
 }
 
-
 // Strata per dimension for n samples of ud dimensions: the largest k with k^ud <= n.
 inline uint64_t strata_per_dim(uint64_t n, int ud) {
     uint64_t k = uint64_t(std::pow(double(n), 1.0 / ud));

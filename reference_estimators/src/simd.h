@@ -60,11 +60,9 @@ RE_INLINE void deinterleave(const double *p, f64v &even, f64v &odd) {
 RE_INLINE f64v load_strided(const double *p, size_t stride) {
     if (stride == 1) return load(p);
     f64v v, odd;
-    if (stride == 2) {
-        deinterleave(p, v, odd);
-        return v;
-    }
-    for (size_t l = 0; l < kWidth; ++l) v[l] = p[l * stride];
+    if (stride == 2) deinterleave(p, v, odd);
+    else
+        for (size_t l = 0; l < kWidth; ++l) v[l] = p[l * stride];
     return v;
 }
 
