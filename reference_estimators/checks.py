@@ -5,6 +5,7 @@ arrays in C++.
 """
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -15,7 +16,7 @@ __all__ = [
     "CHECK_DOMAINS", "domain_params", "domain_points", "cubature_nodes", "cubature_points", "cubature_sums",
     "cubature_moment_sums", "grid_histogram", "rosenblatt",
     "piecewise_linear_lookup", "transform_statistics", "cramer_von_mises_sum", "pdf_summary",
-    "all_float32", "dither_float32",
+    "all_float32", "dither_float32", "finite_rows",
     "float32_unit_rows", "cap_to_world",
 ]
 
@@ -57,9 +58,10 @@ def cap_to_world(h: Any, axis: Any, t: Any, b: Any, cos_alpha: float, scale: flo
     """World directions (N, 3) of points h (N, 3) of the hemisphere (normalised first) through
     the equal-area map of the cap {d : <d, axis> >= cos_alpha} onto it, frame (t, b, axis)
     orthonormal, scale = 1 - cos_alpha: c = clip(cos_alpha + z scale, -1, 1) along the axis,
-    the azimuth kept (its cosine and sine as x / r and y / r; the pole at azimuth 0).  A point
-    below the horizon maps outside the cap, a NaN row to NaN.  In C++ on all threads, in
-    numpy's order of operations (harness.adapters.mitsuba.cap.Cap.to_world)."""
+    the azimuth kept (its cosine and sine as x / r and y / r, r = sqrt(x^2 + y^2); the pole
+    at azimuth 0).  A point below the horizon maps outside the cap, a NaN row to NaN.  In C++
+    on all threads, vectorised, each value numpy's expression in its order of operations
+    (harness.adapters.mitsuba.cap.Cap.to_world)."""
     a = np.ascontiguousarray(h, dtype=np.float64).reshape(-1, 3)
     frame = [np.ascontiguousarray(v, dtype=np.float64).reshape(-1) for v in (axis, t, b)]
     return _core.cap_to_world(a, *frame, float(cos_alpha), float(scale))
@@ -180,6 +182,14 @@ def cramer_von_mises_sum(u: Any) -> np.ndarray:
     if v.ndim not in (1, 2):
         raise ValueError(f"'u' must have shape (N,) or (N, k), got {v.shape}")
     return _core.cramer_von_mises_sum(v.reshape(v.shape[0], -1))
+
+
+def finite_rows(x: Any) -> np.ndarray:
+    """(N,) bool: whether each row of x ((N, ...), or each value of x (N,)) is finite in every
+    value (numpy's all(isfinite(x), axis=1), which takes 15 ns a 3-vector).  One pass in C++
+    on all threads."""
+    a = np.ascontiguousarray(x, dtype=np.float64)
+    return _core.finite_rows(a.reshape(a.shape[0], math.prod(a.shape[1:])) if a.ndim > 1 else a)
 
 
 def all_float32(v: Any) -> bool:

@@ -135,9 +135,9 @@ void bind_checks(nb::module_ &m) {
         OutArray wa = new_array(n, 3, &out);
         {
             nb::gil_scoped_release g;
-            // each row from that row alone: chunks on all threads
-            for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t e, int) {
-                cap_to_world(h.data() + 3 * a, e - a, axis.data(), t.data(), b.data(), cos_alpha, scale, out + 3 * a);
+            // each row from that row alone: chunks of 2^14 rows (a cubature call maps 2^16) on all threads
+            for_chunks(n, size_t(1) << 14, [&](size_t, size_t a, size_t e, int) {
+                cap_to_world(h.data(), a, e, axis.data(), t.data(), b.data(), cos_alpha, scale, out);
             });
         }
         return wa;
@@ -153,7 +153,11 @@ void bind_checks(nb::module_ &m) {
         auto oa = new_bool_array(n, &ok);
         {
             nb::gil_scoped_release g;
-            float32_unit_rows(x.data(), n, slack, cols, ok);
+            // rows on all threads in chunks of 2^14 (a pdf call of the cubature is 2^16 rows);
+            // each row's result is its own
+            for_chunks(n, size_t(1) << 14, [&](size_t, size_t a, size_t b, int) {
+                float32_unit_rows(x.data(), a, b, n, slack, cols, ok);
+            });
         }
         return nb::make_tuple(ca, oa);
     }, "x"_a, "slack"_a,
@@ -299,6 +303,17 @@ void bind_checks(nb::module_ &m) {
         return sums;
     }, "u"_a, "For each column of u (N, k), (upper, slack) with upper >= S >= upper - slack, S = "
        "sum_i ((2 i - 1) / (2 N) - u_(i))^2 over its sorted values; NaN for a column holding a NaN.");
+    m.def("finite_rows", [](InArray x) {
+        if (x.ndim() != 1 && x.ndim() != 2) throw nb::value_error("'x' must have shape (N,) or (N, k)");
+        const size_t n = x.shape(0), k = x.ndim() == 2 ? x.shape(1) : 1;
+        bool *ok;
+        auto oa = new_bool_array(n, &ok);
+        {
+            nb::gil_scoped_release g;
+            for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t b, int) { finite_rows(x.data(), a, b, k, ok); });
+        }
+        return oa;
+    }, "x"_a, "(N,) bool: whether each row of x (N, k) (or value of x (N,)) is finite in every value.");
     m.def("all_float32", [](InArray v) {
         nb::gil_scoped_release g;
         return all_float32(v.data(), v.size());
