@@ -448,8 +448,7 @@ def _sampler_failures(x: np.ndarray, reported: np.ndarray | None, u: np.ndarray,
     left out), the parameters s (m, k) of the points produced inside the domain, and the
     count of those not produced."""
     n = x.shape[0]
-    flat = x.reshape(n, -1)
-    produced = np.all(np.isfinite(flat), axis=1)
+    produced = rest.finite_rows(x)
     missing = int(n - produced.sum())
     idx = np.flatnonzero(produced)
     xp = x[produced]

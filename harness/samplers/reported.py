@@ -18,6 +18,8 @@ from collections.abc import Callable, Iterator
 
 import numpy as np
 
+import reference_estimators as rest
+
 from harness.stats.results import Failure
 
 __all__ = ["NUDGE_ULPS", "reported_pdf_failure", "rounding_spread"]
@@ -54,21 +56,30 @@ def rounding_spread(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray, at: np
 
 
 def reported_pdf_failure(x: np.ndarray, reported: np.ndarray, pdf: Callable[[np.ndarray], np.ndarray], *,
-                         rtol: float = 1e-4, max_examples: int = 5) -> Failure | None:
+                         rtol: float = 1e-4, max_examples: int = 5,
+                         values: np.ndarray | None = None) -> Failure | None:
     """A "reported_pdf" Failure (count, largest relative difference, examples) where the pdf
     a sampler reported with its samples x differs from pdf(x) beyond the module's tolerance,
     else None.  Rows of x that are not finite (samples not produced) are skipped; a reported
-    value that is NaN, infinite or negative at a produced sample is a mismatch."""
+    value that is NaN, infinite or negative at a produced sample is a mismatch.  ``values``:
+    pdf(x) (N,) where the caller has it already (the sampler check does), so that pdf is
+    called again only for the nudged copies of mismatching samples."""
     x = np.asarray(x, dtype=float)
     n = x.shape[0]
     rep = np.asarray(reported, dtype=float).reshape(-1)
     if rep.size != n:
         return Failure("reported_pdf", n, f"the sampler reported {rep.size} pdf values for {n} samples", ())
-    produced = np.flatnonzero(np.all(np.isfinite(x.reshape(n, -1)), axis=1))
+    produced = np.flatnonzero(rest.finite_rows(x))
     if produced.size == 0:
         return None
     xs, rs = x[produced], rep[produced]
-    p = np.asarray(pdf(xs), dtype=float).reshape(-1)
+    if values is None:
+        p = np.asarray(pdf(xs), dtype=float).reshape(-1)
+    else:
+        p = np.asarray(values, dtype=float).reshape(-1)
+        if p.size != n:
+            raise ValueError(f"'values' must hold pdf(x) at the {n} points, got {p.size} values")
+        p = p[produced]
     with np.errstate(all="ignore"):
         diff = np.abs(rs - p)
         bad = ~(diff <= rtol * np.abs(p)) | ~np.isfinite(rs) | (rs < 0)

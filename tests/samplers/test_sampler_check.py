@@ -15,6 +15,7 @@ import reference_estimators as rest
 
 from harness.samplers import Domain, SamplerTest, as_domain, check_sampler, zoo
 from harness.samplers.domains import ParamDensity
+from harness.samplers.reported import reported_pdf_failure
 from harness.stats import ConfidenceInterval, Failure
 from harness.usercode import UserCodeError
 
@@ -409,6 +410,33 @@ def test_the_sampled_lobes_pdf_reported_instead_of_the_mixtures_fails():
     honest = check_sampler(lambda u: (sample(u)[0], pdf(sample(u)[0])), pdf, "hemisphere",
                            sample_count=20_000)
     assert honest.passed, str(honest)
+
+
+def test_the_claimed_pdf_is_called_once_at_the_samples_also_with_a_reported_pdf():
+    """check_points calls the user's pdf once at the sampled points and the reported-pdf check
+    reuses those values, also where the density tested is pdf / total (missing samples); a
+    mismatch calls it again only at the nudged copies of the mismatching samples."""
+    cos = rest.sampler("cosine_hemisphere")
+    calls = []
+
+    def pdf(w):
+        calls.append(w.shape[0])
+        return cos.pdf(w)
+
+    test = SamplerTest(pdf, "hemisphere", sample_count=20_000)
+    w, p = cos.sample(rest.points(20_000, 2, seed=1))
+    half = test.for_total(0.5)
+    assert np.array_equal(half.pdf(w), cos.pdf(w) / 0.5)
+    for t in (test, half):
+        calls.clear()
+        r = t.check_points(w, p)
+        assert calls == [20_000] and "reported_pdf" not in [f.check for f in r.failures]
+    calls.clear()
+    r = test.check_points(w, p * 1.01)
+    assert [f.check for f in r.failures] == ["reported_pdf"] and r.failures[0].count == 20_000
+    assert calls == [20_000] * 7            # at the samples, then at the 6 nudged copies
+    with pytest.raises(ValueError, match="'values' must hold pdf"):
+        reported_pdf_failure(w, p, cos.pdf, values=p[:10])
 
 
 def test_a_reported_pdf_of_the_wrong_length_is_named():

@@ -215,7 +215,7 @@ class MitsubaSampler:
         spdf = out.pop("pdf").reshape(-1)
         weight = out.pop("weight", None)
         delta = out.pop("delta", None)
-        valid = np.all(np.isfinite(x), axis=1) & (spdf > 0)
+        valid = rest.finite_rows(x) & (spdf > 0)
         if weight is not None:
             weight = weight.reshape(len(x), -1)
             valid &= np.any(weight != 0, axis=1)

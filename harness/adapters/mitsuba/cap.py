@@ -109,6 +109,7 @@ class CapView:
         self._drawn = np.empty((0, 3))      # the last draw's points (NaN rows: not produced)
         self._world = np.empty((0, 3))      # and the world directions returned for them
         self._produced = np.zeros(0, dtype=bool)
+        self._produced_count = 0
         self._keys = np.empty(0)            # produced points sorted by x, for a few-row lookup
         self._order = np.empty(0, dtype=np.int64)
 
@@ -116,7 +117,8 @@ class CapView:
         world = np.asarray(self.sampler.sample(u), dtype=float)
         h = self.cap.to_hemisphere(world)
         self._drawn, self._world = h, world
-        self._produced = np.all(np.isfinite(h), axis=1)
+        self._produced = rest.finite_rows(h)
+        self._produced_count = int(self._produced.sum())
         self._order = np.flatnonzero(self._produced)[np.argsort(h[self._produced, 0], kind="stable")]
         self._keys = h[self._order, 0]
         return h
@@ -126,7 +128,7 @@ class CapView:
         rows), else None."""
         if h.shape == self._drawn.shape and np.array_equal(h, self._drawn, equal_nan=True):
             return self._world
-        produced = self._produced.sum()
+        produced = self._produced_count   # counted once a draw: the cubature asks this of every call
         if h.shape[0] == produced and produced and np.array_equal(h, self._drawn[self._produced]):
             return self._world[self._produced]
         return None
@@ -141,7 +143,7 @@ class CapView:
                 drawn = np.all(self._drawn[i] == h, axis=1)
                 world[drawn] = self._world[i[drawn]]
         p = np.asarray(self.sampler.pdf(world), dtype=np.float32) * np.float32(self.cap.scale)
-        return np.where(np.all(np.isfinite(h), axis=1) & (h[:, 2] >= 0), p.astype(float), 0.0)
+        return np.where(rest.finite_rows(h) & (h[:, 2] >= 0), p.astype(float), 0.0)
 
 
 def bounding_cap(ref: Sequence[float], center: Sequence[float], radius: float) -> Cap | None:
