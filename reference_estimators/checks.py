@@ -86,14 +86,17 @@ def cubature_nodes(lo: Any, hi: Any, nodes: Any) -> np.ndarray:
 
 
 def cubature_points(kind: str, lo: Any, hi: Any, nodes: Any,
-                    interval: tuple[float, float] = (0.0, 1.0)) -> np.ndarray:
+                    interval: tuple[float, float] = (0.0, 1.0), columns: Any = None) -> np.ndarray:
     """The points on the sampler check's domain ``kind`` of the tensor rule's nodes on the
     parameter boxes [lo, hi] (M, k): domain_points(kind, cubature_nodes(lo, hi, nodes)), the
-    same bits, without the parameter array; ``interval`` the interval's ends.  One pass in
-    C++ on all threads."""
+    same bits, without the parameter array; ``interval`` the interval's ends; ``columns``: a
+    permutation of the points' coordinates, the result then that array's [:, columns] (a
+    sphere about another pole, :meth:`harness.samplers.domains.Domain.from_pole_frame`)
+    without numpy's copy.  One pass in C++ on all threads."""
     a, b = (np.ascontiguousarray(v, dtype=np.float64) for v in (lo, hi))
+    order = [] if columns is None else [int(c) for c in columns]
     return _core.cubature_points(_check_domain(kind), float(interval[0]), float(interval[1]), a, b,
-                                 np.ascontiguousarray(nodes, dtype=np.float64).reshape(-1))
+                                 np.ascontiguousarray(nodes, dtype=np.float64).reshape(-1), order)
 
 
 def cubature_sums(lo: Any, hi: Any, values: Any, weights: Any, scale: float = 1.0) -> np.ndarray:

@@ -117,9 +117,16 @@ class Domain:
             x = np.asarray(x)[:, _POLES[self.pole]]
         return rest.domain_params(self.kind, x, self.lo, self.hi)
 
+    @property
+    def pole_columns(self) -> list[int] | None:
+        """The columns that take points given in the frame whose z is the pole to the domain's
+        own frame (None for the z pole: the identity)."""
+        return None if self.pole == "z" else np.argsort(_POLES[self.pole]).tolist()
+
     def from_pole_frame(self, x: np.ndarray) -> np.ndarray:
         """Points (N, 3) given in the frame whose z is the pole, in the domain's own frame."""
-        return x if self.pole == "z" else x[:, np.argsort(_POLES[self.pole])]
+        columns = self.pole_columns
+        return x if columns is None else x[:, columns]
 
 
 @dataclass(frozen=True)
@@ -165,8 +172,7 @@ class ParamDensity:
         (:func:`reference_estimators.cubature_sums`): the core maps the nodes to domain points
         directly (:func:`reference_estimators.cubature_points`), and a constant Jacobian
         multiplies each box's sum rather than every value (the same integrals to rounding)."""
-        x = rest.cubature_points(self.dom.kind, lo, hi, nodes, (self.dom.lo, self.dom.hi))
-        x = self.dom.from_pole_frame(x)
+        x = rest.cubature_points(self.dom.kind, lo, hi, nodes, (self.dom.lo, self.dom.hi), self.dom.pole_columns)
         pdf = np.asarray(self.pdf(x), dtype=float)
         jacobian = self.dom.jacobian_at_points(x)
         if self.columns is None and np.ndim(jacobian) == 0:

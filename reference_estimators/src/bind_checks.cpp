@@ -5,6 +5,7 @@
 #include <nanobind/stl/pair.h>
 #include <nanobind/stl/vector.h>
 
+#include <algorithm>
 #include <memory>
 
 #include "bind_common.h"
@@ -178,11 +179,20 @@ void bind_checks(nb::module_ &m) {
         return pts;
     }, "lo"_a, "hi"_a, "nodes"_a,
        "(M g^k, k) nodes of the tensor rule with points `nodes` per axis on the boxes [lo, hi] (M, k), box by box.");
-    m.def("cubature_points", [](int kind, double dlo, double dhi, InArray lo, InArray hi, InArray nodes) {
+    m.def("cubature_points", [](int kind, double dlo, double dhi, InArray lo, InArray hi, InArray nodes,
+                                std::vector<int> columns) {
         const CheckDomain d = check_domain(kind);
         const size_t k = check_boxes(lo, hi), g = nodes.size(), per = k == 1 ? g : g * g;
         if (size_t(domain_param_dim(d)) != k) throw nb::value_error("the boxes' dimension is not the domain's");
         const int pdim = domain_point_dim(d);
+        const bool permute = !columns.empty();
+        if (permute) {
+            std::vector<int> seen(columns);
+            std::sort(seen.begin(), seen.end());
+            bool ok = int(seen.size()) == pdim;
+            for (int j = 0; ok && j < pdim; ++j) ok = seen[size_t(j)] == j;
+            if (!ok) throw nb::value_error("'columns' must be a permutation of the points' coordinates (or empty)");
+        }
         const size_t boxes = lo.shape(0);
         double *x;
         OutArray xa = new_array(boxes * per, pdim == 1 ? 0 : size_t(pdim), &x);
@@ -192,13 +202,20 @@ void bind_checks(nb::module_ &m) {
             // chunks: a cubature's blocks of 2^16 nodes would otherwise run on one)
             for_chunks(boxes, std::max<size_t>(kCheckChunk / 4 / per, 1), [&](size_t, size_t a, size_t b, int) {
                 thread_local std::vector<double> scratch;
-                cubature_points(d, dlo, dhi, lo.data() + a * k, hi.data() + a * k, b - a, k, nodes.data(), g,
-                                x + a * per * size_t(pdim), scratch);
+                double *out = x + a * per * size_t(pdim);
+                cubature_points(d, dlo, dhi, lo.data() + a * k, hi.data() + a * k, b - a, k, nodes.data(), g, out,
+                                scratch);
+                if (permute)   // the chunk's rows, still in cache: numpy's x[:, columns] cost a copy
+                    for (size_t i = 0; i < (b - a) * per; ++i) {
+                        double *row = out + i * size_t(pdim), was[3] = {row[0], row[1], row[2]};
+                        for (int j = 0; j < pdim; ++j) row[j] = was[columns[size_t(j)]];
+                    }
             });
         }
         return xa;
-    }, "kind"_a, "dlo"_a, "dhi"_a, "lo"_a, "hi"_a, "nodes"_a,
-       "Domain points of the tensor rule's nodes on the boxes [lo, hi] (M, k): domain_points(cubature_nodes(...)).");
+    }, "kind"_a, "dlo"_a, "dhi"_a, "lo"_a, "hi"_a, "nodes"_a, "columns"_a,
+       "Domain points of the tensor rule's nodes on the boxes [lo, hi] (M, k): domain_points(cubature_nodes(...)), "
+       "with columns[j] as coordinate j where `columns` is given (a permutation; empty: as computed).");
     m.def("cubature_sums", [](InArray lo, InArray hi, InArray values, InArray weights, double scale) {
         const size_t k = check_boxes(lo, hi), boxes = lo.shape(0), per = weights.size();
         const size_t cols = values.ndim() == 2 ? values.shape(1) : 1;
