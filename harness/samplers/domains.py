@@ -172,7 +172,8 @@ class ParamDensity:
         (:func:`reference_estimators.cubature_sums`): the core maps the nodes to domain points
         directly (:func:`reference_estimators.cubature_points`), and a constant Jacobian
         multiplies each box's sum rather than every value (the same integrals to rounding)."""
-        x = rest.cubature_points(self.dom.kind, lo, hi, nodes, (self.dom.lo, self.dom.hi), self.dom.pole_columns)
+        dom = self.dom
+        x = rest.cubature_points(dom.kind, lo, hi, nodes, (dom.lo, dom.hi), dom.pole_columns)
         pdf = np.asarray(self.pdf(x), dtype=float)
         jacobian = self.dom.jacobian_at_points(x)
         if self.columns is None and np.ndim(jacobian) == 0:
