@@ -90,3 +90,15 @@ def test_a_group_with_a_step_goes_through_box_integrals():
     assert np.all(np.abs(v[:, 0] - exact) <= e[:, 0] + 1e-12)
     alone, alone_err = box_integrals(step, lo, hi, 1e-10)
     assert np.array_equal(v, alone) and np.array_equal(e, alone_err)
+    # the group's own rules are handed on: no box's rule over itself is computed twice
+    calls = []
+
+    def counted(x):
+        calls.append(x.shape[0])
+        return step(x)
+
+    grouped_integrals(counted, lo, hi, group, np.zeros((1, 2)), np.ones((1, 2)), 1e-10)
+    once = sum(calls)
+    calls.clear()
+    box_integrals(counted, lo, hi, 1e-10)
+    assert once == 16 + sum(calls)      # the parent's rule, then box_integrals' own work
