@@ -34,7 +34,9 @@ integrands on the same uniforms before anything is timed.
 On ggx_lobe f and every pdf read a direction's cos theta alone: all three draw z alone (the
 core's polar path, Integrand.polar and Sampler.polar; drjit's tracer would drop the rest
 anyway), the same bits as the whole directions' z.  The core's polar path also generates only
-the uniforms it reads (each sampler's u0, the even-numbered ones of its stream) and computes
+the uniforms it reads (each sampler's u0, the even-numbered ones of its stream; for importance
+sampling inside the sampler's loop, a generator row at a time, so that PCG32's
+multiplications overlap the sampler's divisions as in drjit's fused loop) and computes
 f once where it is a sampler's pdf (the GGX lobe and GGX's pdf: Sampler.polar_function), as
 drjit's tracer leaves out what nothing reads and merges equal expressions.
 Not in the peers: the core's screening of points, pdfs and contributions and its higher
@@ -61,7 +63,9 @@ uniforms; the samplers' points and pdfs; their screening; for MIS every techniqu
 every point; the integrand and the estimator's arithmetic; the contributions' screening and
 accumulation), each prefix timed alone, so a stage near 0 can come out slightly negative on
 a noisy machine (on the polar path, ggx_lobe's rows, the samplers screen z and the pdf in their
-own pass: the screening stage is in the sampling one and reads 0); drjit's are its uniforms
+own pass: the screening stage is in the sampling one and reads 0; and importance sampling
+draws its u0s in that pass too, so its sampling stage is what the pass adds to drawing them
+alone, less than the two apart); drjit's are its uniforms
 (a kernel that draws and sums them) and the rest of its whole kernel.
 
     .venv/bin/python benchmarks/hot_paths.py [--samples 2e7] [--repeat 3] [--no-drjit]

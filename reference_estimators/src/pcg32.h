@@ -114,47 +114,58 @@ class LaneGenerator {
     // lanes' states jump over the rows at once.
     void fill_even(double *out, size_t rows) {
         fill_lanes<true>(out, rows);
-        const LcgJump j = lcg_jump(2 * kLanes * uint64_t(rows), inc_);
-        for (int l = 1; l < kLanes; l += 2) state_[l] = j.mult * state_[l] + j.plus;
+        skip_odd(rows);
     }
-
-  private:
-    // fill, or with `even` the even lanes' part of it (their states advanced, the odd ones'
-    // left).  Written with GCC/Clang vector extensions: compilers do not vectorise PCG's
-    // output on their own.  The 32-bit rotate runs on the 64-bit lanes viewed as pairs of
-    // 32-bit words (the low word of each lane is PCG's output, the high word is ignored), and
-    // one shuffle pairs the two outputs of a uniform into a 64-bit lane: no packing to 32-bit
-    // lanes and back.
+    // The lanes' states held in vector registers while rows of uniforms are drawn one at a
+    // time (all lanes, or with `even` the even ones alone: fill_even's values), written back
+    // when it goes out of scope.  fill and fill_even draw through it; a loop that uses each
+    // row as it comes (a sampler, whose divisions then overlap the generator's
+    // multiplications) draws next() rows times and, for the evens, skip_odd(rows) after: the
+    // same values and the same stream position as fill_even.  Written with GCC/Clang vector
+    // extensions: compilers do not vectorise PCG's output on their own.  The 32-bit rotate
+    // runs on the 64-bit lanes viewed as pairs of 32-bit words (the low word of each lane is
+    // PCG's output, the high word is ignored), and one shuffle pairs the two outputs of a
+    // uniform into a 64-bit lane: no packing to 32-bit lanes and back.
     template <bool even>
-    void fill_lanes(double *out, size_t rows) {
-        typedef uint64_t u64v __attribute__((vector_size(8 * kVec)));
-        typedef uint32_t u32v __attribute__((vector_size(8 * kVec)));
-        typedef double f64v __attribute__((vector_size(8 * kVec)));
-        constexpr int vecs = even ? kVecs / 2 : kVecs, stride = even ? 2 : 1;
-        uint64_t lanes[vecs * kVec];
-        for (int l = 0; l < vecs * kVec; ++l) lanes[l] = state_[l * stride];
-        u64v s[vecs];
-        std::memcpy(s, lanes, sizeof s);
-        const u64v zero = {}, mult = zero + kPcgMult, inc = zero + inc_;
-        const u64v jm = zero + jump_.mult, jp = zero + jump_.plus;
-        const u64v exponent = zero + 0x4330000000000000ULL;
-        // (the AVX2 path below needs neither of these two)
-        [[maybe_unused]] const f64v offset = f64v{} + 4503599627370495.5;  // 2^52 - 0.5
-        [[maybe_unused]] auto output = [](u64v old) __attribute__((always_inline)) {  // PCG32 XSH-RR, low word of each lane
-            u32v x = (u32v)(((old >> 18u) ^ old) >> 27u), rot = (u32v)(old >> 59u);
+    class Rows {
+      public:
+        static constexpr int kVecsDrawn = even ? kVecs / 2 : kVecs, kStride = even ? 2 : 1;
+        static constexpr int kPerRow = kLanes / kStride;   // values next() writes
+
+        explicit Rows(LaneGenerator &g) : g_(g) {
+            uint64_t lanes[kVecsDrawn * kVec];
+            for (int l = 0; l < kVecsDrawn * kVec; ++l) lanes[l] = g.state_[l * kStride];
+            std::memcpy(s_, lanes, sizeof s_);
+        }
+        ~Rows() {
+            uint64_t lanes[kVecsDrawn * kVec];
+            std::memcpy(lanes, s_, sizeof s_);
+            for (int l = 0; l < kVecsDrawn * kVec; ++l) g_.state_[l * kStride] = lanes[l];
+        }
+        Rows(const Rows &) = delete;
+        Rows &operator=(const Rows &) = delete;
+
+        // The next row: out[0 .. kPerRow).
+        __attribute__((always_inline)) void next(double *out) {
+            const u64v zero = {}, mult = zero + kPcgMult, inc = zero + g_.inc_;
+            const u64v jm = zero + g_.jump_.mult, jp = zero + g_.jump_.plus;
+            const u64v exponent = zero + 0x4330000000000000ULL;
+            // (the AVX2 path below needs neither of these two)
+            [[maybe_unused]] const f64v offset = f64v{} + 4503599627370495.5;  // 2^52 - 0.5
+            [[maybe_unused]] auto output = [](u64v old) __attribute__((always_inline)) {  // PCG32 XSH-RR, low word of each lane
+                u32v x = (u32v)(((old >> 18u) ^ old) >> 27u), rot = (u32v)(old >> 59u);
 #if defined(__AVX512F__)
-            // all-lanes mask form: the unmasked intrinsic trips GCC 12's -Wmaybe-uninitialized
-            return (u32v)_mm512_mask_rorv_epi32((__m512i)x, 0xffff, (__m512i)x, (__m512i)rot);
+                // all-lanes mask form: the unmasked intrinsic trips GCC 12's -Wmaybe-uninitialized
+                return (u32v)_mm512_mask_rorv_epi32((__m512i)x, 0xffff, (__m512i)x, (__m512i)rot);
 #else
-            return (x >> rot) | (x << ((-rot) & 31u));
+                return (x >> rot) | (x << ((-rot) & 31u));
 #endif
-        };
-        for (size_t r = 0; r < rows; ++r) {
-            for (int v = 0; v < vecs; ++v) {
-                u64v s1 = s[v] * mult + inc;
+            };
+            for (int v = 0; v < kVecsDrawn; ++v) {
+                u64v s1 = s_[v] * mult + inc;
                 // Lane i = (output(s) << 32) | output(s1): low word from s1, high from s.
 #if defined(__AVX512F__)
-                u32v hi = output(s[v]), lo = output(s1);
+                u32v hi = output(s_[v]), lo = output(s1);
                 u64v pair = (u64v)__builtin_shufflevector(lo, hi, 0, 16, 2, 18, 4, 20, 6, 22, 8, 24, 10, 26, 12, 28, 14, 30);
 #elif defined(__AVX2__)
                 // AVX2 has no 32-bit rotate.  With x copied into both words of a lane (one
@@ -166,13 +177,13 @@ class LaneGenerator {
                     return (__m256i)_mm256_shuffle_epi32((__m256i)(((old >> 18u) ^ old) >> 27u), 0xa0);
                 };
                 __m256i lo = _mm256_srlv_epi64(doubled(s1), (__m256i)(s1 >> 59u));
-                __m256i hi = _mm256_sllv_epi64(doubled(s[v]), (__m256i)(32u - (s[v] >> 59u)));
+                __m256i hi = _mm256_sllv_epi64(doubled(s_[v]), (__m256i)(32u - (s_[v] >> 59u)));
                 u64v pair = (u64v)_mm256_blend_epi32(lo, hi, 0xaa);
 #else
-                u32v hi = output(s[v]), lo = output(s1);
+                u32v hi = output(s_[v]), lo = output(s1);
                 u64v pair = ((u64v)hi << 32u) | (((u64v)lo << 32u) >> 32u);
 #endif
-                s[v] = s1 * jm + jp;
+                s_[v] = s1 * jm + jp;
                 u64v bits = exponent | (pair >> 12u);
                 f64v d;
                 std::memcpy(&d, &bits, sizeof d);
@@ -184,11 +195,32 @@ class LaneGenerator {
 #else
                 d = (d - offset) * 0x1p-52;
 #endif
-                std::memcpy(out + r * (kLanes / stride) + v * kVec, &d, sizeof d);
+                std::memcpy(out + v * kVec, &d, sizeof d);
             }
         }
-        std::memcpy(lanes, s, sizeof s);
-        for (int l = 0; l < vecs * kVec; ++l) state_[l * stride] = lanes[l];
+
+      private:
+        typedef uint64_t u64v __attribute__((vector_size(8 * kVec)));
+        typedef uint32_t u32v __attribute__((vector_size(8 * kVec)));
+        typedef double f64v __attribute__((vector_size(8 * kVec)));
+        LaneGenerator &g_;
+        u64v s_[kVecsDrawn];
+    };
+    static constexpr int kEvensPerRow = Rows<true>::kPerRow;
+
+    // The odd lanes' states moved on by `rows` rows at once (fill_even's second half).
+    void skip_odd(size_t rows) {
+        const LcgJump j = lcg_jump(2 * kLanes * uint64_t(rows), inc_);
+        for (int l = 1; l < kLanes; l += 2) state_[l] = j.mult * state_[l] + j.plus;
+    }
+
+  private:
+    // fill, or with `even` the even lanes' part of it (their states advanced, the odd ones'
+    // left), row by row through Rows.
+    template <bool even>
+    void fill_lanes(double *out, size_t rows) {
+        Rows<even> draw(*this);
+        for (size_t r = 0; r < rows; ++r) draw.next(out + r * Rows<even>::kPerRow);
     }
 
     uint64_t state_[kLanes];
@@ -233,6 +265,9 @@ class UniformStream {
             next();
         }
     }
+    // The generator itself, for a caller drawing whole rows from it where the stream is
+    // row-aligned (LaneGenerator::even_row); the stream stays row-aligned.
+    LaneGenerator &rows() { return gen_; }
     // Where the stream stands (row-aligned), and back there: the same uniforms again.
     LaneGenerator position() const { return gen_; }
     void rewind(const LaneGenerator &at) {

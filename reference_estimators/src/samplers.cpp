@@ -34,6 +34,9 @@ bool Sampler::sample_valid(const double *u, double *x, double *p, size_t n) cons
 size_t Sampler::sample_polar(const double *, size_t, double *, double *, size_t) const {
     throw std::logic_error("sampler '" + name + "' draws no polar part alone (not a polar direction sampler)");
 }
+size_t Sampler::sample_polar_rows(LaneGenerator &, size_t, double *, double *) const {
+    throw std::logic_error("sampler '" + name + "' draws no polar part alone (not a polar direction sampler)");
+}
 void Sampler::pdf_polar(const double *, double *, size_t) const {
     throw std::logic_error("sampler '" + name + "' has no polar pdf (not a polar direction sampler)");
 }
@@ -160,6 +163,28 @@ class Directional : public Pointwise<D> {
             p[i] = self().density(z[i]);
             count += !(polar_in(z[i]) && valid_pdf(p[i]));
         }
+        return count;
+    }
+    size_t sample_polar_rows(LaneGenerator &gen, size_t rows, double *z, double *p) const override {
+        constexpr size_t W = simd::kWidth, R = LaneGenerator::kEvensPerRow;
+        static_assert(R % W == 0, "a generator row holds whole vectors of u0");
+        alignas(64) double u[R];
+        simd::i64v bad = {};
+        {
+        LaneGenerator::Rows<true> draw(gen);
+        for (size_t r = 0; r < rows; ++r, z += R, p += R) {
+            draw.next(u);
+            for (size_t i = 0; i < R; i += W) {
+                const simd::f64v zv = self().cos_theta(simd::load(u + i)), pv = self().density(zv);
+                simd::store(z + i, zv);
+                simd::store(p + i, pv);
+                bad += (polar_in(zv) & valid_pdf(pv)) ? simd::i64v{} : simd::i64v{} + 1;
+            }
+        }
+        }   // the even lanes' states written back
+        gen.skip_odd(rows);
+        size_t count = 0;
+        for (size_t l = 0; l < W; ++l) count += size_t(bad[l]);
         return count;
     }
     void pdf_polar(const double *z, double *p, size_t n) const override {
