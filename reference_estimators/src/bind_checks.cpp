@@ -136,8 +136,8 @@ void bind_checks(nb::module_ &m) {
         OutArray wa = new_array(n, 3, &out);
         {
             nb::gil_scoped_release g;
-            // each row from that row alone: chunks of 2^14 rows (a cubature call maps 2^16) on all threads
-            for_chunks(n, size_t(1) << 14, [&](size_t, size_t a, size_t e, int) {
+            // each row from that row alone: chunks on all threads
+            for_chunks(n, kCubatureChunk, [&](size_t, size_t a, size_t e, int) {
                 cap_to_world(h.data(), a, e, axis.data(), t.data(), b.data(), cos_alpha, scale, out);
             });
         }
@@ -154,9 +154,8 @@ void bind_checks(nb::module_ &m) {
         auto oa = new_bool_array(n, &ok);
         {
             nb::gil_scoped_release g;
-            // rows on all threads in chunks of 2^14 (a pdf call of the cubature is 2^16 rows);
-            // each row's result is its own
-            for_chunks(n, size_t(1) << 14, [&](size_t, size_t a, size_t b, int) {
+            // each row's result is its own: chunks on all threads
+            for_chunks(n, kCubatureChunk, [&](size_t, size_t a, size_t b, int) {
                 float32_unit_rows(x.data(), a, b, n, slack, cols, ok);
             });
         }
@@ -198,16 +197,16 @@ void bind_checks(nb::module_ &m) {
         OutArray xa = new_array(boxes * per, pdim == 1 ? 0 : size_t(pdim), &x);
         {
             nb::gil_scoped_release r;
-            // each box's points from that box alone: chunks of boxes on all threads (quarter
-            // chunks: a cubature's blocks of 2^16 nodes would otherwise run on one)
-            for_chunks(boxes, std::max<size_t>(kCheckChunk / 4 / per, 1), [&](size_t, size_t a, size_t b, int) {
+            // each box's points from that box alone: chunks of boxes on all threads
+            for_chunks(boxes, std::max<size_t>(kCubatureChunk / per, 1), [&](size_t, size_t a, size_t b, int) {
                 thread_local std::vector<double> scratch;
                 double *out = x + a * per * size_t(pdim);
                 cubature_points(d, dlo, dhi, lo.data() + a * k, hi.data() + a * k, b - a, k, nodes.data(), g, out,
                                 scratch);
                 if (permute)   // the chunk's rows, still in cache: numpy's x[:, columns] cost a copy
                     for (size_t i = 0; i < (b - a) * per; ++i) {
-                        double *row = out + i * size_t(pdim), was[3] = {row[0], row[1], row[2]};
+                        double *row = out + i * size_t(pdim), was[3];
+                        std::copy(row, row + pdim, was);
                         for (int j = 0; j < pdim; ++j) row[j] = was[columns[size_t(j)]];
                     }
             });

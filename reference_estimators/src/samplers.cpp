@@ -145,19 +145,13 @@ class Directional : public Pointwise<D> {
         simd::map3(x, p, n, [this](auto w0, auto w1, auto w2) { return pdf_v(w0, w1, w2); });
     }
     // The polar part alone (Sampler::sample_polar): D's cos_theta(u0), sample()'s w2, and its
-    // density, screened in the lanes as sample_lanes screens.
+    // density, screened in the lanes as sample_lanes screens (polar_lanes).
     size_t sample_polar(const double *u, size_t stride, double *z, double *p, size_t n) const override {
         constexpr size_t W = simd::kWidth;
         simd::i64v bad = {};
         size_t i = 0;
-        for (; i + W <= n; i += W) {
-            const simd::f64v zv = self().cos_theta(simd::load_strided(u + i * stride, stride)), pv = self().density(zv);
-            simd::store(z + i, zv);
-            simd::store(p + i, pv);
-            bad += (polar_in(zv) & valid_pdf(pv)) ? simd::i64v{} : simd::i64v{} + 1;
-        }
-        size_t count = 0;
-        for (size_t l = 0; l < W; ++l) count += size_t(bad[l]);
+        for (; i + W <= n; i += W) polar_lanes(simd::load_strided(u + i * stride, stride), z + i, p + i, bad);
+        size_t count = lanes_set(bad);
         for (; i < n; ++i) {
             z[i] = self().cos_theta(u[i * stride]);
             p[i] = self().density(z[i]);
@@ -171,21 +165,14 @@ class Directional : public Pointwise<D> {
         alignas(64) double u[R];
         simd::i64v bad = {};
         {
-        LaneGenerator::Rows<true> draw(gen);
-        for (size_t r = 0; r < rows; ++r, z += R, p += R) {
-            draw.next(u);
-            for (size_t i = 0; i < R; i += W) {
-                const simd::f64v zv = self().cos_theta(simd::load(u + i)), pv = self().density(zv);
-                simd::store(z + i, zv);
-                simd::store(p + i, pv);
-                bad += (polar_in(zv) & valid_pdf(pv)) ? simd::i64v{} : simd::i64v{} + 1;
+            LaneGenerator::Rows<true> draw(gen);   // the even lanes' states, written back at the end
+            for (size_t r = 0; r < rows; ++r, z += R, p += R) {
+                draw.next(u);
+                for (size_t i = 0; i < R; i += W) polar_lanes(simd::load(u + i), z + i, p + i, bad);
             }
         }
-        }   // the even lanes' states written back
         gen.skip_odd(rows);
-        size_t count = 0;
-        for (size_t l = 0; l < W; ++l) count += size_t(bad[l]);
-        return count;
+        return lanes_set(bad);
     }
     void pdf_polar(const double *z, double *p, size_t n) const override {
         simd::map(z, p, n, [this](auto zv) {
@@ -195,6 +182,20 @@ class Directional : public Pointwise<D> {
     }
   private:
     const D &self() const { return static_cast<const D &>(*this); }
+    // z and the pdf of kWidth samples from their u0, stored; bad counts, per lane, those
+    // sample_valid would reject (off the domain, or a pdf not in (0, max double])
+    RE_INLINE void polar_lanes(simd::f64v u0, double *z, double *p, simd::i64v &bad) const {
+        const simd::f64v zv = self().cos_theta(u0), pv = self().density(zv);
+        simd::store(z, zv);
+        simd::store(p, pv);
+        bad += (polar_in(zv) & valid_pdf(pv)) ? simd::i64v{} : simd::i64v{} + 1;
+    }
+    // the sum of the lanes' counts
+    static size_t lanes_set(simd::i64v count) {
+        size_t total = 0;
+        for (size_t l = 0; l < simd::kWidth; ++l) total += size_t(count[l]);
+        return total;
+    }
     // whether some direction of the domain has cosine z: z^2 - 1 within on_sphere_v's tolerance
     // above (x^2 + y^2 makes up any shortfall below)
     template <class V>
@@ -224,8 +225,7 @@ class Directional : public Pointwise<D> {
                 bad += ok ? simd::i64v{} : simd::i64v{} + 1;
             }
         }
-        size_t count = 0;
-        for (size_t l = 0; l < W; ++l) count += size_t(bad[l]);
+        size_t count = lanes_set(bad);
         for (; i < n; ++i) {
             p[i] = sample_one(u + 2 * i, x + 3 * i);
             if (screen) count += !(this->domain.contains(x + 3 * i) && valid_pdf(p[i]));

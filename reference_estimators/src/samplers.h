@@ -55,7 +55,7 @@ class Sampler {
     virtual size_t sample_polar(const double *u, size_t stride, double *z, double *pdf, size_t n) const;
     // sample_polar for rows * LaneGenerator::kEvensPerRow points whose u0 are the even-numbered
     // uniforms of the next rows generator rows (stride 1: fill_even's values), drawn from `gen`
-    // row by row as the loop uses them (LaneGenerator::even_row), the odd lanes skipped after:
+    // row by row as the loop uses them (LaneGenerator::Rows), the odd lanes skipped after:
     // the same results and the same stream position as fill_even then sample_polar, with the
     // generator's work overlapping the sampler's divisions.
     virtual size_t sample_polar_rows(LaneGenerator &gen, size_t rows, double *z, double *pdf) const;

@@ -272,6 +272,10 @@ class RosenblattTransform {
 // Points a chunk of the sampler check's batch kernels (this transform, the histogram, the
 // domain maps): fixed, so that work is cut the same way on any number of threads.
 inline constexpr size_t kCheckChunk = size_t(1) << 16;
+// Points a chunk of the kernels called once per block of the sampler check's cubature (2^16
+// nodes, one call of the user's pdf: the nodes, the cap map, float32 rounding): a quarter of
+// kCheckChunk, so that a block runs on all threads.
+inline constexpr size_t kCubatureChunk = kCheckChunk / 4;
 
 // rosenblatt: u (n, k) and strip (n,) of the points s (n, k), on all hardware threads.
 inline void rosenblatt(const PiecewiseLinearTable &marginal, const PiecewiseLinearTable *conditional,
