@@ -17,7 +17,7 @@ divided by P).  All p-values are combined by Holm.
 
 A user's sample or pdf that raises, or returns the wrong shape, is a
 :class:`~harness.usercode.UserCodeError` naming it, its input's shape and dtype, and the shape
-expected back.
+expected back (:mod:`harness.samplers.calls`).
 """
 from __future__ import annotations
 
@@ -31,6 +31,7 @@ import numpy as np
 
 import reference_estimators as rest
 
+from harness.samplers.calls import checked_pdf, drawn_points
 from harness.samplers.cramer_von_mises import cramer_von_mises_from_sums
 from harness.samplers.cubature import cell_integrals, rounding_floor
 from harness.samplers.domains import Domain, MomentColumns, ParamDensity, as_domain, checked_breaks
@@ -39,7 +40,6 @@ from harness.samplers.result import SamplerCheck
 from harness.samplers.transform import STRIPS, Transform
 from harness.stats import distributions, holm
 from harness.stats.results import Failure
-from harness.usercode import UserCodeError, array_result, call, callable_name
 
 __all__ = ["SAMPLE_CASE", "SamplerTest", "check_sampler", "check_with_missing",
            "failure_pvalue", "histogram"]
@@ -63,7 +63,7 @@ class SamplerTest:
                  sample_count: int = 1_000_000, alpha: float = 0.01, breaks: Sequence[Any] | None = None):
         self.dom = dom = as_domain(domain)
         self.breaks = breaks = checked_breaks(breaks, dom)
-        self.pdf = self.claimed_pdf = _checked_pdf(pdf)   # claimed_pdf: the pdf as given (for_total keeps it)
+        self.pdf = self.claimed_pdf = checked_pdf(pdf)   # claimed_pdf: the pdf as given (for_total keeps it)
         self.total = 1.0    # pdf = claimed_pdf / total (for_total)
         self.n = n = int(sample_count)
         if n < 1000:
@@ -431,49 +431,7 @@ def _draw(sample: Callable[[np.ndarray], Any], dom: Domain, n: int, seed: int,
     """The check's uniforms (stream ``seed``, :data:`SAMPLE_CASE`) and the points ``sample``
     draws from them."""
     u = rest.points(n, udim or dom.udim, seed=seed, case_id=SAMPLE_CASE)
-    return (u, *_drawn(sample, u, dom))
-
-
-def _drawn(sample: Callable[[np.ndarray], Any], u: np.ndarray,
-           dom: Domain) -> tuple[np.ndarray, np.ndarray | None]:
-    """The points ``sample`` draws from uniforms u, as float64 of shape (N,) on an interval
-    or (N, point_dim), and the pdf values it reported with them: a (points, pdf) tuple gives
-    both, a bare array None.  Errors name the sampler."""
-    name = callable_name(sample)
-    n = u.shape[0]
-    want = (n,) if dom.point_dim == 1 else (n, dom.point_dim)
-    out = call(sample, name, u, what=f"points of shape {want} on the {dom.kind}")
-    x = array_result(out[0] if isinstance(out, tuple) else out, None, name, f"uniforms of shape {u.shape}")
-    if x.size != n * dom.point_dim:
-        raise UserCodeError(f"{name} returned points of shape {x.shape} for uniforms of shape {u.shape}; "
-                            f"expected shape {want} on the {dom.kind}")
-    reported = None
-    if isinstance(out, tuple) and len(out) >= 2 and out[1] is not None:
-        reported = array_result(out[1], None, name, f"uniforms of shape {u.shape}")
-        if reported.size != n:
-            raise UserCodeError(f"{name} returned {reported.size} pdf values with {n} points for uniforms of "
-                                f"shape {u.shape}; expected one pdf value per point")
-        reported = reported.reshape(n)
-    return x.reshape(want), reported
-
-
-def _checked_pdf(pdf: Callable[[np.ndarray], Any]) -> Callable[[np.ndarray], np.ndarray]:
-    """pdf, returning float64 of shape (N,) for N points; errors name it and the input."""
-    if getattr(pdf, "_checked", False):
-        return pdf
-    name = callable_name(pdf)
-
-    def checked(x: np.ndarray) -> np.ndarray:
-        n = x.shape[0]
-        p = call(pdf, name, x, what=f"densities of shape ({n},)")
-        a = array_result(p, None, name, f"points of shape {x.shape}")
-        if a.size != n:
-            raise UserCodeError(f"{name} returned shape {a.shape} for points of shape {x.shape}, {x.dtype}; "
-                                f"expected shape ({n},), one density per point")
-        return a.reshape(n)
-
-    checked._checked = True
-    return checked
+    return (u, *drawn_points(sample, u, dom))
 
 
 def histogram(s: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:

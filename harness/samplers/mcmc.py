@@ -44,7 +44,8 @@ from scipy import special, stats
 
 import reference_estimators as rest
 
-from harness.samplers.check import _checked_pdf, _drawn, histogram
+from harness.samplers.calls import checked_pdf, drawn_points
+from harness.samplers.check import histogram
 from harness.samplers.domains import Domain, as_domain
 from harness.samplers.reported import reported_pdf_failure
 from harness.samplers.result import SamplerCheck
@@ -133,13 +134,13 @@ def mcmc_crosscheck(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.ndarr
     nw = int(walkers) if walkers is not None else 2 * int(np.clip(-(-n // 64), 16, 256))
     if nw < 8 or nw % 2:
         raise ValueError(f"'walkers' must be an even number >= 8, got {walkers!r}")
-    pdf = _checked_pdf(pdf)
+    pdf = checked_pdf(pdf)
     rng = np.random.default_rng([seed, MCMC_CASE])
     log_q, bad_count = _log_target(pdf, dom)
 
     # the sampler's points first: a user error surfaces before the chain runs
     u = rest.points(n, udim or dom.udim, seed=seed, case_id=MCMC_CASE)
-    x, reported = _drawn(sample, u, dom)
+    x, reported = drawn_points(sample, u, dom)
     failures, s, missing = _sampler_failures(x, reported, u, pdf, dom)
 
     explore = _Chain(emcee, log_q, dom.k, nw, rng, [(_stretch_move(emcee, log_q), STRETCH),

@@ -12,7 +12,7 @@ from scipy import stats
 import reference_estimators as rest
 
 from harness.samplers import DOMAINS, Domain, mcmc_crosscheck
-from harness.samplers.check import _checked_pdf
+from harness.samplers.calls import checked_pdf
 from harness.samplers.mcmc import _Chain, _FrozenProposal, _log_target
 from harness.usercode import UserCodeError
 
@@ -46,7 +46,7 @@ def test_the_chains_target_has_the_right_jacobian_on_every_domain(kind):
     pdfs = {"interval": lambda x: 2 * x, "half_line": EXPO.pdf, "square": lambda x: 4 * x[:, 0] * x[:, 1],
             "disk": lambda x: np.full(len(x), 1 / math.pi), "hemisphere": COS.pdf,
             "sphere": lambda w: np.full(len(w), 0.25 / math.pi)}
-    pdf = _checked_pdf(pdfs[kind])
+    pdf = checked_pdf(pdfs[kind])
     log_q, bad = _log_target(pdf, dom)
     s = np.random.default_rng(0).uniform(0.05, 0.95, (200, dom.k))
     np.testing.assert_allclose(log_q(s) - np.log(pdf(dom.to_points(s))), np.log(_numerical_jacobian(dom, s)),
