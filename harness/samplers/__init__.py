@@ -2,7 +2,9 @@
 
 Domains and their equal-measure maps (``domains``), adaptive cubature of the claimed pdf over
 many cells at once (``cubature``), the chi-square check with its deterministic pre-checks and
-marginal and moment tests (``check``) and its outcome (``result``), the emcee cross-check
+marginal and moment tests (``check``) and its outcome (``result``), the Rosenblatt transform's
+tests below the bin width (``transform``) and their CDF tables (``cdf_tables``), the user's
+sample and pdf called with their results checked (``calls``), the emcee cross-check
 (``mcmc``), and the zoo of correct and wrong samplers (``zoo``).  ``mcmc_crosscheck`` loads on
 first use (it imports emcee and scipy.stats).
 """

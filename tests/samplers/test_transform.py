@@ -13,10 +13,12 @@ from scipy import stats
 
 import reference_estimators as rest
 
+import harness.samplers.cdf_tables as cdf_tables
 from harness.samplers import SamplerTest, as_domain, zoo
+from harness.samplers.cdf_tables import _interpolation_bound, _split
 from harness.samplers.check import SAMPLE_CASE
 from harness.samplers.cramer_von_mises import cramer_von_mises, cramer_von_mises_from_sums, cvm_sf
-from harness.samplers.transform import STRIPS, Transform, _interpolation_bound, _split
+from harness.samplers.transform import STRIPS, Transform
 
 
 @pytest.mark.parametrize("w2, p", [(0.347, 0.10), (0.461, 0.05), (0.581, 0.025), (0.743, 0.01),
@@ -86,7 +88,7 @@ def _marginal_with(monkeypatch, coarse: int, q) -> tuple:
 
     monkeypatch.setattr(tr, "_COARSE_PIECES", coarse)
     calls = []
-    tabulate = getattr(tr._tabulate, "__wrapped__", tr._tabulate)   # not an earlier call's wrapper
+    tabulate = getattr(tr.tabulate, "__wrapped__", tr.tabulate)   # not an earlier call's wrapper
 
     def marginal_only(q, k, axis, *args, **kwargs):
         if axis == 0:
@@ -101,7 +103,7 @@ def _marginal_with(monkeypatch, coarse: int, q) -> tuple:
         return q(sp)
 
     marginal_only.__wrapped__ = tabulate
-    monkeypatch.setattr(tr, "_tabulate", marginal_only)
+    monkeypatch.setattr(tr, "tabulate", marginal_only)
     return Transform.build(q, 2, 1_000_000).marginal, sum(calls)
 
 
@@ -186,13 +188,12 @@ def test_graded_cuts_keep_the_halved_tables_leaves_for_fewer_pdf_calls(monkeypat
     halving spends reaching _MIN_WIDTH at each end (a pass each, the singular box refined to the
     cubature's depth limit again each time), and keep the same leaves: a quarter's integral is
     its own boxes' whatever level made it, so the table is the halved one's bit for bit."""
-    import harness.samplers.transform as tr
 
     def arcsine(sp):
         return 1 / (math.pi * np.sqrt(sp[:, 0] * (1 - sp[:, 0])))
 
     graded, graded_calls = _marginal_with(monkeypatch, 4, arcsine)
-    monkeypatch.setattr(tr, "_GRADED", math.inf)
+    monkeypatch.setattr(cdf_tables, "_GRADED", math.inf)
     halved, halved_calls = _marginal_with(monkeypatch, 4, arcsine)
     # 2.6 -> 2.1 million calls (with the fine pieces throughout, 12.7 -> 8.5)
     assert graded_calls <= halved_calls / 1.2, (graded_calls, halved_calls)
@@ -204,7 +205,6 @@ def test_a_light_lobe_at_the_end_gets_finer_graded_leaves_within_their_bound(mon
     """A lobe at s = 0 holding 3e-5 of the mass: graded cuts make leaves at the end that halving
     would have stopped short of (its leaf [0, w/2) was fine already), so the table differs from
     the halved one: finer, with a bound as small or smaller, and within it of the exact CDF."""
-    import harness.samplers.transform as tr
 
     def lobe(sp):
         return 1 + 30 * np.exp(-sp[:, 0] / 1e-6)
@@ -213,7 +213,7 @@ def test_a_light_lobe_at_the_end_gets_finer_graded_leaves_within_their_bound(mon
         return (x + 30e-6 * -np.expm1(-x / 1e-6)) / (1 + 30e-6)
 
     graded = Transform.build(lobe, 1, 1_000_000).marginal
-    monkeypatch.setattr(tr, "_GRADED", math.inf)
+    monkeypatch.setattr(cdf_tables, "_GRADED", math.inf)
     halved = Transform.build(lobe, 1, 1_000_000).marginal
     assert graded.lo.size > halved.lo.size and graded.error <= halved.error   # 4144 and 4136 leaves
     for table in (graded, halved):
@@ -302,9 +302,8 @@ def test_a_tabulation_over_its_evaluation_budget_stops_within_its_bound(monkeypa
     keeps the cubature refining; with the budget cut to 2 million pdf calls the tabulation
     stops there, and the marginal it gives is still within its (larger) bound of the exact
     CDF, the disk's segment area left of s0."""
-    import harness.samplers.transform as tr
 
-    monkeypatch.setattr(tr, "_MAX_TABLE_EVALS", 2_000_000)
+    monkeypatch.setattr(cdf_tables, "_MAX_TABLE_EVALS", 2_000_000)
     r = 0.3
     calls = []
 
@@ -315,7 +314,7 @@ def test_a_tabulation_over_its_evaluation_budget_stops_within_its_bound(monkeypa
     t = Transform.build(q, 2, 1_000_000)
     # the budget, then at most one round of box integrals (_MAX_EVALS) past it, per table
     # (without the cut: 60 million)
-    assert sum(calls) <= 2 * (2_000_000 + tr._MAX_EVALS)
+    assert sum(calls) <= 2 * (2_000_000 + cdf_tables._MAX_EVALS)
     x = np.linspace(0.2, 0.8, 2001)
     d = np.clip((x - 0.5) / r, -1, 1)
     exact = (np.arccos(-d) * r * r - (-d) * r * r * np.sqrt(1 - d * d)) / (math.pi * r * r)
@@ -345,9 +344,9 @@ def test_a_tabulation_stops_refining_once_its_cubature_error_leaves_the_tests_no
     n = 1_000_000
     stopped, refined = [], []
     t = Transform.build(checkerboard(stopped), 2, n)
-    tabulate = tr._tabulate
+    tabulate = tr.tabulate
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(tr, "_tabulate", lambda *a, **k: tabulate(*a, **{**k, "useless": math.inf}))
+        mp.setattr(tr, "tabulate", lambda *a, **k: tabulate(*a, **{**k, "useless": math.inf}))
         t_on = Transform.build(checkerboard(refined), 2, n)
     assert sum(stopped) < sum(refined) / 4
     assert min(t_on.marginal.error, t_on.conditional.error) > 1 / math.sqrt(n)
@@ -372,7 +371,7 @@ def test_once_a_strip_stops_with_a_useless_bound_the_others_stop_refining_to_eps
     c, s = math.cos(0.5), math.sin(0.5)
 
     axis = [0]
-    tabulate = tr._tabulate
+    tabulate = tr.tabulate
 
     def tabulate_axis(*args, **kw):   # args[2]: the axis tabulated (1: the conditional)
         axis[0] = args[2]
@@ -390,9 +389,9 @@ def test_once_a_strip_stops_with_a_useless_bound_the_others_stop_refining_to_eps
     n = 1_000_000
     calls, refined = [], []
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(tr, "_tabulate", tabulate_axis)
+        mp.setattr(tr, "tabulate", tabulate_axis)
         t = Transform.build(rough(calls), 2, n)
-        mp.setattr(tr, "_settled_bound", lambda bound, mass: 0.0)   # every strip refines to eps
+        mp.setattr(cdf_tables, "_settled_bound", lambda bound, mass: 0.0)   # every strip refines to eps
         t_on = Transform.build(rough(refined), 2, n)
     assert t.conditional.error > 1 / math.sqrt(n)
     assert t.conditional.error == pytest.approx(t_on.conditional.error, rel=1e-6)
