@@ -1,0 +1,218 @@
+// The sampler check's domains (harness/samplers/domains.py) as batch kernels: their
+// equal-measure parameter maps both ways (domain_params, domain_points), the cap map of the
+// Mitsuba adapter's area lights (cap_to_world), and the finite rows of a point array.
+#pragma once
+
+#include <cmath>
+#include <cstddef>
+
+#include "fastmath.h"
+
+namespace re {
+
+// The sampling domains of the sampler check, in the order of harness.samplers.domains.DOMAINS.
+enum class CheckDomain : int { interval = 0, half_line = 1, square = 2, disk = 3, hemisphere = 4, sphere = 5 };
+
+inline int domain_param_dim(CheckDomain d) { return d == CheckDomain::interval || d == CheckDomain::half_line ? 1 : 2; }
+inline int domain_point_dim(CheckDomain d) {
+    switch (d) {
+        case CheckDomain::interval:
+        case CheckDomain::half_line: return 1;
+        case CheckDomain::square:
+        case CheckDomain::disk: return 2;
+        default: return 3;
+    }
+}
+
+// s[2 i + 1] = the azimuth in turns of (x[stride i], x[stride i + 1]), for n points: whole
+// vectors of fastmath's atan2_turns, then the scalar tail (the same bits).
+inline void azimuths(const double *x, size_t stride, size_t n, double *s) {
+    constexpr size_t W = simd::kWidth;
+    size_t i = 0;
+    for (; i + W <= n; i += W) {
+        simd::f64v a, b;
+        for (size_t w = 0; w < W; ++w) {
+            a[w] = x[stride * (i + w)];
+            b[w] = x[stride * (i + w) + 1];
+        }
+        const simd::f64v turns = fm::atan2_turns(b, a);
+        for (size_t w = 0; w < W; ++w) s[2 * (i + w) + 1] = turns[w];
+    }
+    for (; i < n; ++i) s[2 * i + 1] = fm::atan2_turns(x[stride * i + 1], x[stride * i]);
+}
+
+// Parameters s (n, k) of points x (n, point_dim) and whether each lies inside the domain:
+// the equal-measure maps of harness/samplers/domains.py (see there).  Unit vectors count as
+// inside when their squared norm is within 1e-5 of 1 (float32 renderers); a non-finite
+// point is outside (its s may be NaN).
+inline void domain_params(CheckDomain d, double lo, double hi, const double *x, size_t n, double *s,
+                          bool *inside) {
+    switch (d) {
+        case CheckDomain::interval:
+            for (size_t i = 0; i < n; ++i) {
+                const double v = x[i];
+                s[i] = (v - lo) / (hi - lo);
+                inside[i] = std::isfinite(v) && v >= lo && v <= hi;
+            }
+            return;
+        case CheckDomain::half_line:
+            for (size_t i = 0; i < n; ++i) {
+                const double v = x[i];
+                s[i] = v / (1.0 + v);
+                inside[i] = std::isfinite(v) && v >= 0;
+            }
+            return;
+        case CheckDomain::square:
+            for (size_t i = 0; i < n; ++i) {
+                const double a = x[2 * i], b = x[2 * i + 1];
+                s[2 * i] = a;
+                s[2 * i + 1] = b;
+                inside[i] = std::isfinite(a) && std::isfinite(b) && a >= 0 && a <= 1 && b >= 0 && b <= 1;
+            }
+            return;
+        case CheckDomain::disk:
+            for (size_t i = 0; i < n; ++i) {
+                const double a = x[2 * i], b = x[2 * i + 1];
+                const double r2 = a * a + b * b;
+                s[2 * i] = r2;
+                inside[i] = std::isfinite(a) && std::isfinite(b) && r2 <= 1 + 1e-12;
+            }
+            azimuths(x, 2, n, s);
+            return;
+        case CheckDomain::hemisphere:
+        case CheckDomain::sphere: {
+            const bool hemi = d == CheckDomain::hemisphere;
+            for (size_t i = 0; i < n; ++i) {
+                const double a = x[3 * i], b = x[3 * i + 1], c = x[3 * i + 2];
+                const double norm = a * a + b * b + c * c;
+                const bool ok = std::isfinite(a) && std::isfinite(b) && std::isfinite(c) && std::fabs(norm - 1) <= 1e-5;
+                const double z = c < -1 ? -1.0 : (c > 1 ? 1.0 : c);  // NaN passes
+                s[2 * i] = hemi ? z : (1 - z) / 2;
+                inside[i] = hemi ? ok && c >= -1e-12 : ok;
+            }
+            azimuths(x, 3, n, s);
+            return;
+        }
+    }
+}
+
+// World directions out (n, 3) of the points h (n, 3) of the hemisphere through the
+// equal-area map of the cap {d : <d, axis> >= cos_alpha} (harness/adapters/mitsuba/cap.py,
+// Cap.to_world; frame t, b, axis orthonormal, scale = 1 - cos_alpha): h normalised, then
+// c = clamp(cos_alpha + z scale, -1, 1) along the axis and the azimuth's cosine and sine as
+// x / r and y / r, r = sqrt(x^2 + y^2) (the pole r = 0 at azimuth 0).  A point below the
+// horizon maps outside the cap; NaN rows give NaN.  Rows a .. b - 1, kWidth at a time in
+// vector lanes (the same bits as one at a time): a cubature of an area light maps some 70
+// million nodes, where libm's hypot and a scalar loop had cost 35 ns a node.
+template <class D>
+RE_INLINE void cap_point(D p0, D p1, D p2, const double *axis, const double *t, const double *b, double cos_alpha,
+                         double scale, D &o0, D &o1, D &o2) {
+    const D len = simd::sqrt(p0 * p0 + p1 * p1 + p2 * p2);
+    const D x = p0 / len, y = p1 / len, z = p2 / len;
+    D c = cos_alpha + z * scale;
+    c = c < -1.0 ? D{} - 1.0 : (c > 1.0 ? D{} + 1.0 : c);  // NaN passes
+    const D r = simd::sqrt(x * x + y * y), w = 1.0 - c * c;
+    const auto pole = r == 0.0;
+    const D s = simd::sqrt(0.0 < w ? w : D{}) / (pole ? D{} + 1.0 : r);   // std::max(0, w): NaN -> 0
+    const D cos_phi = pole ? s : s * x, sin_phi = pole ? D{} : s * y;
+    o0 = cos_phi * t[0] + sin_phi * b[0] + c * axis[0];
+    o1 = cos_phi * t[1] + sin_phi * b[1] + c * axis[1];
+    o2 = cos_phi * t[2] + sin_phi * b[2] + c * axis[2];
+}
+
+inline void cap_to_world(const double *h, size_t a, size_t b, const double *axis, const double *t, const double *bv,
+                         double cos_alpha, double scale, double *out) {
+    constexpr size_t W = simd::kWidth;
+    size_t i = a;
+    for (; i + W <= b; i += W) {
+        simd::f64v p0, p1, p2, o0, o1, o2;
+        simd::load3(h + 3 * i, p0, p1, p2);
+        cap_point(p0, p1, p2, axis, t, bv, cos_alpha, scale, o0, o1, o2);
+        simd::store3(out + 3 * i, o0, o1, o2);
+    }
+    for (; i < b; ++i)
+        cap_point(h[3 * i], h[3 * i + 1], h[3 * i + 2], axis, t, bv, cos_alpha, scale, out[3 * i], out[3 * i + 1],
+                  out[3 * i + 2]);
+}
+
+// Whether each of the rows a .. b - 1 of x (rows of k values) is finite in every value: ok[i].
+// numpy's all(isfinite(x), axis=1) reduces along the short axis at 15 ns a row.
+inline void finite_rows(const double *x, size_t a, size_t b, size_t k, bool *ok) {
+    for (size_t i = a; i < b; ++i) {
+        bool finite = true;
+        for (size_t j = 0; j < k; ++j) finite &= std::isfinite(x[i * k + j]);
+        ok[i] = finite;
+    }
+}
+
+// Points x (n, point_dim; n values on the interval and half line) of parameters s (n, k):
+// the inverse maps of domain_params, in numpy's order of operations except the azimuth's
+// cosine and sine, which are fastmath's sincos_2pi of s1 (exact argument reduction; numpy's
+// cos(2 pi s1) rounds 2 pi s1 first): the same points to rounding.
+// One point on the disk (k = 2 coordinates out) or the (hemi)sphere (3 out) from its
+// parameters, for double or simd::f64v lanes.
+template <class D>
+RE_INLINE void disk_point(D s0, D s1, D *x) {
+    const D r = simd::sqrt(s0);
+    D sn, cs;
+    fm::sincos_2pi(s1, sn, cs);
+    x[0] = r * cs;
+    x[1] = r * sn;
+}
+template <class D>
+RE_INLINE void sphere_point(bool hemi, D s0, D s1, D *x) {
+    const D z = hemi ? s0 : 1 - 2 * s0;
+    const D w = 1 - z * z;
+    const D r = simd::sqrt(w > 0 ? w : D{});
+    D sn, cs;
+    fm::sincos_2pi(s1, sn, cs);
+    x[0] = r * cs;
+    x[1] = r * sn;
+    x[2] = z;
+}
+
+// point(s0, s1, out) for every parameter pair of s (n, 2) into x (n, m): kWidth points at a
+// time through the vector lanes (the azimuth's sincos is most of the work), the tail in
+// scalars; the same bits either way.
+template <int M, class Point>
+RE_INLINE void map_pairs(const double *s, size_t n, double *x, Point point) {
+    using simd::f64v;
+    constexpr size_t W = simd::kWidth;
+    size_t i = 0;
+    for (; i + W <= n; i += W) {
+        f64v s0, s1, out[M];
+        for (size_t w = 0; w < W; ++w) {
+            s0[w] = s[2 * (i + w)];
+            s1[w] = s[2 * (i + w) + 1];
+        }
+        point(s0, s1, out);
+        for (size_t w = 0; w < W; ++w)
+            for (int j = 0; j < M; ++j) x[M * (i + w) + j] = out[j][w];
+    }
+    for (; i < n; ++i) point(s[2 * i], s[2 * i + 1], x + M * i);
+}
+
+inline void domain_points(CheckDomain d, double lo, double hi, const double *s, size_t n, double *x) {
+    switch (d) {
+        case CheckDomain::interval:
+            for (size_t i = 0; i < n; ++i) x[i] = lo + (hi - lo) * s[i];
+            return;
+        case CheckDomain::half_line:
+            for (size_t i = 0; i < n; ++i) x[i] = s[i] / (1.0 - s[i]);
+            return;
+        case CheckDomain::square:
+            std::copy(s, s + 2 * n, x);
+            return;
+        case CheckDomain::disk:
+            map_pairs<2>(s, n, x, [](auto s0, auto s1, auto *out) { disk_point(s0, s1, out); });
+            return;
+        case CheckDomain::hemisphere:
+        case CheckDomain::sphere: {
+            const bool hemi = d == CheckDomain::hemisphere;
+            map_pairs<3>(s, n, x, [hemi](auto s0, auto s1, auto *out) { sphere_point(hemi, s0, s1, out); });
+            return;
+        }
+    }
+}
+
+}  // namespace re
