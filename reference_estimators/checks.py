@@ -1,7 +1,7 @@
-"""The sampler check's batch kernels (src/checks.h): the work of harness.samplers.check that
-is not the user's sample and pdf calls (domain maps, histograms, cubature nodes, the
-Rosenblatt transform, Cramer-von Mises sums, the pdf's screening), each one pass over numpy
-arrays in C++.
+"""The sampler check's batch kernels (src/checks.h and the src/check_*.h it includes): the
+work of harness.samplers.check that is not the user's sample and pdf calls (domain maps,
+histograms, cubature nodes, the Rosenblatt transform, Cramer-von Mises sums, the pdf's
+screening), each one pass over numpy arrays in C++.
 """
 from __future__ import annotations
 
