@@ -41,6 +41,10 @@ struct RunOptions {
     bool tail_median = false;
 };
 
+// The stages of a block's contributions after its uniforms, in order (StageTimes):
+// profile_stages stops after each in turn.
+enum class Stage { Sampled, Screened, Weighted, Contributions };
+
 // Wall seconds of each prefix of integrate()'s pipeline, each run over the same chunks on the
 // same threads: the point set alone (0 for rejection samplers, which draw inside the
 // sampler); for the techniques that draw points from samplers (importance, uniform on a

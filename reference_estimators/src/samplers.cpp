@@ -4,6 +4,7 @@
 #include <cmath>
 #include <sstream>
 
+#include "direction_samplers.h"
 #include "integrands.h"
 #include "piecewise_tables.h"
 #include "sampling.h"
@@ -66,27 +67,6 @@ std::string Sampler::describe() const {
 
 namespace {
 
-// Batch loops over the scalar triples of sampling.h; D supplies sample_one/pdf_one/invert_one.
-template <class D>
-class Pointwise : public Sampler {
-  public:
-    void sample(const double *u, double *x, double *p, size_t n) const override {
-        const D &d = static_cast<const D &>(*this);
-        const int ud = udim, xd = domain.dim;
-        for (size_t i = 0; i < n; ++i) p[i] = d.sample_one(u + i * ud, x + i * xd);
-    }
-    void pdf(const double *x, double *p, size_t n) const override {
-        const D &d = static_cast<const D &>(*this);
-        const int xd = domain.dim;
-        for (size_t i = 0; i < n; ++i) p[i] = d.pdf_one(x + i * xd);
-    }
-    void invert(const double *x, double *u, size_t n) const override {
-        const D &d = static_cast<const D &>(*this);
-        const int ud = udim, xd = domain.dim;
-        for (size_t i = 0; i < n; ++i) d.invert_one(x + i * xd, u + i * ud);
-    }
-};
-
 // One-dimensional inversion samplers (one uniform to one coordinate), vectorised: D supplies
 // point(u) and density(x), templates over double and simd::f64v (the same bits lane by lane);
 // the batch loops run them on kWidth samples at a time and the scalar tail on one.  The
@@ -112,126 +92,6 @@ class Interval1D : public Pointwise<D> {
     }
   private:
     const D &self() const { return static_cast<const D &>(*this); }
-};
-
-// Direction samplers (u in [0,1)^2 to unit vectors), vectorised: D supplies draw(u0, u1, w0,
-// w1, w2) and density(z) (the pdf at a direction of cosine z inside the support), templates
-// over double and simd::f64v (the same bits lane by lane); the batch loops run them on kWidth
-// samples at a time, the point's (x, y, z) gathered into and scattered from vector lanes, and
-// the scalar tail and the scalar triple on one.  The per-sample scalar loop was a third of
-// drjit's speed on ggx_lobe.  pdf is 0 off the sphere (off the hemisphere when `hemisphere`).
-template <class D, bool hemisphere>
-class Directional : public Pointwise<D> {
-  public:
-    Directional() { this->polar = true; }   // every one's pdf is density(z)
-    template <class V>
-    V sample_v(V u0, V u1, V &w0, V &w1, V &w2) const {
-        self().draw(u0, u1, w0, w1, w2);
-        return self().density(w2);
-    }
-    template <class V>
-    V pdf_v(V w0, V w1, V w2) const {
-        auto in = on_sphere_v(w0, w1, w2);
-        if (hemisphere) in &= w2 >= V{};
-        return in ? self().density(w2) : V{};
-    }
-    double sample_one(const double *u, double *w) const { return sample_v(u[0], u[1], w[0], w[1], w[2]); }
-    double pdf_one(const double *w) const { return pdf_v(w[0], w[1], w[2]); }
-    void sample(const double *u, double *x, double *p, size_t n) const override { sample_lanes<false>(u, x, p, n); }
-    bool sample_valid(const double *u, double *x, double *p, size_t n) const override {
-        return sample_lanes<true>(u, x, p, n) == 0;
-    }
-    void pdf(const double *x, double *p, size_t n) const override {
-        simd::map3(x, p, n, [this](auto w0, auto w1, auto w2) { return pdf_v(w0, w1, w2); });
-    }
-    // The polar part alone (Sampler::sample_polar): D's cos_theta(u0), sample()'s w2, and its
-    // density, screened in the lanes as sample_lanes screens (polar_lanes).
-    size_t sample_polar(const double *u, size_t stride, double *z, double *p, size_t n) const override {
-        constexpr size_t W = simd::kWidth;
-        simd::i64v bad = {};
-        size_t i = 0;
-        for (; i + W <= n; i += W) polar_lanes(simd::load_strided(u + i * stride, stride), z + i, p + i, bad);
-        size_t count = lanes_set(bad);
-        for (; i < n; ++i) {
-            z[i] = self().cos_theta(u[i * stride]);
-            p[i] = self().density(z[i]);
-            count += !(polar_in(z[i]) && valid_pdf(p[i]));
-        }
-        return count;
-    }
-    size_t sample_polar_rows(LaneGenerator &gen, size_t rows, double *z, double *p) const override {
-        constexpr size_t W = simd::kWidth, R = LaneGenerator::kEvensPerRow;
-        static_assert(R % W == 0, "a generator row holds whole vectors of u0");
-        alignas(64) double u[R];
-        simd::i64v bad = {};
-        {
-            LaneGenerator::Rows<true> draw(gen);   // the even lanes' states, written back at the end
-            for (size_t r = 0; r < rows; ++r, z += R, p += R) {
-                draw.next(u);
-                for (size_t i = 0; i < R; i += W) polar_lanes(simd::load(u + i), z + i, p + i, bad);
-            }
-        }
-        gen.skip_odd(rows);
-        return lanes_set(bad);
-    }
-    void pdf_polar(const double *z, double *p, size_t n) const override {
-        simd::map(z, p, n, [this](auto zv) {
-            using V = decltype(zv);
-            return polar_in(zv) ? self().density(zv) : V{};
-        });
-    }
-  private:
-    const D &self() const { return static_cast<const D &>(*this); }
-    // z and the pdf of kWidth samples from their u0, stored; bad counts, per lane, those
-    // sample_valid would reject (off the domain, or a pdf not in (0, max double])
-    RE_INLINE void polar_lanes(simd::f64v u0, double *z, double *p, simd::i64v &bad) const {
-        const simd::f64v zv = self().cos_theta(u0), pv = self().density(zv);
-        simd::store(z, zv);
-        simd::store(p, pv);
-        bad += (polar_in(zv) & valid_pdf(pv)) ? simd::i64v{} : simd::i64v{} + 1;
-    }
-    // the sum of the lanes' counts
-    static size_t lanes_set(simd::i64v count) {
-        size_t total = 0;
-        for (size_t l = 0; l < simd::kWidth; ++l) total += size_t(count[l]);
-        return total;
-    }
-    // whether some direction of the domain has cosine z: z^2 - 1 within on_sphere_v's tolerance
-    // above (x^2 + y^2 makes up any shortfall below)
-    template <class V>
-    static auto polar_in(V z) {
-        auto in = (z * z - 1.0 <= kUnitTolerance);
-        if (hemisphere) in &= z >= V{};
-        return in;
-    }
-    // sample(), kWidth directions at a time; with `screen`, also the number of them off the
-    // domain or with a pdf not in (0, max double], counted in the lanes before they are
-    // stored (the tests of Domain::count_outside and count_invalid_pdfs: a separate pass
-    // reloading and transposing the block was 15 % of an importance estimate's time).
-    template <bool screen>
-    size_t sample_lanes(const double *u, double *x, double *p, size_t n) const {
-        constexpr size_t W = simd::kWidth;
-        simd::i64v bad = {};
-        size_t i = 0;
-        for (; i + W <= n; i += W) {
-            simd::f64v u0, u1, w0, w1, w2;
-            simd::deinterleave(u + 2 * i, u0, u1);
-            const simd::f64v pv = sample_v(u0, u1, w0, w1, w2);
-            simd::store(p + i, pv);
-            simd::store3(x + 3 * i, w0, w1, w2);
-            if (screen) {
-                auto ok = on_sphere_v(w0, w1, w2) & valid_pdf(pv);
-                if (hemisphere) ok &= w2 >= 0.0;
-                bad += ok ? simd::i64v{} : simd::i64v{} + 1;
-            }
-        }
-        size_t count = lanes_set(bad);
-        for (; i < n; ++i) {
-            p[i] = sample_one(u + 2 * i, x + 3 * i);
-            if (screen) count += !(this->domain.contains(x + 3 * i) && valid_pdf(p[i]));
-        }
-        return count;
-    }
 };
 
 class UniformBox final : public Pointwise<UniformBox> {
@@ -338,99 +198,6 @@ class TrimmedLogistic final : public Interval1D<TrimmedLogistic> {
     void invert_one(const double *x, double *u) const { u[0] = invert_trimmed_logistic(x[0], mu_, s_, a_, b_); }
   private:
     double mu_, s_, a_, b_;
-};
-
-class UniformHemisphere final : public Directional<UniformHemisphere, true> {
-  public:
-    UniformHemisphere() { name = "uniform_hemisphere"; domain = Domain::hemisphere(); udim = 2; }
-    template <class V>
-    void draw(V u0, V u1, V &w0, V &w1, V &w2) const { sample_uniform_hemisphere(u0, u1, w0, w1, w2); }
-    template <class V>
-    V cos_theta(V u0) const { return uniform_hemisphere_cos(u0); }
-    template <class V>
-    V density(V z) const { return uniform_hemisphere_pdf(z); }
-    void invert_one(const double *w, double *u) const {
-        bool in = domain.contains(w);
-        u[0] = in ? w[2] : kNaN;
-        u[1] = in ? azimuth_fraction(w) : kNaN;
-    }
-};
-
-class UniformSphere final : public Directional<UniformSphere, false> {
-  public:
-    UniformSphere() { name = "uniform_sphere"; domain = Domain::sphere(); udim = 2; }
-    template <class V>
-    void draw(V u0, V u1, V &w0, V &w1, V &w2) const { sample_uniform_sphere(u0, u1, w0, w1, w2); }
-    template <class V>
-    V cos_theta(V u0) const { return uniform_sphere_cos(u0); }
-    template <class V>
-    V density(V z) const { return uniform_sphere_pdf(z); }
-    void invert_one(const double *w, double *u) const {
-        bool in = domain.contains(w);
-        u[0] = in ? (1 - w[2]) / 2 : kNaN;
-        u[1] = in ? azimuth_fraction(w) : kNaN;
-    }
-};
-
-class CosineHemisphere final : public Directional<CosineHemisphere, true> {
-  public:
-    CosineHemisphere() { name = "cosine_hemisphere"; domain = Domain::hemisphere(); udim = 2; }
-    template <class V>
-    void draw(V u0, V u1, V &w0, V &w1, V &w2) const { sample_cosine_hemisphere(u0, u1, w0, w1, w2); }
-    template <class V>
-    V cos_theta(V u0) const { return cosine_hemisphere_cos(u0); }
-    template <class V>
-    V density(V z) const { return cosine_hemisphere_pdf(z); }
-    void invert_one(const double *w, double *u) const {
-        bool in = domain.contains(w);
-        u[0] = in ? w[0] * w[0] + w[1] * w[1] : kNaN;
-        u[1] = in ? azimuth_fraction(w) : kNaN;
-    }
-};
-
-class UniformCone final : public Directional<UniformCone, false> {
-  public:
-    explicit UniformCone(double cos_max) : c_(cos_max) {
-        name = "uniform_cone"; params = {{"cos_max", cos_max}}; domain = Domain::sphere(); udim = 2;
-    }
-    template <class V>
-    void draw(V u0, V u1, V &w0, V &w1, V &w2) const { sample_uniform_cone(u0, u1, c_, w0, w1, w2); }
-    template <class V>
-    V cos_theta(V u0) const { return uniform_cone_cos(u0, c_); }
-    template <class V>
-    V density(V z) const { return uniform_cone_pdf(z, c_); }
-    void invert_one(const double *w, double *u) const {
-        bool in = domain.contains(w) && w[2] >= c_;
-        u[0] = in ? (1 - w[2]) / (1 - c_) : kNaN;
-        u[1] = in ? azimuth_fraction(w) : kNaN;
-    }
-  private:
-    double c_;
-};
-
-class Ggx final : public Directional<Ggx, true> {
-  public:
-    explicit Ggx(double alpha) : a_(alpha) {
-        name = "ggx";
-        params = {{"alpha", alpha}};
-        domain = Domain::hemisphere();
-        udim = 2;
-        polar_function = ggx_pdf_name(alpha);
-    }
-    template <class V>
-    void draw(V u0, V u1, V &w0, V &w1, V &w2) const { sample_ggx(u0, u1, a_, w0, w1, w2); }
-    template <class V>
-    V cos_theta(V u0) const { return ggx_cos(u0, a_); }
-    template <class V>
-    V density(V z) const { return ggx_pdf(z, a_); }
-    void invert_one(const double *w, double *u) const {
-        bool in = domain.contains(w) && w[2] > 0;
-        double t2 = (w[0] * w[0] + w[1] * w[1]) / (w[2] * w[2]), a2 = a_ * a_;
-        u[0] = in ? t2 / (a2 + t2) : kNaN;
-        u[1] = in ? azimuth_fraction(w) : kNaN;
-    }
-  private:
-    double a_;
 };
 
 // pbrt-v4's PiecewiseConstant1D over [a, b]: one CDF table (PiecewiseTables), sampled by inversion.

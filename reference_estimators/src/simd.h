@@ -66,6 +66,13 @@ RE_INLINE f64v load_strided(const double *p, size_t stride) {
     return v;
 }
 
+// The sum of the lanes of a vector of counts.
+RE_INLINE size_t lane_total(i64v count) {
+    size_t total = 0;
+    for (size_t l = 0; l < kWidth; ++l) total += size_t(count[l]);
+    return total;
+}
+
 RE_INLINE uint64_t bits(double d) { uint64_t b; std::memcpy(&b, &d, 8); return b; }
 RE_INLINE u64v bits(f64v v) { return (u64v)v; }
 RE_INLINE double from_bits(uint64_t b) { double d; std::memcpy(&d, &b, 8); return d; }

@@ -10,6 +10,10 @@ import pytest
 import reference_estimators as rest
 
 N = rest.CHUNK_SIZE + 4099     # a partial chunk and a partial block, the scalar tails included
+# a partial block of 13 generator rows of an MIS pair's 8 samples: the fused pair's loop that
+# draws its rows inside, an odd count for its rows drawn ahead (not whole rows of importance
+# sampling's 16 samples: its block draws first)
+N_ROWS = rest.CHUNK_SIZE + 2048 + 104
 
 # (integrand, technique, the samplers it draws from with their parameters)
 CASES = [
@@ -28,6 +32,15 @@ CASES = [
     ("ggx_lobe", "mis_power:ggx(0.02)+cosine_hemisphere",
      [("ggx", {"alpha": 0.02}), ("cosine_hemisphere", {})]),
     ("ggx_lobe", "importance:ggx(0.02)", [("ggx", {"alpha": 0.02})]),
+    # MIS pairs whose f is one sampler's pdf run in one fused loop (polar_mis.cpp), whatever
+    # direction sampler the other is: a hemisphere, a sphere (half its points where f is 0), a
+    # cone, GGX of another roughness
+    ("ggx_lobe", "mis_balance:uniform_hemisphere+ggx",
+     [("uniform_hemisphere", {}), ("ggx", {"alpha": 0.01})]),
+    ("ggx_lobe", "mis_power:uniform_sphere+ggx", [("uniform_sphere", {}), ("ggx", {"alpha": 0.01})]),
+    ("ggx_lobe", "mis_balance:ggx+uniform_cone",
+     [("ggx", {"alpha": 0.01}), ("uniform_cone", {"cos_max": 0.5})]),
+    ("ggx_lobe", "mis_power:ggx(0.3)+ggx", [("ggx", {"alpha": 0.3}), ("ggx", {"alpha": 0.01})]),
 ]
 
 
@@ -40,20 +53,20 @@ def technique(f: str, name: str, samplers: list):
     return rest.importance(ss[0]) if len(ss) == 1 else rest.mis(ss, "power" if "power" in name else "balance")
 
 
-def general_contributions(f: str, name: str, samplers: list, power: float, **keys) -> np.ndarray:
+def general_contributions(f: str, name: str, samplers: list, power: float, n: int, **keys) -> np.ndarray:
     """The contributions computed as the general path does, from whole points: the samplers'
     sample() and pdf() and the integrand's eval() on the uniforms the estimate consumes."""
     kind = "sobol" if name.endswith("/sobol") else "random"
-    u = rest.points(N, 2 * len(samplers), kind, **keys)
+    u = rest.points(n, 2 * len(samplers), kind, **keys)
     fi = rest.integrand(f)
     ss = [rest.sampler(name, **params) for name, params in samplers]
     if len(ss) == 1:
         x, p = ss[0].sample(u)
         return fi.eval(x) / p
-    y = np.zeros(N)
+    y = np.zeros(n)
     for a, sa in enumerate(ss):
         x, p = sa.sample(u[:, 2 * a:2 * a + 2])
-        w = np.zeros(N)
+        w = np.zeros(n)
         for b, sb in enumerate(ss):
             w += (p if b == a else sb.pdf(x)) ** power
         fx = fi.eval(x)
@@ -62,15 +75,16 @@ def general_contributions(f: str, name: str, samplers: list, power: float, **key
     return y
 
 
+@pytest.mark.parametrize("n", [N, N_ROWS], ids=["tail", "rows"])
 @pytest.mark.parametrize("f, name, samplers", CASES, ids=[f"{c[0]}-{c[1]}" for c in CASES])
-def test_polar_path_gives_the_general_paths_bits(f, name, samplers):
+def test_polar_path_gives_the_general_paths_bits(f, name, samplers, n):
     keys = dict(seed=7, case_id=3, replica=1)
     power = 2.0 if name.startswith("mis_power") else 1.0
     t = technique(f, name, samplers)
-    y = rest.contributions(f, t, N, threads=2, **keys)
-    np.testing.assert_array_equal(y, general_contributions(f, name, samplers, power, **keys))
-    e = rest.integrate(f, t, N, threads=2, **keys)
-    assert e.n == N and e.ok
+    y = rest.contributions(f, t, n, threads=2, **keys)
+    np.testing.assert_array_equal(y, general_contributions(f, name, samplers, power, n, **keys))
+    e = rest.integrate(f, t, n, threads=2, **keys)
+    assert e.n == n and e.ok
     assert e.mean == rest.accumulate(y).mean
 
 
@@ -99,6 +113,23 @@ def test_an_mis_block_with_bad_pdfs_is_reported_with_whole_points():
     for example in e.examples:
         np.testing.assert_array_equal(example["point"], x[example["index"]])
     assert np.isnan(rest.contributions("ggx_lobe", t, 3000, seed=4)).all()
+
+
+def test_a_fused_mis_block_with_bad_pdfs_goes_back_to_the_general_path():
+    """GGX at alpha = 1e200 draws z = 0 with pdf 0 (alpha^2 overflows) and x, y NaN: paired
+    with GGX at the lobe's alpha, whose pdf is f, every block of the fused loop fails its
+    screening and goes back to the general path, which drops every sample for its point outside
+    the domain, names that direction, and gives the contributions NaN, as for any technique."""
+    bad = rest.sampler("ggx", alpha=1e200)
+    t = rest.mis([rest.sampler("ggx", alpha=0.01), bad], "power")
+    u = rest.points(N_ROWS, 4, seed=4)
+    x, _ = bad.sample(u[:, 2:])
+    e = rest.integrate("ggx_lobe", t, N_ROWS, seed=4, threads=2)
+    assert e.counts["outside_domain"] == N_ROWS and e.n == 0
+    assert e.examples
+    for example in e.examples:
+        np.testing.assert_array_equal(example["point"], x[example["index"]])
+    assert np.isnan(rest.contributions("ggx_lobe", t, N_ROWS, seed=4)).all()
 
 
 def test_which_integrands_and_samplers_take_the_polar_path():
