@@ -38,7 +38,11 @@ the uniforms it reads (each sampler's u0, the even-numbered ones of its stream; 
 sampling inside the sampler's loop, a generator row at a time, so that PCG32's
 multiplications overlap the sampler's divisions as in drjit's fused loop) and computes
 f once where it is a sampler's pdf (the GGX lobe and GGX's pdf: Sampler.polar_function), as
-drjit's tracer leaves out what nothing reads and merges equal expressions.
+drjit's tracer leaves out what nothing reads and merges equal expressions.  An MIS pair whose
+f is one sampler's pdf runs in one loop (polar_mis.cpp): both techniques' draws, pdfs, weights
+and terms in registers, each generator row's cosines drawn a row ahead of its terms.  The
+"core path" lines name the path each row took (Estimate.kernel) and the blocks that went back
+to the general path (Estimate.redone_blocks: 0 for these samplers).
 Not in the peers: the core's screening of points, pdfs and contributions and its higher
 moments (these samplers never produce a point the core would exclude).
 
@@ -65,7 +69,8 @@ accumulation), each prefix timed alone, so a stage near 0 can come out slightly 
 a noisy machine (on the polar path, ggx_lobe's rows, the samplers screen z and the pdf in their
 own pass: the screening stage is in the sampling one and reads 0; and importance sampling
 draws its u0s in that pass too, so its sampling stage is what the pass adds to drawing them
-alone, less than the two apart); drjit's are its uniforms
+alone, less than the two apart; the MIS pair's prefixes are its one loop stopped early, so
+its stages are what each part adds to that loop); drjit's are its uniforms
 (a kernel that draws and sums them) and the rest of its whole kernel.
 
     .venv/bin/python benchmarks/hot_paths.py [--samples 2e7] [--repeat 3] [--no-drjit]
@@ -547,6 +552,16 @@ def print_throughput(n: int, seconds: dict[Row, dict[str, float]]) -> None:
               + column(ratio[0], ".2f", 13, "x") + column(ratio[1], ".2f", 14, "x"))
 
 
+def print_kernels(results: dict[Row, dict[str, Any]]) -> None:
+    """The path each row's estimate took through the core (Estimate.kernel) and how many of
+    its blocks went back to the general path (a core without these fields: '?')."""
+    print("\ncore path (two threads; blocks redone on the general path):")
+    for row, r in results.items():
+        e = r["core 2"]
+        print(f"  {row.integrand:10s} {row.technique:46s} {getattr(e, 'kernel', '?') or '?':34s} "
+              f"{getattr(e, 'redone_blocks', '?')}")
+
+
 def print_estimates(rest: Any, n: int, results: dict[Row, dict[str, Any]]) -> None:
     print(f"\nestimates (n = {n:.3g}){'':25s}{'core':>19s}{'stderr':>11s}{'numpy':>19s}{'drjit':>19s}")
     for integrand in dict.fromkeys(row.integrand for row in results):
@@ -665,6 +680,7 @@ def main() -> None:
     for row in ROWS:
         seconds[row], results[row] = time_row(rest, row, table, n, repeat, drjit)
     print_throughput(n, seconds)
+    print_kernels(results)
     print_estimates(rest, n, results)
     print_stages(rest, n, repeat, drjit, table)
 

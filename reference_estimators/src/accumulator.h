@@ -258,6 +258,9 @@ struct Diagnostics {
     uint64_t counts[kIssueKinds] = {0};
     uint64_t drawn = 0;        // samples drawn (finite or not)
     uint64_t candidates = 0;   // rejection: candidates tried
+    // blocks an estimator's fast path (Estimate::kernel) handed back to the general path,
+    // which reports what it found there: a speed diagnostic, not stored with a state
+    uint64_t redone_blocks = 0;
     std::vector<Example> examples;
 
     size_t examples_of(Issue kind) const {
@@ -290,6 +293,7 @@ struct Diagnostics {
         }
         drawn += b.drawn;
         candidates += b.candidates;
+        redone_blocks += b.redone_blocks;
     }
 };
 

@@ -1,6 +1,7 @@
 // Bindings of accumulator states (their dicts, merges and accumulation of given values) and of
 // the contributions' tails and extremes (extremes.h).  A state dict holds every field of the
 // accumulator, so a state read back merges to exactly the bits a fresh computation gives.
+#include <nanobind/stl/string.h>
 #include <nanobind/stl/vector.h>
 
 #include <cmath>
@@ -38,6 +39,7 @@ nb::dict diagnostics_dict(const Diagnostics &d) {
     r["examples"] = examples;
     r["drawn"] = d.drawn;
     r["candidates"] = d.candidates;
+    r["redone_blocks"] = d.redone_blocks;
     return r;
 }
 
@@ -62,6 +64,7 @@ nb::dict estimate_dict(const Estimate &e) {
     r["chunks"] = e.chunks;
     r["threads"] = e.threads;
     r["busy"] = nb::tuple(nb::cast(e.busy));
+    r["kernel"] = e.kernel;
     return r;
 }
 

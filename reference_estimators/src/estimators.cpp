@@ -115,6 +115,16 @@ struct Kernel {
         points.key = key;
     }
     Scratch scratch() const { return Scratch(ud, xd, t.evaluations()); }
+    // The path blocks take (Estimate::kernel), where nothing hands them back: the general
+    // path; the polar path, its uniforms drawn first and its stages in passes; importance
+    // sampling on it with the u0s drawn in the sampler's loop (rows_drawn_in_sampler, for
+    // blocks of whole generator rows); an MIS pair on it in one loop (fused).
+    std::string path() const {
+        if (!polar) return "general";
+        if (fused) return "polar: MIS pair in one loop";
+        if (evens && t.kind != TechniqueKind::Mis) return "polar: u0s drawn in the sampler";
+        return "polar";
+    }
 };
 
 // The block's uniforms u[m * ud] (fill_points), or on a polar path reading u0 alone
@@ -416,6 +426,7 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
             if (last < Stage::Contributions) return 0;
             break;
         } else {
+            diag.redone_blocks += k.polar;
             all_uniforms();
             if (last == Stage::Sampled) {  // the profile's prefix: the points alone, unchecked
                 smp.sample(s.u.data(), s.x.data(), s.p.data(), m);
@@ -503,6 +514,7 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
             if (last < Stage::Contributions) return 0;
             break;
         }
+        diag.redone_blocks += k.polar;
         all_uniforms();
         std::fill(s.y.begin(), s.y.begin() + m, 0.0);
         std::fill(s.drop.begin(), s.drop.begin() + m, 0);
@@ -663,6 +675,7 @@ Estimate integrate(const Integrand &f, const Technique &t, uint64_t n, const Run
     });
     if (!chunk_tails.empty() && opt.tail_median) chunk_tails[0].median = upper_median(first_chunk.data(), first_chunk.size());
     if (tails) e.tails = merge_tails(chunk_tails, opt.tail_keep);
+    e.kernel = k.path();
     return e;
 }
 
@@ -797,6 +810,7 @@ Estimate merge_estimates(const std::vector<Estimate> &parts) {
         e.seconds += p.seconds;
         e.chunks += p.chunks;
         e.threads = std::max(e.threads, p.threads);
+        if (e.kernel.empty()) e.kernel = p.kernel;
         if (e.busy.size() < p.busy.size()) e.busy.resize(p.busy.size(), 0.0);
         for (size_t w = 0; w < p.busy.size(); ++w) e.busy[w] += p.busy[w];
     }

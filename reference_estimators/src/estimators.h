@@ -4,6 +4,7 @@
 #pragma once
 #include <cstdint>
 #include <limits>
+#include <string>
 #include <vector>
 
 #include "accumulator.h"
@@ -23,6 +24,9 @@ struct Estimate {
     uint64_t chunks = 0;
     int threads = 1;
     ValueTails tails;         // with RunOptions::tail_keep > 0: the finite contributions' tails
+    // integrate()'s path for the integrand and technique (estimators.cpp's Kernel::path:
+    // "general", or one of the polar path's); empty elsewhere
+    std::string kernel;
 };
 
 struct RunOptions {

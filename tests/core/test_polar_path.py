@@ -75,6 +75,24 @@ def general_contributions(f: str, name: str, samplers: list, power: float, n: in
     return y
 
 
+# the path each case's blocks take (Estimate.kernel)
+PATHS = {
+    "importance:ggx": "polar: u0s drawn in the sampler",
+    "importance:cosine_hemisphere": "polar: u0s drawn in the sampler",
+    "uniform": "polar: u0s drawn in the sampler",
+    "importance:cosine_hemisphere/sobol": "polar",                 # no generator rows to draw
+    "mis_balance:cosine_hemisphere+ggx": "polar: MIS pair in one loop",
+    "mis_power:cosine_hemisphere+ggx": "polar: MIS pair in one loop",
+    "mis_balance:ggx+cosine_hemisphere": "polar: MIS pair in one loop",
+    "mis_power:ggx(0.02)+cosine_hemisphere": "polar",              # f is neither sampler's pdf
+    "importance:ggx(0.02)": "polar: u0s drawn in the sampler",
+    "mis_balance:uniform_hemisphere+ggx": "polar: MIS pair in one loop",
+    "mis_power:uniform_sphere+ggx": "polar: MIS pair in one loop",
+    "mis_balance:ggx+uniform_cone": "polar: MIS pair in one loop",
+    "mis_power:ggx(0.3)+ggx": "polar: MIS pair in one loop",
+}
+
+
 @pytest.mark.parametrize("n", [N, N_ROWS], ids=["tail", "rows"])
 @pytest.mark.parametrize("f, name, samplers", CASES, ids=[f"{c[0]}-{c[1]}" for c in CASES])
 def test_polar_path_gives_the_general_paths_bits(f, name, samplers, n):
@@ -86,6 +104,7 @@ def test_polar_path_gives_the_general_paths_bits(f, name, samplers, n):
     e = rest.integrate(f, t, n, threads=2, **keys)
     assert e.n == n and e.ok
     assert e.mean == rest.accumulate(y).mean
+    assert (e.kernel, e.redone_blocks) == (PATHS[name], 0)
 
 
 def test_a_block_with_bad_pdfs_is_reported_with_whole_points():
@@ -95,6 +114,7 @@ def test_a_block_with_bad_pdfs_is_reported_with_whole_points():
     u = rest.points(3000, 2, seed=2)
     x, _ = s.sample(u)
     e = rest.integrate("ggx_lobe", rest.importance(s), 3000, seed=2)
+    assert (e.kernel, e.redone_blocks) == ("polar: u0s drawn in the sampler", 2)
     assert e.counts["bad_pdf"] == 3000 and e.n == 0
     for example in e.examples:
         assert example["issue"] == "bad_pdf" and len(example["point"]) == 3
@@ -125,6 +145,8 @@ def test_a_fused_mis_block_with_bad_pdfs_goes_back_to_the_general_path():
     u = rest.points(N_ROWS, 4, seed=4)
     x, _ = bad.sample(u[:, 2:])
     e = rest.integrate("ggx_lobe", t, N_ROWS, seed=4, threads=2)
+    blocks = 32 + 2     # of the whole chunk, of the partial one (2048 + 104 samples)
+    assert (e.kernel, e.redone_blocks) == ("polar: MIS pair in one loop", blocks)
     assert e.counts["outside_domain"] == N_ROWS and e.n == 0
     assert e.examples
     for example in e.examples:
@@ -144,6 +166,9 @@ def test_which_integrands_and_samplers_take_the_polar_path():
     assert polar_samplers == directions
     assert not any(rest.sampler(t, table=np.ones((2, 2)) if t.endswith("2d") else np.ones(2)).polar
                    for t in tables)
+    for f, t in [("gaussian2d", "mis_balance:uniform_box+piecewise_constant_2d"), ("gaussian", "uniform"),
+                 ("gaussian", "rejection")]:
+        assert rest.integrate(f, t, 5000).kernel == "general"
 
 
 def test_which_pdfs_are_the_integrand():
