@@ -101,9 +101,10 @@ struct CramerVonMisesSum {
 // C, `slack` is the sum of the C bounds doubled: about n / (2 K^2) <= 1.2e-4 for uniform
 // values, against a statistic whose 1 % point is 0.74.  Two passes over u (count, then sum),
 // where a radix sort took five and twice the time.  The second pass sums in blocks of 1024
-// terms, the block sums compensated; it reads the values in order, so the result is the same
-// on any thread.  NaN (both) if any u is NaN.  32-bit counts (the table at K = 2^16 fits in
-// L2: 1.4x faster than 64-bit ones): at most 2^32 - 1 values.
+// terms, the block sums compensated in order, so the result is the same on any thread count.
+// Both passes run on the thread pool (so not to be called from inside one of its jobs).  NaN
+// (both) if any u is NaN.  32-bit counts (the table at K = 2^16 fits in L2: 1.4x faster than
+// 64-bit ones): at most 2^32 - 1 values.
 inline CramerVonMisesSum cramer_von_mises_sum(const double *u, size_t stride, size_t n) {
     constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
     if (n == 0) return {0.0, 0.0};
@@ -117,39 +118,60 @@ inline CramerVonMisesSum cramer_von_mises_sum(const double *u, size_t stride, si
         const double f = v * scale;  // exact: K is a power of two, so cell edges are b / K exactly
         return f < scale ? int64_t(f) : K - 1;
     };
-    thread_local std::vector<uint32_t> first;  // per cell its count, then the rank before it
-    first.assign(size_t(K) + 1, 0);
-    for (size_t i = 0; i < n; ++i) {
-        const double v = u[i * stride];
-        if (v != v) return {kNaN, kNaN};
-        ++first[size_t(cell(clamped(v)))];
-    }
+    // both passes on all threads in fixed chunks (kCheckChunk: whole blocks of the sums below):
+    // the counts merged, the block sums added in order after, so the same bits on any thread
+    // count as one thread's loop (a column on one thread had left the other idle in a 1-D check)
+    const size_t chunks = (n + kCheckChunk - 1) / kCheckChunk;
+    static_assert(kCheckChunk % 1024 == 0, "a chunk holds whole blocks of the sums");
+    std::vector<uint32_t *> tables(size_t(ThreadPool::default_threads()), nullptr);   // a worker's counts
+    std::vector<unsigned char> nan_in(chunks, 0);
+    for_chunks(n, kCheckChunk, [&](size_t c, size_t a, size_t b, int worker) {
+        uint32_t *&table = tables[size_t(worker)];
+        if (!table) {
+            thread_local std::vector<uint32_t> own;   // kept between calls: no fresh pages
+            own.assign(size_t(K), 0);
+            table = own.data();
+        }
+        for (size_t i = a; i < b; ++i) {
+            const double v = u[i * stride];
+            if (v != v) { nan_in[c] = 1; return; }
+            ++table[size_t(cell(clamped(v)))];
+        }
+    });
+    if (std::find(nan_in.begin(), nan_in.end(), 1) != nan_in.end()) return {kNaN, kNaN};
+    thread_local std::vector<double> centres;   // per cell its values' mean c, cbar_b
+    centres.resize(size_t(K));
+    double *centre = centres.data();   // (the workers' own thread_local is another vector)
     CompensatedSum cubes, pairs;
-    uint32_t rank = 0;
+    const double twice_n = 2.0 * double(n);
+    uint32_t rank = 0;   // of the values before cell b
     for (int64_t b = 0; b < K; ++b) {
-        const uint32_t m = first[size_t(b)];
-        first[size_t(b)] = rank;
+        uint32_t m = 0;
+        for (const uint32_t *table : tables) m += table ? table[b] : 0;
+        // cbar_b = (2 r + m) / (2 n), once a cell (a division a value had cost the pass a
+        // tenth of its time)
+        centre[b] = (2.0 * double(rank) + double(m)) / twice_n;
         rank += m;
         if (m < 2) continue;
         const double md = double(m);
         cubes.add(md * (md * md - 1.0));
         pairs.add(md * (md - 1.0));
     }
-    first[size_t(K)] = rank;
-    const double twice_n = 2.0 * double(n);
-    CompensatedSum acc;
-    for (size_t a = 0; a < n; a += 1024) {
-        const size_t e = std::min(n, a + 1024);
-        double block = 0;
-        for (size_t i = a; i < e; ++i) {
-            const double v = clamped(u[i * stride]);
-            const size_t b = size_t(cell(v));
-            const uint32_t r = first[b], m = first[b + 1] - r;
-            const double d = v - (2.0 * double(r) + double(m)) / twice_n;   // cbar_b = (2 r + m) / (2 n)
-            block += d * d;
+    std::vector<double> blocks((n + 1023) / 1024);
+    for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t b, int) {
+        for (size_t s = a; s < b; s += 1024) {
+            const size_t e = std::min(b, s + 1024);
+            double block = 0;
+            for (size_t i = s; i < e; ++i) {
+                const double v = clamped(u[i * stride]);
+                const double d = v - centre[cell(v)];
+                block += d * d;
+            }
+            blocks[s / 1024] = block;
         }
-        acc.add(block);
-    }
+    });
+    CompensatedSum acc;
+    for (double block : blocks) acc.add(block);
     const double nn = double(n) * double(n);
     return {acc.value() + cubes.value() / (12.0 * nn), pairs.value() / (scale * twice_n)};
 }
@@ -162,7 +184,7 @@ inline CramerVonMisesSum cramer_von_mises_sum(const double *u, size_t stride, si
 // a NaN v counts nowhere).  u stays in this thread's scratch buffers instead of going to
 // Python with its strips: 24 MB of fresh arrays a check cost 8 ms of page faults, more than a
 // third of the transform.  Fixed chunks on all hardware threads (count_on_threads), the
-// columns' sums in parallel: the same for any thread count.
+// columns' sums one after the other, each on all threads: the same for any thread count.
 inline void transform_statistics(const PiecewiseLinearTable &marginal, const PiecewiseLinearTable *conditional,
                                  const double *edges, size_t nedges, const double *s, size_t k, size_t n,
                                  int64_t bins, CramerVonMisesSum *sums, double *counts) {
@@ -182,8 +204,7 @@ inline void transform_statistics(const PiecewiseLinearTable &marginal, const Pie
             ++cells[size_t(strip[j - a] * bins + i)];
         }
     });
-    ThreadPool::instance().run(k, ThreadPool::default_threads(),
-                               [&](size_t c, int) { sums[c] = cramer_von_mises_sum(u[c], 1, n); });
+    for (size_t c = 0; c < k; ++c) sums[c] = cramer_von_mises_sum(u[c], 1, n);
 }
 
 // The deterministic pdf checks and the pdf moment of the sampler check, in one pass over the

@@ -592,6 +592,16 @@ def test_cramer_von_mises_sum_by_column_and_nan():
     assert np.isfinite(got[0]).all() and np.isnan(got[1]).all()
 
 
+def test_cramer_von_mises_sum_over_chunks():
+    """Both passes run on the threads in chunks of 2^16 values, their counts merged: the
+    bracket of values spanning several chunks is the sorted sum's, and a NaN in the last
+    chunk alone makes it NaN."""
+    u = np.random.default_rng(12).random(CHUNKS) ** 1.01
+    assert_brackets(rest.cramer_von_mises_sum(u)[0], cvm_sum_reference(u))
+    u[-1] = np.nan
+    assert np.isnan(rest.cramer_von_mises_sum(u)[0]).all()
+
+
 @pytest.mark.parametrize("n", [N, CHUNKS])
 @pytest.mark.parametrize("kind", ["interval", "half_line", "sphere"])
 def test_pdf_summary_matches_numpy(kind, n):
