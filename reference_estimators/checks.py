@@ -190,9 +190,10 @@ def cramer_von_mises_sum(u: Any) -> np.ndarray:
 def finite_rows(x: Any) -> np.ndarray:
     """(N,) bool: whether each row of x ((N, ...), or each value of x (N,)) is finite in every
     value (numpy's all(isfinite(x), axis=1), which takes 15 ns a 3-vector).  One pass in C++
-    on all threads."""
-    a = np.ascontiguousarray(x, dtype=np.float64)
-    return _core.finite_rows(a.reshape(a.shape[0], math.prod(a.shape[1:])) if a.ndim > 1 else a)
+    on all threads; float64 (N,) and (N, k) views are read in place, whatever their strides
+    (a transposed (3, N) array as well)."""
+    a = _strided(x)
+    return _core.finite_rows(a.reshape(a.shape[0], math.prod(a.shape[1:])) if a.ndim > 2 else a)
 
 
 def all_float32(v: Any) -> bool:

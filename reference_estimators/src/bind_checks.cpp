@@ -319,17 +319,22 @@ void bind_checks(nb::module_ &m) {
         return sums;
     }, "u"_a, "For each column of u (N, k), (upper, slack) with upper >= S >= upper - slack, S = "
        "sum_i ((2 i - 1) / (2 N) - u_(i))^2 over its sorted values; NaN for a column holding a NaN.");
-    m.def("finite_rows", [](InArray x) {
+    m.def("finite_rows", [](nb::ndarray<const double, nb::device::cpu> x) {
         if (x.ndim() != 1 && x.ndim() != 2) throw nb::value_error("'x' must have shape (N,) or (N, k)");
         const size_t n = x.shape(0), k = x.ndim() == 2 ? x.shape(1) : 1;
+        const int64_t row = x.stride(0), column = x.ndim() == 2 ? x.stride(1) : 1;
+        if (row < 0 || column < 0) throw nb::value_error("'x' must not have negative strides");
         bool *ok;
         auto oa = new_bool_array(n, &ok);
         {
             nb::gil_scoped_release g;
-            for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t b, int) { finite_rows(x.data(), a, b, k, ok); });
+            for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t b, int) {
+                finite_rows(x.data(), size_t(row), size_t(column), a, b, k, ok);
+            });
         }
         return oa;
-    }, "x"_a, "(N,) bool: whether each row of x (N, k) (or value of x (N,)) is finite in every value.");
+    }, "x"_a, "(N,) bool: whether each row of x (N, k) (or value of x (N,)) is finite in every value; strided "
+       "views read in place.");
     m.def("all_float32", [](InArray v) {
         nb::gil_scoped_release g;
         return all_float32(v.data(), v.size());

@@ -313,6 +313,18 @@ def test_finite_rows_match_numpy():
     assert rest.finite_rows(np.array([[1, 2], [3, 4]], dtype=np.float32)).tolist() == [True, True]
 
 
+def test_finite_rows_read_strided_views_in_place():
+    """A renderer's (3, N) components seen as (N, 3), every other row, one column, a reversed
+    view (negative strides: copied first): the same as numpy's answer on a copy."""
+    rng = np.random.default_rng(14)
+    x = rng.normal(size=(3, CHUNKS))
+    x[rng.integers(0, 3, 500), rng.integers(0, CHUNKS, 500)] = np.nan
+    x[2, -1] = np.inf
+    for view in (x.T, x.T[::2], x.T[:, 1:], x.T[:, 2], x.T[::-1], x[:, :7].T):
+        flat = np.ascontiguousarray(view).reshape(view.shape[0], -1)
+        np.testing.assert_array_equal(rest.finite_rows(view), np.all(np.isfinite(flat), axis=1))
+
+
 # --- float32 points: detection and dithering -----------------------------------------------
 def all_float32_reference(values: np.ndarray) -> bool:
     v = np.asarray(values, dtype=float)
