@@ -23,7 +23,7 @@ wrong_catalogue(), through
 
     .venv/bin/python benchmarks/mitsuba_samplers.py [--samples 1e6] [--seed 0] [--csv out.csv]
                                                     [--only TEXT] [--group GROUP,...] [--start K]
-                                                    [--no-mitsuba]
+                                                    [--no-mitsuba] [--warm-up 16384]
 
 Columns: P is the pdf's integral over the domain (cubature, ± its error bound; in the cap's map
 for area lights); 'failed' the samples Mitsuba did not produce of n ('δ' of those sampled a
@@ -33,9 +33,12 @@ count and the largest relative difference over the weight check's draw (every pl
 0 where Mitsuba computes the reported pdf with pdf() itself); 'weight' the verdict with the
 number of mismatching weights and the largest relative difference; 'exp' whether the
 failing checks are the entry's documented ones (a real plugin: its Mitsuba finding, else
-none; a planted fault: the check of its kind); seconds for our checks (pdf cubature
-included) and for Mitsuba's test.  llvm_ad_rgb on the CPU.  The findings are in the
-catalogue's entries (``finding``) and the README.
+none; a planted fault: the check of its kind); seconds: 's ours' for check_mitsuba_sampler
+(pdf cubature and reported pdf included: the test beside Mitsuba's), 's wt' for the weight
+check, 's mi' for Mitsuba's test, each entry's checks first run untimed on --warm-up samples
+so that drjit's JIT compilation of the plugin's kernels (cached for the process) is in none
+of them (Mitsuba's test, run after ours, reuses those kernels).  llvm_ad_rgb on the CPU.
+The findings are in the catalogue's entries (``finding``) and the README.
 """
 from __future__ import annotations
 
@@ -84,14 +87,14 @@ def _row(r) -> str:
     return (f"{r['plugin'][:52]:52s} {theta:>4s} {r['domain'][:4]:4s} {r['P']:.5f}±{r['P_err']:.0e} "
             f"{r['failed']:>7d} {r['delta']:>7d} {r['pvalue']:9.2g} {r.get('adjusted', float('nan')):9.2g} "
             f"{r.get('chi2', ''):5s} {rep:18s} {weight:22s} {r.get('mitsuba', ''):5s} "
-            f"{r.get('expected', ''):3s} {r['seconds_chi2'] + r['seconds_weight']:6.1f} "
-            f"{r.get('seconds_mitsuba', float('nan')):5.1f}"
+            f"{r.get('expected', ''):3s} {r['seconds_chi2']:6.2f} {r['seconds_weight']:5.2f} "
+            f"{r.get('seconds_mitsuba', float('nan')):5.2f}"
             + (f"  {r['failures']}" if r["failures"] else "") + (f"  [{r['fault']}]" if r["fault"] else ""))
 
 
 HEADER = (f"{'plugin':52s} {'θi':>4s} {'dom':4s} {'P (pdf integral)':16s} {'failed':>7s} {'δ':>7s} {'p':>9s} "
           f"{'adj':>9s} {'chi2':5s} {'rep mism/max rel':18s} {'weight mism/max rel':22s} {'mitsu':5s} "
-          f"{'exp':3s} {'s ours':>6s} {'s mi':>5s}")
+          f"{'exp':3s} {'s ours':>6s} {'s wt':>5s} {'s mi':>5s}")
 
 
 def main() -> None:
@@ -106,6 +109,9 @@ def main() -> None:
                         help="run only real entries of these catalogue groups (comma-separated, e.g. "
                              "phase,emitter,mask) and the planted faults")
     parser.add_argument("--start", type=int, default=0, help="skip the first START entries (resume a run)")
+    parser.add_argument("--warm-up", type=int, default=16384,
+                        help="samples of an untimed first run of each entry's checks, which compiles the "
+                             "plugin's kernels (0: none; the first timed test then pays drjit's JIT)")
     parser.add_argument("--no-mitsuba", action="store_true", help="skip Mitsuba's own ChiSquareTest")
     args = parser.parse_args()
     n = int(float(args.samples))
@@ -130,7 +136,8 @@ def main() -> None:
         print(_row(row), file=sys.stderr, flush=True)
 
     print("running (unadjusted):\n" + HEADER, file=sys.stderr, flush=True)
-    table = run_catalogue(entries, sample_count=n, seed=args.seed, alpha=args.alpha, progress=progress)
+    table = run_catalogue(entries, sample_count=n, seed=args.seed, alpha=args.alpha, warm_up=args.warm_up,
+                          progress=progress)
     table["mitsuba"] = [theirs.get(label, ("", np.nan))[0] for label in table["label"]]
     table["seconds_mitsuba"] = [theirs.get(label, ("", np.nan))[1] for label in table["label"]]
     print(HEADER)
@@ -147,9 +154,13 @@ def main() -> None:
           f"{int((real['expected'] == 'yes').sum())} of {len(real)}")
     print(f"planted faults caught by their check {int((wrong['expected'] == 'yes').sum())} of {len(wrong)} "
           f"(Mitsuba's ChiSquareTest rejects {int((wrong['mitsuba'] == 'FAIL').sum())}); "
-          f"seconds per entry: ours median {np.median(table['seconds_chi2'] + table['seconds_weight']):.1f}, "
-          f"Mitsuba's median {np.nanmedian(table['seconds_mitsuba'].to_numpy(dtype=float)):.1f}; "
-          f"{time.perf_counter() - start:.0f} s in all")
+          f"seconds per entry (medians): ours {np.median(table['seconds_chi2']):.2f} (the check beside "
+          f"Mitsuba's test; the weight check {np.median(table['seconds_weight']):.2f} more), Mitsuba's "
+          f"{np.nanmedian(table['seconds_mitsuba'].to_numpy(dtype=float)):.2f}"
+          + (f", both after an untimed warm-up of {args.warm_up} samples that compiles the plugin's kernels "
+             f"({np.median(table['seconds_warm_up']):.2f})" if args.warm_up > 0 else
+             ", ours with drjit's JIT compilation of the plugin's kernels, Mitsuba's reusing them")
+          + f"; {time.perf_counter() - start:.0f} s in all")
     for _, r in real[real["finding"] != ""].iterrows():
         print(f"finding, {r['label']}: {r['finding']}")
     if args.csv:
