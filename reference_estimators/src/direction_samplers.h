@@ -56,6 +56,15 @@ class Directional : public Pointwise<D> {
     }
     double sample_one(const double *u, double *w) const { return sample_v(u[0], u[1], w[0], w[1], w[2]); }
     double pdf_one(const double *w) const { return pdf_v(w[0], w[1], w[2]); }
+    // u of the direction w: D's u0_of(w) and the azimuth's fraction of a turn, NaN outside the
+    // domain or where D's in_support(w) is false
+    void invert_one(const double *w, double *u) const {
+        const bool in = this->domain.contains(w) && self().in_support(w);
+        u[0] = in ? self().u0_of(w) : kNaN;
+        u[1] = in ? azimuth_fraction(w) : kNaN;
+    }
+    // every direction of the domain, unless D says otherwise
+    bool in_support(const double *) const { return true; }
     void sample(const double *u, double *x, double *p, size_t n) const override { sample_lanes<false>(u, x, p, n); }
     bool sample_valid(const double *u, double *x, double *p, size_t n) const override {
         return sample_lanes<true>(u, x, p, n) == 0;
@@ -161,11 +170,7 @@ class UniformHemisphere final : public Directional<UniformHemisphere, true> {
     V cos_theta(V u0) const { return uniform_hemisphere_cos(u0); }
     template <class V>
     V density(V z) const { return uniform_hemisphere_pdf(z); }
-    void invert_one(const double *w, double *u) const {
-        bool in = domain.contains(w);
-        u[0] = in ? w[2] : kNaN;
-        u[1] = in ? azimuth_fraction(w) : kNaN;
-    }
+    double u0_of(const double *w) const { return w[2]; }
 };
 
 class UniformSphere final : public Directional<UniformSphere, false> {
@@ -177,11 +182,7 @@ class UniformSphere final : public Directional<UniformSphere, false> {
     V cos_theta(V u0) const { return uniform_sphere_cos(u0); }
     template <class V>
     V density(V z) const { return uniform_sphere_pdf(z); }
-    void invert_one(const double *w, double *u) const {
-        bool in = domain.contains(w);
-        u[0] = in ? (1 - w[2]) / 2 : kNaN;
-        u[1] = in ? azimuth_fraction(w) : kNaN;
-    }
+    double u0_of(const double *w) const { return (1 - w[2]) / 2; }
 };
 
 class CosineHemisphere final : public Directional<CosineHemisphere, true> {
@@ -193,11 +194,7 @@ class CosineHemisphere final : public Directional<CosineHemisphere, true> {
     V cos_theta(V u0) const { return cosine_hemisphere_cos(u0); }
     template <class V>
     V density(V z) const { return cosine_hemisphere_pdf(z); }
-    void invert_one(const double *w, double *u) const {
-        bool in = domain.contains(w);
-        u[0] = in ? w[0] * w[0] + w[1] * w[1] : kNaN;
-        u[1] = in ? azimuth_fraction(w) : kNaN;
-    }
+    double u0_of(const double *w) const { return w[0] * w[0] + w[1] * w[1]; }
 };
 
 class UniformCone final : public Directional<UniformCone, false> {
@@ -211,11 +208,8 @@ class UniformCone final : public Directional<UniformCone, false> {
     V cos_theta(V u0) const { return uniform_cone_cos(u0, c_); }
     template <class V>
     V density(V z) const { return uniform_cone_pdf(z, c_); }
-    void invert_one(const double *w, double *u) const {
-        bool in = domain.contains(w) && w[2] >= c_;
-        u[0] = in ? (1 - w[2]) / (1 - c_) : kNaN;
-        u[1] = in ? azimuth_fraction(w) : kNaN;
-    }
+    bool in_support(const double *w) const { return w[2] >= c_; }
+    double u0_of(const double *w) const { return (1 - w[2]) / (1 - c_); }
   private:
     double c_;
 };
@@ -235,11 +229,10 @@ class Ggx final : public Directional<Ggx, true> {
     V cos_theta(V u0) const { return ggx_cos(u0, a_); }
     template <class V>
     V density(V z) const { return ggx_pdf(z, a_); }
-    void invert_one(const double *w, double *u) const {
-        bool in = domain.contains(w) && w[2] > 0;
-        double t2 = (w[0] * w[0] + w[1] * w[1]) / (w[2] * w[2]), a2 = a_ * a_;
-        u[0] = in ? t2 / (a2 + t2) : kNaN;
-        u[1] = in ? azimuth_fraction(w) : kNaN;
+    bool in_support(const double *w) const { return w[2] > 0; }
+    double u0_of(const double *w) const {
+        const double t2 = (w[0] * w[0] + w[1] * w[1]) / (w[2] * w[2]);
+        return t2 / (a_ * a_ + t2);
     }
   private:
     double a_;
