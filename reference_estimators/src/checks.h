@@ -123,15 +123,13 @@ inline CramerVonMisesSum cramer_von_mises_sum(const double *u, size_t stride, si
     // count as one thread's loop (a column on one thread had left the other idle in a 1-D check)
     const size_t chunks = (n + kCheckChunk - 1) / kCheckChunk;
     static_assert(kCheckChunk % 1024 == 0, "a chunk holds whole blocks of the sums");
-    std::vector<uint32_t *> tables(size_t(ThreadPool::default_threads()), nullptr);   // a worker's counts
+    // each worker's counts, owned by this call: the pool serves other callers between this
+    // call's jobs, so a table kept by the worker's thread could be reset under the merge below
+    std::vector<std::vector<uint32_t>> tables(size_t(ThreadPool::default_threads()));
     std::vector<unsigned char> nan_in(chunks, 0);
     for_chunks(n, kCheckChunk, [&](size_t c, size_t a, size_t b, int worker) {
-        uint32_t *&table = tables[size_t(worker)];
-        if (!table) {
-            thread_local std::vector<uint32_t> own;   // kept between calls: no fresh pages
-            own.assign(size_t(K), 0);
-            table = own.data();
-        }
+        std::vector<uint32_t> &table = tables[size_t(worker)];
+        if (table.empty()) table.assign(size_t(K), 0);
         for (size_t i = a; i < b; ++i) {
             const double v = u[i * stride];
             if (v != v) { nan_in[c] = 1; return; }
@@ -141,13 +139,13 @@ inline CramerVonMisesSum cramer_von_mises_sum(const double *u, size_t stride, si
     if (std::find(nan_in.begin(), nan_in.end(), 1) != nan_in.end()) return {kNaN, kNaN};
     thread_local std::vector<double> centres;   // per cell its values' mean c, cbar_b
     centres.resize(size_t(K));
-    double *centre = centres.data();   // (the workers' own thread_local is another vector)
+    double *centre = centres.data();   // (a worker naming centres would get its own thread's)
     CompensatedSum cubes, pairs;
     const double twice_n = 2.0 * double(n);
     uint32_t rank = 0;   // of the values before cell b
     for (int64_t b = 0; b < K; ++b) {
         uint32_t m = 0;
-        for (const uint32_t *table : tables) m += table ? table[b] : 0;
+        for (const std::vector<uint32_t> &table : tables) m += table.empty() ? 0 : table[size_t(b)];
         // cbar_b = (2 r + m) / (2 n), once a cell (a division a value had cost the pass a
         // tenth of its time)
         centre[b] = (2.0 * double(rank) + double(m)) / twice_n;

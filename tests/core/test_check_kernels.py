@@ -8,6 +8,7 @@ value but a bracket of it (no sort): its tests check that it brackets the sorted
 how tightly."""
 from __future__ import annotations
 
+import concurrent.futures
 import math
 
 import numpy as np
@@ -602,6 +603,21 @@ def test_cramer_von_mises_sum_by_column_and_nan():
     u[17, 1] = np.nan
     got = rest.cramer_von_mises_sum(u)
     assert np.isfinite(got[0]).all() and np.isnan(got[1]).all()
+
+
+def test_cramer_von_mises_sums_of_concurrent_callers_are_their_own():
+    """A suite runs sampler checks on several Python threads at once, and the core's thread
+    pool serves them in turn, between the passes of one caller's sum too: each caller's counts
+    must stay its own (worker tables kept by the pool's threads were reset under a merge: a
+    main-job check of a correct sampler failed with a statistic of 5e4)."""
+    rng = np.random.default_rng(15)
+    data = [rng.random(n) ** 1.01 for n in (CHUNKS, 2 * CHUNKS, 150_001, 3 * CHUNKS)]
+    alone = [rest.cramer_von_mises_sum(u) for u in data]
+    with concurrent.futures.ThreadPoolExecutor(max_workers=len(data)) as pool:
+        for _ in range(10):
+            together = list(pool.map(rest.cramer_von_mises_sum, data))
+            for a, b in zip(alone, together):
+                np.testing.assert_array_equal(a, b)
 
 
 def test_cramer_von_mises_sum_over_chunks():
