@@ -24,7 +24,7 @@ struct Estimate {
     uint64_t chunks = 0;
     int threads = 1;
     ValueTails tails;         // with RunOptions::tail_keep > 0: the finite contributions' tails
-    // integrate()'s path for the integrand and technique (estimators.cpp's Kernel::path:
+    // integrate()'s path for the integrand and technique (estimator_blocks.h's Kernel::path:
     // "general", or one of the polar path's); empty elsewhere
     std::string kernel;
 };

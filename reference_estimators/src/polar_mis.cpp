@@ -18,7 +18,7 @@ static_assert(kRowSamples % kLanes == 0, "scan_values' steps fall on the rows' s
 // The contributions of kW samples from their directions' cosines (z0: technique 0's, z1:
 // technique 1's), with f the pdf of technique FPdf; bad counts, per lane, the samples the
 // screening rejects.  As
-// estimators.cpp's polar_mis computes them with add_pair_terms (the same bits): technique 0's
+// estimator_blocks.cpp's polar_mis computes them with add_pair_terms (the same bits): technique 0's
 // term at its point (p0, and technique 1's pdf q1 there), technique 1's at its own (q0, p1),
 // y = (0 + term_0) + term_1.
 template <class S0, class S1, int FPdf, bool Power>

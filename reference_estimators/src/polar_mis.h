@@ -1,6 +1,6 @@
 // MIS of a pair of polar direction samplers in one loop: both techniques' draws, pdfs, weights
 // and terms per vector of samples, with the u0s drawn from the generator as the loop uses them.
-// The estimators' pass-by-pass polar path (estimators.cpp's polar_mis) stores and reloads
+// The estimators' pass-by-pass polar path (estimator_blocks.cpp's polar_mis) stores and reloads
 // every intermediate (each technique's z, its pdf, the other's pdf, f, the running sum) and
 // draws the block's uniforms first; here none of it leaves the registers, so the generator's
 // multiplications and the loads and stores overlap the divisions that bound the loop.
@@ -32,7 +32,7 @@ using FusedPairKernel = size_t (*)(const Sampler &s0, const Sampler &s1, Stage l
 
 // The fused kernel for MIS of the samplers s0 and s1 (techniques 0 and 1) with the balance
 // (beta = 1) or power (beta = 2) heuristic on an integrand equal to the pdf of technique
-// f_is_pdf (estimators.cpp's polar_pdf_equal_to_f), or null where there is none: the
+// f_is_pdf (estimator_blocks.h's polar_pdf_equal_to_f), or null where there is none: the
 // integrand then is not inlined into the loop, and the pass-by-pass path runs.  Kernels exist
 // for every pair of direction sampler types of which the one f equals has a named polar
 // function (Sampler::polar_function: GGX).
