@@ -151,9 +151,10 @@ def rosenblatt(marginal: tuple, conditional: tuple | None, edges: Any,
 
 def _strided(a: Any) -> np.ndarray:
     """a as float64, strided views kept (the core reads them in place) unless a stride is
-    negative (the core's strides are unsigned)."""
+    negative (the core's strides are unsigned) or not a whole number of values (a field of a
+    packed structured array: the core's strides count values)."""
     v = np.asarray(a, dtype=np.float64)
-    return np.ascontiguousarray(v) if any(s < 0 for s in v.strides) else v
+    return np.ascontiguousarray(v) if any(s < 0 or s % v.itemsize for s in v.strides) else v
 
 
 def transform_statistics(marginal: tuple, conditional: tuple | None, edges: Any, s: Any,

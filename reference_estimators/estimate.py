@@ -46,9 +46,10 @@ class Estimate:
     busy: tuple[float, ...] = ()  # seconds each thread spent in chunks, the calling thread first
     candidates: int = 0        # samplers' candidate draws (rejection: > drawn)
     # the estimator's path through the core ("general", or the polar path's: "polar", "polar:
-    # u0s drawn in the sampler", "polar: MIS pair in one loop"; empty for estimates not made by
-    # integrate), and the blocks of it that went back to the general path to report what they
-    # held (a speed diagnostic, not kept with a stored state)
+    # u0s drawn in the sampler", "polar: MIS pair in one loop", the last two where some block
+    # took that loop (blocks of whole generator rows: 8 or 16 samples); empty for estimates not
+    # made by integrate), and the blocks of it that went back to the general path to report
+    # what they held (a speed diagnostic, not kept with a stored state)
     kernel: str = ""
     redone_blocks: int = 0
     integrand: str | None = None

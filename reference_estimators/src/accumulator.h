@@ -261,6 +261,9 @@ struct Diagnostics {
     // blocks an estimator's fast path (Estimate::kernel) handed back to the general path,
     // which reports what it found there: a speed diagnostic, not stored with a state
     uint64_t redone_blocks = 0;
+    // blocks that drew their u0s inside the sampler's loop or an MIS pair's fused loop, handed
+    // back or not (what Estimate::kernel names; likewise not stored)
+    uint64_t inside_blocks = 0;
     std::vector<Example> examples;
 
     size_t examples_of(Issue kind) const {
@@ -294,6 +297,7 @@ struct Diagnostics {
         drawn += b.drawn;
         candidates += b.candidates;
         redone_blocks += b.redone_blocks;
+        inside_blocks += b.inside_blocks;
     }
 };
 

@@ -249,6 +249,7 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
     const bool rejection = smp.method == SamplingMethod::Rejection;
     // where the polar path hands the block back, the general path needs all of its uniforms
     const bool in_sampler = !rejection && rows_drawn_in_sampler(k, stream, m);
+    diag.inside_blocks += in_sampler;
     const std::optional<LaneGenerator> replay =
         rejection ? std::nullopt
                   : in_sampler ? std::optional<LaneGenerator>(stream.position())

@@ -110,15 +110,16 @@ struct Kernel {
         points.key = key;
     }
     Scratch scratch() const { return Scratch(ud, xd, t.evaluations()); }
-    // The path blocks take (Estimate::kernel), where nothing hands them back: the general
-    // path; the polar path, its uniforms drawn first and its stages in passes; importance
-    // sampling on it with the u0s drawn in the sampler's loop (rows_drawn_in_sampler, for
-    // blocks of whole generator rows); an MIS pair on it in one loop (fused).
-    std::string path() const {
+    // The path an estimate's blocks took (Estimate::kernel; those handed back then took the
+    // general path too: Diagnostics::redone_blocks): the general path; the polar path, its
+    // uniforms drawn first and its stages in passes; with `inside` (some block drew its u0s
+    // inside a loop: Diagnostics::inside_blocks; only blocks of whole generator rows can,
+    // rows_drawn_in_sampler) importance sampling on it with the u0s drawn in the sampler's
+    // loop, or an MIS pair on it in one loop (fused).
+    std::string path(bool inside) const {
         if (!polar) return "general";
-        if (fused) return "polar: MIS pair in one loop";
-        if (evens && t.kind != TechniqueKind::Mis) return "polar: u0s drawn in the sampler";
-        return "polar";
+        if (!inside) return "polar";
+        return fused ? "polar: MIS pair in one loop" : "polar: u0s drawn in the sampler";
     }
 };
 

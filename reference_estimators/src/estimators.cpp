@@ -88,7 +88,7 @@ Estimate integrate(const Integrand &f, const Technique &t, uint64_t n, const Run
     });
     if (!chunk_tails.empty() && opt.tail_median) chunk_tails[0].median = upper_median(first_chunk.data(), first_chunk.size());
     if (tails) e.tails = merge_tails(chunk_tails, opt.tail_keep);
-    e.kernel = k.path();
+    e.kernel = k.path(e.diagnostics.inside_blocks > 0);
     return e;
 }
 

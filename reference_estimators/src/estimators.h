@@ -24,8 +24,8 @@ struct Estimate {
     uint64_t chunks = 0;
     int threads = 1;
     ValueTails tails;         // with RunOptions::tail_keep > 0: the finite contributions' tails
-    // integrate()'s path for the integrand and technique (estimator_blocks.h's Kernel::path:
-    // "general", or one of the polar path's); empty elsewhere
+    // the path integrate()'s blocks took (estimator_blocks.h's Kernel::path: "general", or
+    // one of the polar path's, its loops named where some block took them); empty elsewhere
     std::string kernel;
 };
 

@@ -324,6 +324,11 @@ def test_finite_rows_read_strided_views_in_place():
     for view in (x.T, x.T[::2], x.T[:, 1:], x.T[:, 2], x.T[::-1], x[:, :7].T):
         flat = np.ascontiguousarray(view).reshape(view.shape[0], -1)
         np.testing.assert_array_equal(rest.finite_rows(view), np.all(np.isfinite(flat), axis=1))
+    # strides that are not whole values (fields of a packed structured array) are copied first
+    packed = np.zeros(1000, dtype=[("x", "f8", (3,)), ("flag", "i1")])
+    packed["x"][::7, 1] = np.nan
+    np.testing.assert_array_equal(rest.finite_rows(packed["x"]), np.arange(1000) % 7 != 0)
+    assert rest.cramer_von_mises_sum(packed["x"][:, 0]).shape == (1, 2)
 
 
 # --- float32 points: detection and dithering -----------------------------------------------

@@ -169,6 +169,14 @@ def test_which_integrands_and_samplers_take_the_polar_path():
     for f, t in [("gaussian2d", "mis_balance:uniform_box+piecewise_constant_2d"), ("gaussian", "uniform"),
                  ("gaussian", "rejection")]:
         assert rest.integrate(f, t, 5000).kernel == "general"
+    # too few samples for a whole generator row (8 an MIS pair's, 16 importance sampling's): no
+    # block takes the loops that draw the rows inside, and the path named is the polar passes
+    for t, n in [("mis_balance:cosine_hemisphere+ggx", 7), ("importance:ggx", 15)]:
+        e = rest.integrate("ggx_lobe", t, n)
+        assert (e.kernel, e.redone_blocks) == ("polar", 0)
+    for t, n, path in [("mis_balance:cosine_hemisphere+ggx", 8, "polar: MIS pair in one loop"),
+                       ("importance:ggx", 16, "polar: u0s drawn in the sampler")]:
+        assert rest.integrate("ggx_lobe", t, n).kernel == path
 
 
 def test_which_pdfs_are_the_integrand():
