@@ -15,6 +15,13 @@ constexpr size_t kRowSamples = LaneGenerator::kEvensPerRow / 2;   // samples a g
 static_assert(kRowSamples % kW == 0, "a generator row holds whole vectors of each technique's u0s");
 static_assert(kRowSamples % kLanes == 0, "scan_values' steps fall on the rows' starts");
 
+// bad += 1 in the lanes whose sample the screening rejects: either technique's draw (a cosine
+// no direction of its domain has, a pdf not in (0, max double]: Sampler::sample_polar's test)
+template <class S0, class S1>
+RE_INLINE void count_rejected(f64v z0, f64v p0, f64v z1, f64v p1, i64v &bad) {
+    bad += (S0::polar_valid(z0, p0) & S1::polar_valid(z1, p1)) ? i64v{} : i64v{} + 1;
+}
+
 // The contributions of kW samples from their directions' cosines (z0: technique 0's, z1:
 // technique 1's), with f the pdf of technique FPdf; bad counts, per lane, the samples the
 // screening rejects.  As
@@ -24,7 +31,7 @@ static_assert(kRowSamples % kLanes == 0, "scan_values' steps fall on the rows' s
 template <class S0, class S1, int FPdf, bool Power>
 RE_INLINE f64v pair_terms(const S0 &s0, const S1 &s1, f64v z0, f64v z1, i64v &bad) {
     const f64v p0 = s0.density(z0), p1 = s1.density(z1);
-    bad += (S0::polar_valid(z0, p0) & S1::polar_valid(z1, p1)) ? i64v{} : i64v{} + 1;
+    count_rejected<S0, S1>(z0, p0, z1, p1, bad);
     const f64v q1 = s1.polar_pdf_v(z0), q0 = s0.polar_pdf_v(z1);
     const f64v f0 = FPdf == 0 ? p0 : q1, f1 = FPdf == 1 ? p1 : q0;
     // w_a f / p_a at the pdfs (w0, w1) of the two techniques, `own` technique a's
@@ -33,33 +40,6 @@ RE_INLINE f64v pair_terms(const S0 &s0, const S1 &s1, f64v z0, f64v z1, i64v &ba
         else return f == f64v{} ? f64v{} : f / ((f64v{} + w0) + w1);
     };
     return (f64v{} + term(f0, p0, p0, q1)) + term(f1, p1, q0, p1);
-}
-
-// The profile's prefixes of pair_kernel (FusedPairKernel): up to `last` (before the
-// contributions), the values' sums into p and q.
-template <class S0, class S1>
-size_t pair_prefix(const S0 &s0, const S1 &s1, Stage last, LaneGenerator &gen, size_t rows, double *p, double *q) {
-    alignas(64) double row[LaneGenerator::kEvensPerRow];
-    i64v bad = {};
-    LaneGenerator::Rows<true> draw(gen);
-    for (size_t r = 0; r < rows; ++r) {
-        draw.next(row);
-        for (size_t j = 0; j < kRowSamples; j += kW) {
-            f64v u0, u1;
-            simd::deinterleave(row + 2 * j, u0, u1);
-            const f64v z0 = s0.cos_theta(u0), z1 = s1.cos_theta(u1);
-            f64v p0 = s0.density(z0), p1 = s1.density(z1);
-            if (last >= Stage::Screened)
-                bad += (S0::polar_valid(z0, p0) & S1::polar_valid(z1, p1)) ? i64v{} : i64v{} + 1;
-            if (last >= Stage::Weighted) {
-                p0 += s1.polar_pdf_v(z0);
-                p1 += s0.polar_pdf_v(z1);
-            }
-            simd::store(p + r * kRowSamples + j, p0);
-            simd::store(q + r * kRowSamples + j, p1);
-        }
-    }
-    return simd::lane_total(bad);
 }
 
 // The cosines of a generator row's samples, each technique's in kRowSamples / kW vectors.
@@ -78,6 +58,30 @@ struct RowCosines {
         }
     }
 };
+
+// The profile's prefixes of pair_kernel (FusedPairKernel): up to `last` (before the
+// contributions), the values' sums into p and q.
+template <class S0, class S1>
+size_t pair_prefix(const S0 &s0, const S1 &s1, Stage last, LaneGenerator &gen, size_t rows, double *p, double *q) {
+    using Cosines = RowCosines<S0, S1>;
+    i64v bad = {};
+    LaneGenerator::Rows<true> draw(gen);
+    for (size_t r = 0; r < rows; ++r) {
+        const Cosines row(s0, s1, draw);
+        for (size_t v = 0; v < Cosines::kVectors; ++v) {
+            const f64v z0 = row.z0[v], z1 = row.z1[v];
+            f64v p0 = s0.density(z0), p1 = s1.density(z1);
+            if (last >= Stage::Screened) count_rejected<S0, S1>(z0, p0, z1, p1, bad);
+            if (last >= Stage::Weighted) {
+                p0 += s1.polar_pdf_v(z0);
+                p1 += s0.polar_pdf_v(z1);
+            }
+            simd::store(p + r * kRowSamples + v * kW, p0);
+            simd::store(q + r * kRowSamples + v * kW, p1);
+        }
+    }
+    return simd::lane_total(bad);
+}
 
 // FusedPairKernel for samplers of types S0 and S1, f the pdf of technique FPdf, the power
 // heuristic (beta = 2) or the balance heuristic.  A row's cosines are drawn a row ahead of its
