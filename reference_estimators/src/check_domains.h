@@ -141,14 +141,6 @@ inline void cap_to_world(const double *h, size_t a, size_t b, const double *axis
 // read in place: a renderer's (3, N) components seen as (N, 3) had been copied first, 24 MB
 // of fresh pages a million directions.
 inline void finite_rows(const double *x, size_t row, size_t column, size_t a, size_t b, size_t k, bool *ok) {
-    if (column == 1 && row == k) {   // C order: the compiler's loop over whole rows
-        for (size_t i = a; i < b; ++i) {
-            bool finite = true;
-            for (size_t j = 0; j < k; ++j) finite &= std::isfinite(x[i * k + j]);
-            ok[i] = finite;
-        }
-        return;
-    }
     for (size_t i = a; i < b; ++i) {
         bool finite = true;
         for (size_t j = 0; j < k; ++j) finite &= std::isfinite(x[i * row + j * column]);
