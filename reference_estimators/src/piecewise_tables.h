@@ -145,6 +145,17 @@ struct PiecewiseTables {
         return c[o] + s * (c[o + 1] - c[o]);
     }
 
+    // The points of uniforms u in bins o (vector lanes; o as doubles) whose CDF entries there
+    // are lo and hi: sample_many's, lane by lane the same bits (unplaced, then placed point by
+    // point in the rare vector with a lane outside its bin).  For kernels that find the bins
+    // and their entries themselves (SmallTable2D).
+    simd::f64v points_in(simd::f64v u, simd::f64v lo, simd::f64v hi, simd::f64v o) const {
+        simd::f64v x = unplaced(u, lo, hi, o);
+        if (!simd::all_equal(bins_of_x(x), o))
+            for (size_t l = 0; l < simd::kWidth; ++l) x[l] = placed(x[l], size_t(o[l]));
+        return x;
+    }
+
     // pbrt's sample: x in bin o of table k, its density back.
     double sample_one(size_t k, double u, double *x) const { return point_in(k, bin_of_u(k, u), u, x); }
 

@@ -1,0 +1,112 @@
+// The 2-D table sampler's kernel for small tables on AVX-512 (piecewise_constant_2d with at
+// most 16 rows): each vector of points finds its bins by counting CDF entries in its lanes,
+// where sample_many counts them point by point.  The same bits as PiecewiseTables::sample_many.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "piecewise_tables.h"
+#include "simd.h"
+
+namespace re {
+
+// For a marginal over at most 16 rows and one conditional a row (PiecewiseTables with every
+// bin holding mass and non-decreasing CDFs, so that a bin is the count of its table's entries
+// 1 .. bins - 1 at or below u, as the halving and counting searches find it): a point's row
+// is counted against the marginal's entries broadcast to every lane, and its column against
+// entry e of the rows' CDFs, read for every lane's row at once by one 16-entry permute
+// (vpermt2pd) from the entries e of all rows laid out together.  Each count's last entry at or
+// below u and the entry after it, the bin's CDF ends, are kept on the way by masked blends, so
+// a point's bins and entries cost no dependent loads, where sample_many's scalar count and
+// entry loads held a point at its latency.  The cells' densities are gathered.
+// (gaussian2d's 16 x 16 table: 8.2 -> 6.0 ns a point, blocks of 2048 in L1, Zen 4)
+class SmallTable2D {
+  public:
+    static constexpr size_t kMaxRows = 16, kMaxCols = 64;   // 64: a count's loop over entries stays short
+
+    // Whether the kernel applies: an AVX-512 build, and tables as described above.
+    static bool fits(const PiecewiseTables &marginal, const PiecewiseTables &conditional) {
+#if defined(__AVX512F__)
+        return marginal.bins <= kMaxRows && conditional.bins <= kMaxCols && !marginal.gaps &&
+               !conditional.gaps && marginal.counted && conditional.counted;
+#else
+        (void)marginal, (void)conditional;
+        return false;
+#endif
+    }
+
+    SmallTable2D(const PiecewiseTables &marginal, const PiecewiseTables &conditional)
+        : by_entry_((conditional.bins + 1) * kMaxRows, 0.0) {
+        const size_t cols = conditional.bins;
+        for (size_t e = 0; e <= cols; ++e)
+            for (size_t r = 0; r < marginal.bins; ++r) by_entry_[e * kMaxRows + r] = conditional.cdf[r * (cols + 1) + e];
+    }
+
+    // The points x (n x 2: column, row coordinates) and densities p of the uniforms u (n x 2:
+    // u0 picks the column, u1 the row) for the whole vectors of n, from the tables this was
+    // built for and the cells' densities cell_pdf (row-major); returns how many points that
+    // is (the caller samples the rest).
+    size_t sample(const PiecewiseTables &marginal, const PiecewiseTables &conditional, const double *cell_pdf,
+                  const double *u, double *x, double *p, size_t n) const {
+#if defined(__AVX512F__)
+        using simd::f64v;
+        using simd::i64v;
+        constexpr size_t W = simd::kWidth;
+        const double *mc = marginal.cdf.data();
+        const size_t rows = marginal.bins, cols = conditional.bins;
+        const i64v row_width = i64v{} + int64_t(cols);
+        size_t i = 0;
+        for (; i + W <= n; i += W) {
+            f64v u0, u1;
+            simd::deinterleave(u + 2 * i, u0, u1);
+            i64v row{};
+            f64v lo = mc[0] - f64v{}, hi = mc[1] - f64v{};
+            for (size_t e = 1; e < rows; ++e) {
+                const i64v at_most = mc[e] - f64v{} <= u1;
+                row -= at_most;
+                lo = at_most ? mc[e] - f64v{} : lo;
+                hi = at_most ? mc[e + 1] - f64v{} : hi;
+            }
+            const f64v y = marginal.points_in(u1, lo, hi, __builtin_convertvector(row, f64v));
+            i64v col{};
+            f64v next = entries(0, row);
+            f64v clo = next;
+            next = entries(1, row);
+            f64v chi = next;
+            for (size_t e = 1; e < cols; ++e) {
+                const f64v v = next;
+                next = entries(e + 1, row);
+                const i64v at_most = v <= u0;
+                col -= at_most;
+                clo = at_most ? v : clo;
+                chi = at_most ? next : chi;
+            }
+            const f64v xv = conditional.points_in(u0, clo, chi, __builtin_convertvector(col, f64v));
+            const i64v cell = row * row_width + col;
+            // the all-lanes mask form: the unmasked intrinsic trips GCC 12's -Wmaybe-uninitialized
+            simd::store(p + i, (f64v)_mm512_mask_i64gather_pd(_mm512_setzero_pd(), 0xff, (__m512i)cell, cell_pdf, 8));
+            simd::store(x + 2 * i, __builtin_shufflevector(xv, y, 0, 8, 1, 9, 2, 10, 3, 11));
+            simd::store(x + 2 * i + W, __builtin_shufflevector(xv, y, 4, 12, 5, 13, 6, 14, 7, 15));
+        }
+        return i;
+#else
+        (void)marginal, (void)conditional, (void)cell_pdf, (void)u, (void)x, (void)p, (void)n;
+        return 0;
+#endif
+    }
+
+  private:
+#if defined(__AVX512F__)
+    // Entry e of the CDF of each lane's row.
+    RE_INLINE simd::f64v entries(size_t e, simd::i64v row) const {
+        const double *t = by_entry_.data() + e * kMaxRows;
+        return (simd::f64v)_mm512_permutex2var_pd(_mm512_loadu_pd(t), (__m512i)row, _mm512_loadu_pd(t + 8));
+    }
+#endif
+
+    std::vector<double> by_entry_;   // entry e of row r's CDF at [e kMaxRows + r]
+};
+
+}  // namespace re
