@@ -58,6 +58,9 @@ class Sampler:
                               doc="the function of cos(theta) the pdf is, by name ('' for none); an "
                                   "integrand with the same polar_function is this pdf, bit for bit, and "
                                   "estimates compute it once")
+    kernel = property(lambda self: self._core.kernel,
+                      doc="the path sample() takes for whole vectors of points: 'small table in vector "
+                          "lanes' (a 2-D table that fits small_table2d.h, AVX-512 builds) or 'batch loop'")
 
     def sample(self, u: Any) -> tuple[np.ndarray, np.ndarray]:
         """Points and their pdf values from canonical uniforms u in [0, 1] of shape (N, udim)

@@ -105,6 +105,8 @@ NB_MODULE(_core, m) {
         .def_prop_ro("method", [](const Sampler &s) { return s.method == SamplingMethod::Inversion ? "inversion" : "rejection"; })
         .def_prop_ro("domain", [](const Sampler &s) { return s.domain.kind_name(); })
         .def_prop_ro("dim", [](const Sampler &s) { return s.domain.dim; })
+        .def_prop_ro("kernel", &Sampler::kernel,
+                     "the path sample() takes for whole vectors of points: 'small table in vector lanes' or 'batch loop'")
         .def("describe", &Sampler::describe)
         .def("sample", [](const Sampler &s, InArray u) {
             size_t n = check_points(u, s.udim, "u");

@@ -271,6 +271,7 @@ class PiecewiseConstant2D final : public Pointwise<PiecewiseConstant2D> {
             for (size_t j = 0; j < m; ++j) p[a + j] = cell_pdf_[size_t(row[j]) * cols + size_t(col[j])];
         }
     }
+    std::string kernel() const override { return small_ ? "small table in vector lanes" : "batch loop"; }
     double sample_one(const double *u, double *x) const {
         double y;
         const double py = marginal_.sample_one(0, u[1], &y);

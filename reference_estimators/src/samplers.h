@@ -66,6 +66,9 @@ class Sampler {
     // the polar path then reads f off the pdf it already has, as drjit merges the same
     // expression computed twice (a division a point fewer on GGX).
     std::string polar_function;
+    // The path sample() takes for whole vectors of points, by name, where a sampler has more
+    // than one: "small table in vector lanes" (the 2-D table's SmallTable2D), else "batch loop".
+    virtual std::string kernel() const { return "batch loop"; }
     std::string describe() const;
 };
 

@@ -1,6 +1,7 @@
 // The 2-D table sampler's kernel for small tables on AVX-512 (piecewise_constant_2d with at
-// most 16 rows): each vector of points finds its bins by counting CDF entries in its lanes,
-// where sample_many counts them point by point.  The same bits as PiecewiseTables::sample_many.
+// most 16 rows and 64 columns and no gaps, SmallTable2D::fits): each vector of points finds
+// its bins by counting CDF entries in its lanes, where sample_many counts them point by point.
+// The same bits as PiecewiseConstant2D's passes through PiecewiseTables::sample_many.
 #pragma once
 
 #include <cstddef>
@@ -12,19 +13,25 @@
 
 namespace re {
 
-// For a marginal over at most 16 rows and one conditional a row (PiecewiseTables with every
-// bin holding mass and non-decreasing CDFs, so that a bin is the count of its table's entries
-// 1 .. bins - 1 at or below u, as the halving and counting searches find it): a point's row
-// is counted against the marginal's entries broadcast to every lane, and its column against
-// entry e of the rows' CDFs, read for every lane's row at once by one 16-entry permute
-// (vpermt2pd) from the entries e of all rows laid out together.  Each count's last entry at or
-// below u and the entry after it, the bin's CDF ends, are kept on the way by masked blends, so
-// a point's bins and entries cost no dependent loads, where sample_many's scalar count and
-// entry loads held a point at its latency.  The cells' densities are gathered.
+// For a marginal over at most 16 rows and one conditional a row, PiecewiseTables whose CDFs
+// are non-decreasing (`counted`: a bin is then the count of its table's entries 1 .. bins - 1
+// at or below u, as bins_of_u's searches find it, u = 1 included) and without gaps (an empty
+// bin after the first, which bins_of_u moves down through `below`; an empty first bin is never
+// chosen by either): a point's row is counted against the marginal's entries broadcast to
+// every lane, and its column against entry e of the rows' CDFs, read for every lane's row by
+// one 16-entry permute (vpermt2pd) an entry, from the entries e of all rows laid out together.
+// Each count's last entry at or below u and the entry after it, the bin's CDF ends, are kept
+// on the way by masked blends, so a point's bins and entries cost no dependent loads, where
+// sample_many's scalar count and entry loads held a point at its latency.  The cells'
+// densities are gathered.  The conditional and the cell are those of the row searched, where
+// PiecewiseConstant2D's passes take the row the point landed in: the same on [0, 1], whose
+// bins all hold doubles below 2^50 bins.
 // (gaussian2d's 16 x 16 table: 8.2 -> 6.0 ns a point, blocks of 2048 in L1, Zen 4)
 class SmallTable2D {
   public:
-    static constexpr size_t kMaxRows = 16, kMaxCols = 64;   // 64: a count's loop over entries stays short
+    // 16 rows: one permute's table; 64 columns: the count's loop over a row's entries costs
+    // 3 vector operations an entry, so a wider table is left to the halving and level searches
+    static constexpr size_t kMaxRows = 16, kMaxCols = 64;
 
     // Whether the kernel applies: an AVX-512 build, and tables as described above.
     static bool fits(const PiecewiseTables &marginal, const PiecewiseTables &conditional) {
@@ -46,8 +53,8 @@ class SmallTable2D {
 
     // The points x (n x 2: column, row coordinates) and densities p of the uniforms u (n x 2:
     // u0 picks the column, u1 the row) for the whole vectors of n, from the tables this was
-    // built for and the cells' densities cell_pdf (row-major); returns how many points that
-    // is (the caller samples the rest).
+    // built for (the caller passes the same ones) and the cells' densities cell_pdf
+    // (row-major); returns how many points that is (the caller samples the rest).
     size_t sample(const PiecewiseTables &marginal, const PiecewiseTables &conditional, const double *cell_pdf,
                   const double *u, double *x, double *p, size_t n) const {
 #if defined(__AVX512F__)

@@ -989,30 +989,46 @@ def test_the_2d_table_sampler_agrees_in_vector_lanes_and_one_at_a_time():
     assert np.all(t[rows, cols] > 0)
 
 
-@pytest.mark.parametrize("shape", [(1, 1), (2, 1), (3, 5), (16, 16), (16, 64), (5, 33), (17, 4), (16, 65)])
-def test_small_2d_tables_sample_the_same_in_vector_lanes_and_one_at_a_time(shape):
-    """Tables of at most 16 rows and 64 columns with every cell non-empty take the vector
-    kernel of small_table2d.h on AVX-512 builds (whole vectors of a batch; one point alone, and
-    the tail, take sample_many's path; 17 rows or 65 columns never do): the same points and
-    densities bit for bit, on uniforms that are exactly the tables' CDF entries (inverted from
-    the cells' corners), an ulp either side of them, 0, and the largest double below 1."""
+SMALL_TABLES = [((1, 1), ""), ((2, 1), ""), ((3, 5), ""), ((16, 16), ""), ((16, 64), ""), ((5, 33), ""),
+                ((16, 16), "first row empty"), ((9, 12), "first column empty"), ((17, 4), ""), ((16, 65), ""),
+                ((6, 6), "an empty cell inside")]
+
+
+@pytest.mark.parametrize("shape, zeros", SMALL_TABLES)
+def test_small_2d_tables_sample_the_same_in_vector_lanes_and_one_at_a_time(shape, zeros):
+    """Tables of at most 16 rows and 64 columns whose CDFs have no empty bin after the first
+    take the vector kernel of small_table2d.h on AVX-512 builds (Sampler.kernel; whole vectors
+    of a batch, while one point alone takes sample_many's path; 17 rows, 65 columns or an empty
+    cell inside a row never do): the same points and densities bit for bit, on uniforms that
+    are exactly the tables' CDF entries (inverted from the cells' corners), an ulp either side
+    of them, 0 and 1."""
     rng = np.random.default_rng(shape[0] * 100 + shape[1])
     t = rng.gamma(0.5, 1.0, shape) + 1e-9
+    if zeros == "first row empty":
+        t[0] = 0.0
+    elif zeros == "first column empty":
+        t[:, 0] = 0.0
+    elif zeros:
+        t[2, 3] = 0.0
     s = rest.sampler("piecewise_constant_2d", table=t)
+    fits = shape[0] <= 16 and shape[1] <= 64 and zeros != "an empty cell inside"
+    avx512 = rest.build_info()["isa"] == "AVX-512"
+    assert s.kernel == ("small table in vector lanes" if fits and avx512 else "batch loop")
     corners = np.stack(np.meshgrid(np.arange(shape[1] + 1) / shape[1], np.arange(shape[0] + 1) / shape[0]),
                        axis=-1).reshape(-1, 2)
     entries = s.invert(np.minimum(corners, np.nextafter(1.0, 0.0)))
     entries = entries[np.all(np.isfinite(entries), axis=1)]
-    u = np.concatenate([entries, np.nextafter(entries, 0.0), np.nextafter(entries, 1.0),
-                        [[0.0, 0.0], [np.nextafter(1.0, 0.0)] * 2, [0.0, np.nextafter(1.0, 0.0)]],
+    u = np.concatenate([entries, np.nextafter(entries, 0.0), np.nextafter(entries, 2.0),
+                        [[0.0, 0.0], [1.0, 1.0], [0.0, 1.0], [1.0, 0.0], [np.nextafter(1.0, 0.0)] * 2],
                         rng.random((4001, 2))])
-    u = np.clip(u, 0.0, np.nextafter(1.0, 0.0))
+    u = np.clip(u, 0.0, 1.0)
     x, p = s.sample(u)
     one = [s.sample(u[i:i + 1]) for i in range(u.shape[0])]
     np.testing.assert_array_equal(x.view(np.uint64), np.concatenate([o[0] for o in one]).view(np.uint64))
     np.testing.assert_array_equal(p.view(np.uint64), np.concatenate([o[1] for o in one]).view(np.uint64))
     rows = np.minimum(np.floor(x[:, 1] * shape[0]), shape[0] - 1).astype(int)
     cols = np.minimum(np.floor(x[:, 0] * shape[1]), shape[1] - 1).astype(int)
+    assert np.all(t[rows, cols] > 0)
     np.testing.assert_allclose(p, t[rows, cols] / t.mean(), rtol=1e-12)
 
 
