@@ -42,7 +42,9 @@ drjit's tracer leaves out what nothing reads and merges equal expressions.  An M
 f is one sampler's pdf runs in one loop (polar_mis.cpp): both techniques' draws, pdfs, weights
 and terms in registers, each generator row's cosines drawn a row ahead of its terms.  The
 "core path" lines name the path each row took (Estimate.kernel) and the blocks that went back
-to the general path (Estimate.redone_blocks: 0 for these samplers).
+to the general path (Estimate.redone_blocks: 0 for these samplers), and the table sampler's
+path for whole vectors of points (Sampler.kernel: on AVX-512 the 16 x 16 table is counted in
+vector lanes, small_table2d.h).
 Not in the peers: the core's screening of points, pdfs and contributions and its higher
 moments (these samplers never produce a point the core would exclude).
 
@@ -552,14 +554,17 @@ def print_throughput(n: int, seconds: dict[Row, dict[str, float]]) -> None:
               + column(ratio[0], ".2f", 13, "x") + column(ratio[1], ".2f", 14, "x"))
 
 
-def print_kernels(results: dict[Row, dict[str, Any]]) -> None:
+def print_kernels(rest: Any, results: dict[Row, dict[str, Any]]) -> None:
     """The path each row's estimate took through the core (Estimate.kernel) and how many of
-    its blocks went back to the general path (a core without these fields: '?')."""
+    its blocks went back to the general path, and the path the table sampler takes for whole
+    vectors of points (Sampler.kernel) (a core without these fields: '?')."""
     print("\ncore path (two threads; blocks redone on the general path):")
     for row, r in results.items():
         e = r["core 2"]
         print(f"  {row.integrand:10s} {row.technique:46s} {getattr(e, 'kernel', '?') or '?':34s} "
               f"{getattr(e, 'redone_blocks', '?')}")
+    table = rest.sampler("piecewise_constant_2d", table=gaussian2d_table(rest))
+    print(f"  the {TABLE_RES}x{TABLE_RES} table sampler: {getattr(table, 'kernel', '?')}")
 
 
 def print_estimates(rest: Any, n: int, results: dict[Row, dict[str, Any]]) -> None:
@@ -680,7 +685,7 @@ def main() -> None:
     for row in ROWS:
         seconds[row], results[row] = time_row(rest, row, table, n, repeat, drjit)
     print_throughput(n, seconds)
-    print_kernels(results)
+    print_kernels(rest, results)
     print_estimates(rest, n, results)
     print_stages(rest, n, repeat, drjit, table)
 
