@@ -1,22 +1,24 @@
 """Where a Mitsuba sampler check's time goes, beside Mitsuba's own ChiSquareTest on the same
-plugin: the plugin's calls that the check makes, the check's own work, and the floor those
-calls set.  At 1e6 samples, seed 0, llvm_ad_rgb on the CPU; best of --repeat runs, after an
-untimed run of each (drjit's JIT compilation in neither).
+plugin: the plugin's calls that the check makes, the check's own work, and a lower bound on
+the plugin work its CDF tables need.  At 1e6 samples, seed 0, llvm_ad_rgb on the CPU; best of
+--repeat runs, after an untimed run of each (drjit's JIT compilation in neither).
 
 Columns (seconds unless stated):
   mitsuba   Mitsuba's ChiSquareTest (benchmarks/mitsuba_samplers.py's mitsuba_chi2)
   ours      check_mitsuba_sampler
   sample    the plugin's sample calls within ours
-  pdf       the plugin's pdf calls within ours; 'evals' their points
+  pdf       the plugin's pdf calls within ours (every one: the CDF tables', the chi-square
+            cubature's, the drawn points', an area light's reported-pdf pass)
   tables    the Rosenblatt transform's tabulation (Transform.build), its pdf calls included
   points    the checks on the drawn points (SamplerTest.check_points), their pdf call included
   own       ours less sample and pdf: the check's own work (cubature bookkeeping included)
-  floor     what the plugin's calls cost at the rate its pdf reaches alone (batches of 65536
-            directions it sampled): the sample calls, the pdf at the drawn points and the
-            tabulation's evaluations.  Where the floor exceeds Mitsuba's whole test, no check
-            that tabulates the CDFs to the bound the transform tests carry can match it.
-The calls' own times within ours run beside drjit's worker threads, which spin after each
-kernel (nanothread), so they exceed the floor's rate.
+  floor     a lower bound on the plugin work that sampling and the CDF tables need: the 1e6
+            sample calls timed alone plus the tables' pdf evaluations at the plugin's best
+            rate (one call on the 1e6 directions it sampled, no per-call overhead).  Every
+            check that tabulates the CDFs to the bound the transform tests carry pays it.
+  table evals, other evals   the tables' pdf evaluations, and every other one of ours
+The calls within ours run beside drjit's worker threads, which spin after each kernel
+(nanothread): the check's own kernels between them run slower than alone.
 
     .venv/bin/python benchmarks/check_time_split.py [--only TEXT ...] [--all] [--repeat 3]
 """
@@ -24,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import os
 import sys
 import time
@@ -51,40 +54,49 @@ N = 1_000_000
 
 
 class Split:
-    """Seconds and calls accumulated per key by the wrappers of :meth:`timing`."""
+    """Seconds and pdf evaluations accumulated per key by the wrappers of :meth:`timing`; pdf
+    evaluations made inside the tabulation count as "table evals", the others as "other evals"."""
 
     def __init__(self) -> None:
         self.seconds: dict[str, float] = {}
-        self.points: dict[str, int] = {}
+        self.evals = {"table evals": 0, "other evals": 0}
+        self.in_tables = False
 
-    def wrap(self, key: str, fn: Callable[..., Any], count: bool = False) -> Callable[..., Any]:
+    def wrap(self, key: str, fn: Callable[..., Any]) -> Callable[..., Any]:
+        @functools.wraps(fn)
         def timed(*args: Any, **kwargs: Any) -> Any:
             start = time.perf_counter()
+            if key == "tables":
+                self.in_tables = True
             try:
                 return fn(*args, **kwargs)
             finally:
+                if key == "tables":
+                    self.in_tables = False
                 self.seconds[key] = self.seconds.get(key, 0.0) + time.perf_counter() - start
-                if count:
-                    self.points[key] = self.points.get(key, 0) + len(args[-1])
+                if key == "pdf":   # pdf(self, x): x (N, 3)
+                    self.evals["table evals" if self.in_tables else "other evals"] += len(args[-1])
         return timed
 
     @contextlib.contextmanager
     def timing(self, sampler: Any) -> Iterator[None]:
         """The sampler's sample and pdf calls, the tabulation and the point checks timed while
-        inside (the class attributes restored after)."""
+        inside (the class attributes restored after; the sampler's own class gets wrappers of
+        what it inherits, removed after)."""
         cls = type(sampler)
-        saved = [(cls, name, cls.__dict__.get(name)) for name in ("pdf", "sample_batch")]
-        saved += [(Transform, "build", Transform.__dict__["build"]),
-                  (SamplerTest, "check_points", SamplerTest.__dict__["check_points"])]
+        build = Transform.__dict__["build"].__func__
+        patches = [(cls, "pdf", self.wrap("pdf", cls.pdf)),
+                   (cls, "sample_batch", self.wrap("sample", cls.sample_batch)),   # under sample()
+                   (Transform, "build", classmethod(self.wrap("tables", build))),
+                   (SamplerTest, "check_points", self.wrap("points", SamplerTest.check_points))]
+        done = []
         try:
-            cls.pdf = self.wrap("pdf", cls.pdf, count=True)
-            cls.sample_batch = self.wrap("sample", cls.sample_batch)   # under sample and sample_with_pdf
-            build = Transform.build
-            Transform.build = classmethod(lambda _, *a, **k: self.wrap("tables", build)(*a, **k))
-            SamplerTest.check_points = self.wrap("points", SamplerTest.check_points)
+            for owner, name, value in patches:
+                done.append((owner, name, owner.__dict__.get(name)))
+                setattr(owner, name, value)
             yield
         finally:
-            for owner, name, value in saved:
+            for owner, name, value in reversed(done):
                 if value is None:
                     delattr(owner, name)   # inherited: the subclass's wrapper goes
                 else:
@@ -113,18 +125,16 @@ def measure(entry: Any, repeat: int) -> dict[str, float]:
             split.seconds["ours"] = time.perf_counter() - start
         splits.append(split)
     split = min(splits, key=lambda s: s.seconds["ours"])
-    row = dict(split.seconds)
-    row["evals"] = split.points.get("pdf", 0)
+    row: dict[str, float] = {**split.seconds, **split.evals}
     row["mitsuba"] = min(mitsuba_chi2(sampler, N, 0)[1] for _ in range(repeat))
     row["own"] = row["ours"] - row.get("sample", 0.0) - row.get("pdf", 0.0)
-    # the floor: the plugin's own rates, measured alone
+    # the floor: the plugin's own time for the sample calls, and its best pdf rate
     u = np.random.default_rng(0).random((N, sampler.udim))
-    row["floor sample"] = best(repeat, lambda: sampler.sample_with_pdf(u))
+    sample_alone = best(repeat, lambda: sampler.sample_batch(u))
     x = sampler.sample(u)
     x = x[np.all(np.isfinite(x), axis=1)]
-    batch = x[:65536]
-    rate = best(repeat, lambda: sampler.pdf(batch)) / max(len(batch), 1)
-    row["floor"] = row["floor sample"] + rate * row["evals"]
+    rate = best(repeat, lambda: sampler.pdf(x)) / max(len(x), 1)
+    row["floor"] = sample_alone + rate * row["table evals"]
     return row
 
 
@@ -139,14 +149,17 @@ def main() -> None:
     entries = catalogue()
     if not args.all:
         wanted = args.only or DEFAULT
+        missing = [w for w in wanted if not any(w in e.label for e in entries)]
+        if missing:
+            parser.error(f"no catalogue entry's label contains {missing}")
         entries = [e for e in entries if any(w in e.label for w in wanted)]
     print(f"{N:.0e} samples, seed 0, llvm_ad_rgb, best of {args.repeat}; seconds")
     cols = ["mitsuba", "ours", "sample", "pdf", "tables", "points", "own", "floor"]
-    print(f"{'entry':50s}" + "".join(f"{c:>9s}" for c in cols) + f"{'evals':>12s}")
+    print(f"{'entry':50s}" + "".join(f"{c:>9s}" for c in cols) + f"{'table evals':>13s}{'other evals':>13s}")
     for e in entries:
         row = measure(e, args.repeat)
         print(f"{e.label[:50]:50s}" + "".join(f"{row.get(c, 0.0):9.3f}" for c in cols)
-              + f"{row['evals']:12d}", flush=True)
+              + f"{row['table evals']:13d}{row['other evals']:13d}", flush=True)
 
 
 if __name__ == "__main__":

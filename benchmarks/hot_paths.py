@@ -270,7 +270,7 @@ def cdf_and_pdf(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 class PiecewiseConstant2D:
-    """samplers.cpp's PiecewiseConstant2D on [0,1]^2 (pbrt-v4): a marginal over rows (y) from
+    """table_samplers.cpp's PiecewiseConstant2D on [0,1]^2 (pbrt-v4): a marginal over rows (y) from
     u[1], then the row's conditional over columns (x) from u[0]; pdf = p(y) p(x | row)."""
 
     def __init__(self, values: np.ndarray):
@@ -563,7 +563,7 @@ def print_kernels(rest: Any, results: dict[Row, dict[str, Any]]) -> None:
         e = r["core 2"]
         print(f"  {row.integrand:10s} {row.technique:46s} {getattr(e, 'kernel', '?') or '?':34s} "
               f"{getattr(e, 'redone_blocks', '?')}")
-    table = rest.sampler("piecewise_constant_2d", table=gaussian2d_table(rest))
+    table = rest.technique("gaussian2d", "importance:piecewise_constant_2d").sampler
     print(f"  the {TABLE_RES}x{TABLE_RES} table sampler: {getattr(table, 'kernel', '?')}")
 
 

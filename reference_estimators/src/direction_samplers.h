@@ -1,7 +1,8 @@
 // The direction samplers (uniform on the sphere or hemisphere, cosine lobe, uniform cone, GGX)
-// as types, with Pointwise, the batch loops every sampler type builds on: samplers.cpp makes
-// them (make_sampler) and polar_mis.cpp inlines their polar parts into one loop over an MIS
-// pair.  In namespace re, not an anonymous one, so that both see the same types.
+// as types, with Pointwise, the batch loops every sampler type builds on (table_samplers.cpp's
+// too): samplers.cpp makes them (make_sampler) and polar_mis.cpp inlines their polar parts into
+// one loop over an MIS pair.  In namespace re, not an anonymous one, so that both see the same
+// types.
 #pragma once
 #include <cmath>
 

@@ -1,6 +1,6 @@
 // pbrt-v4's piecewise-constant tables, sampled in batches: the bins of a block of points by
 // counting CDF entries in vector lanes, then the points.  Used by the table samplers
-// (samplers.cpp: piecewise_constant_1d, piecewise_constant_2d).
+// (table_samplers.cpp: piecewise_constant_1d, piecewise_constant_2d).
 #pragma once
 
 #include <algorithm>

@@ -1,7 +1,7 @@
 #include "table_samplers.h"
 
 #include <algorithm>
-#include <cmath>
+#include <cstdint>
 #include <memory>
 #include <optional>
 #include <string>

@@ -13,8 +13,9 @@ namespace re {
 // The density proportional to `values` on their bins over [a, b] (b > a, the values checked
 // by the caller: finite, >= 0, not all 0).
 SamplerPtr make_piecewise_constant_1d(const std::vector<double> &values, double a, double b);
-// The density proportional to `values` (rows x cols, row-major; rows along y) on the cells of
-// [0, 1]^2; an all-zero row is never drawn.
+// The density proportional to `values` (rows x cols of them, row-major; rows along y) on the
+// cells of [0, 1]^2 (the values checked by the caller: finite, >= 0, not all 0); an all-zero
+// row is never drawn.
 SamplerPtr make_piecewise_constant_2d(const std::vector<double> &values, size_t rows, size_t cols);
 
 }  // namespace re
