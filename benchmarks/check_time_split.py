@@ -38,6 +38,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from mitsuba_samplers import mitsuba_chi2  # noqa: E402
+from uniform_mc import best_of  # noqa: E402
 
 from harness.adapters.mitsuba.catalogue import catalogue  # noqa: E402
 from harness.adapters.mitsuba.checks import check_mitsuba_sampler  # noqa: E402
@@ -103,15 +104,6 @@ class Split:
                     setattr(owner, name, value)
 
 
-def best(repeat: int, fn: Callable[[], Any]) -> float:
-    seconds = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        fn()
-        seconds.append(time.perf_counter() - start)
-    return min(seconds)
-
-
 def measure(entry: Any, repeat: int) -> dict[str, float]:
     sampler = entry.make()
     check_mitsuba_sampler(sampler, seed=0, sample_count=16384)   # compiles the plugin's kernels
@@ -130,10 +122,10 @@ def measure(entry: Any, repeat: int) -> dict[str, float]:
     row["own"] = row["ours"] - row.get("sample", 0.0) - row.get("pdf", 0.0)
     # the floor: the plugin's own time for the sample calls, and its best pdf rate
     u = np.random.default_rng(0).random((N, sampler.udim))
-    sample_alone = best(repeat, lambda: sampler.sample_batch(u))
+    sample_alone = best_of(repeat, lambda: sampler.sample_batch(u))
     x = sampler.sample(u)
     x = x[np.all(np.isfinite(x), axis=1)]
-    rate = best(repeat, lambda: sampler.pdf(x)) / max(len(x), 1)
+    rate = best_of(repeat, lambda: sampler.pdf(x)) / max(len(x), 1)
     row["floor"] = sample_alone + rate * row["table evals"]
     return row
 
