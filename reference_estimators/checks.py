@@ -16,7 +16,8 @@ __all__ = [
     "CHECK_DOMAINS", "domain_params", "domain_points", "cubature_nodes", "cubature_points", "cubature_sums",
     "cubature_moment_sums", "grid_histogram", "rosenblatt",
     "piecewise_linear_lookup", "transform_statistics", "cramer_von_mises_sum", "pdf_summary",
-    "all_float32", "dither_float32", "finite_rows",
+    "all_float32", "dither_float32", "finite_rows", "pdf_mismatches", "float64_rows", "take_rows",
+    "nan_rows",
     "float32_unit_rows", "cap_to_world",
 ]
 
@@ -75,6 +76,33 @@ def float32_unit_rows(x: Any, slack: float) -> tuple[np.ndarray, np.ndarray]:
     renderer's pdf is called with, in one pass in C++ (numpy took 34 ns a row)."""
     a = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3)
     return _core.float32_unit_rows(a, float(slack))
+
+
+def float64_rows(columns: Any) -> np.ndarray:
+    """(N, c) float64 in C order: float32 columns (c, N) (a float32 renderer's vectors, as
+    drjit gives them) as rows, cast and transposed in one pass in C++, into memory the core
+    reuses from call to call (a fresh numpy array of a million directions cost 5-10 ms of page
+    faults on a loaded machine, more than the copy)."""
+    a = np.ascontiguousarray(columns, dtype=np.float32)
+    if a.ndim != 2:
+        raise ValueError(f"'columns' must have shape (c, N), got {a.shape}")
+    return _core.float64_rows(a)
+
+
+def take_rows(x: Any, keep: Any) -> np.ndarray:
+    """x[keep] for x (N,) or (N, k) float64 and ``keep`` (N,) bool: the rows kept, in order,
+    in one pass in C++ into memory the core reuses (see :func:`float64_rows`)."""
+    a = np.ascontiguousarray(x, dtype=np.float64)
+    m = np.ascontiguousarray(keep, dtype=bool).reshape(-1)
+    return _core.take_rows(a, m)
+
+
+def nan_rows(x: Any, keep: Any) -> np.ndarray:
+    """x (N,) or (N, k) float64 with the rows not kept NaN (numpy's where(keep[:, None], x,
+    nan)), in one pass in C++ into memory the core reuses (see :func:`float64_rows`)."""
+    a = np.ascontiguousarray(x, dtype=np.float64)
+    m = np.ascontiguousarray(keep, dtype=bool).reshape(-1)
+    return _core.nan_rows(a, m)
 
 
 def cubature_nodes(lo: Any, hi: Any, nodes: Any) -> np.ndarray:
@@ -229,6 +257,17 @@ def pdf_summary(kind: str, measure: float, s: Any, inside: Any, p: Any,
     v = np.ascontiguousarray(p, dtype=np.float64).reshape(-1)
     bad, zero, used, h_sum = _core.pdf_summary(code, float(measure), a, m, v, float(c))
     return int(bad), int(zero), int(used), float(h_sum)
+
+
+def pdf_mismatches(reported: Any, p: Any, rtol: float) -> np.ndarray:
+    """(M,) int64, ascending: the rows where the pdf a sampler reported with its sample,
+    ``reported`` (N,), differs from the claimed pdf at the sample, ``p`` (N,), by more than
+    ``rtol`` relative (|reported - p| > rtol |p|, or NaN either side), or is infinite or
+    negative: numpy's ~(abs(reported - p) <= rtol * abs(p)) | ~isfinite(reported) |
+    (reported < 0), the same operations, in one pass in C++ without its temporaries."""
+    r = np.ascontiguousarray(reported, dtype=np.float64).reshape(-1)
+    v = np.ascontiguousarray(p, dtype=np.float64).reshape(-1)
+    return _core.pdf_mismatches(r, v, float(rtol))
 
 
 def piecewise_linear_lookup(lo: Any, hi: Any, start: Any, mass: Any, offsets: Any, strip: Any,

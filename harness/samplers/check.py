@@ -347,9 +347,12 @@ def _check_drawn(u: np.ndarray, x: np.ndarray, reported: np.ndarray | None,
     n = x.shape[0]
     x = x.reshape(n, dom.point_dim)
     failed = ~rest.finite_rows(x)
-    # (with none failed, x itself: indexing copied 24 MB a million directions)
+    # (with none failed, x itself: indexing copied 24 MB a million directions; else the rows
+    # taken in the core, into memory it reuses, where numpy's fresh array cost 10 ms of page
+    # faults)
     any_failed = bool(failed.any())
-    produced = (x[~failed] if any_failed else x).reshape((-1,) if dom.point_dim == 1 else (-1, dom.point_dim))
+    produced = (rest.take_rows(x, ~failed) if any_failed else x).reshape((-1,) if dom.point_dim == 1
+                                                                        else (-1, dom.point_dim))
     m = produced.shape[0]
     if m < 1000:
         import pandas as pd  # deferred, as in harness.suite.kind.Outcome.frame
@@ -379,7 +382,7 @@ def _check_drawn(u: np.ndarray, x: np.ndarray, reported: np.ndarray | None,
             failures.append(Failure("normalization", 1,
                                     f"pdf integrates to {cubature:.6f} ± {cubature_err:.1e} over the "
                                     f"{dom.kind}, more than 1"))
-    kept_reported = reported[~failed] if reported is not None and any_failed else reported
+    kept_reported = rest.take_rows(reported, ~failed) if reported is not None and any_failed else reported
     shape = raw.for_total(p_total).check_points(produced, kept_reported, seed=seed)
     index = np.flatnonzero(~failed)  # the shape check's examples index the produced samples
     for f in shape.failures:

@@ -69,12 +69,13 @@ def reported_pdf_failure(x: np.ndarray, reported: np.ndarray, pdf: Callable[[np.
     rep = np.asarray(reported, dtype=float).reshape(-1)
     if rep.size != n:
         return Failure("reported_pdf", n, f"the sampler reported {rep.size} pdf values for {n} samples", ())
-    produced = np.flatnonzero(rest.finite_rows(x))
-    if produced.size == 0:
-        return None
+    finite = rest.finite_rows(x)
     # every sample produced (the sampler check passes the produced ones): the arrays as they
     # are, where indexing them copied 40 MB a million directions
-    every = produced.size == n
+    every = bool(finite.all())
+    produced = None if every else np.flatnonzero(finite)    # the rows of x that xs holds
+    if produced is not None and produced.size == 0:
+        return None
     xs, rs = (x, rep) if every else (x[produced], rep[produced])
     if values is None:
         p = np.asarray(pdf(xs), dtype=float).reshape(-1)
@@ -83,23 +84,25 @@ def reported_pdf_failure(x: np.ndarray, reported: np.ndarray, pdf: Callable[[np.
         if p.size != n:
             raise ValueError(f"'values' must hold pdf(x) at the {n} points, got {p.size} values")
         p = p if every else p[produced]
+    bad = rest.pdf_mismatches(rs, p, rtol)    # rows of xs; rare, so the rest works on them alone
     with np.errstate(all="ignore"):
-        diff = np.abs(rs - p)
-        bad = ~(diff <= rtol * np.abs(p)) | ~np.isfinite(rs) | (rs < 0)
-        if bad.any():
-            sel = np.flatnonzero(bad & np.isfinite(rs) & (rs >= 0) & np.isfinite(p))
-            if sel.size:
-                flat_pdf = lambda y: np.asarray(pdf(y), dtype=float).reshape(-1)  # noqa: E731
-                spread = rounding_spread(flat_pdf, xs[sel], p[sel])
-                bad[sel] = ~(diff[sel] <= rtol * np.abs(p[sel]) + spread)
-    if not bad.any():
+        diff = np.abs(rs[bad] - p[bad])
+        nudge = np.isfinite(rs[bad]) & (rs[bad] >= 0) & np.isfinite(p[bad])
+        if nudge.any():
+            sel = bad[nudge]
+            flat_pdf = lambda y: np.asarray(pdf(y), dtype=float).reshape(-1)  # noqa: E731
+            spread = rounding_spread(flat_pdf, xs[sel], p[sel])
+            still = np.ones(bad.size, dtype=bool)
+            still[nudge] = ~(diff[nudge] <= rtol * np.abs(p[sel]) + spread)
+            bad, diff = bad[still], diff[still]
+    if not bad.size:
         return None
     with np.errstate(all="ignore"):
-        rel = np.where(p[bad] > 0, diff[bad] / p[bad], np.inf)
+        rel = np.where(p[bad] > 0, diff / p[bad], np.inf)
     worst = float(np.nanmax(rel)) if rel.size else float("nan")
-    ex = tuple({"index": int(produced[i]), "point": np.atleast_1d(xs[i]).tolist(), "reported": float(rs[i]),
-                "pdf": float(p[i])} for i in np.flatnonzero(bad)[:max_examples])
-    return Failure("reported_pdf", int(bad.sum()),
+    ex = tuple({"index": int(i if produced is None else produced[i]), "point": np.atleast_1d(xs[i]).tolist(), "reported": float(rs[i]),
+                "pdf": float(p[i])} for i in bad[:max_examples])
+    return Failure("reported_pdf", int(bad.size),
                    f"the pdf reported with the sample differs from pdf() at the sampled point beyond "
                    f"{rtol:g} relative + float32 rounding of the point (largest relative difference "
                    f"{worst:.3g})", ex)

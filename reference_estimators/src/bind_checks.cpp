@@ -6,6 +6,7 @@
 #include <nanobind/stl/vector.h>
 
 #include <algorithm>
+#include <limits>
 #include <memory>
 
 #include "bind_common.h"
@@ -147,8 +148,8 @@ void bind_checks(nb::module_ &m) {
        "(frame t, b, axis) with cosine `cos_alpha`, scale = 1 - cos_alpha.");
     m.def("float32_unit_rows", [](InArray x, double slack) {
         const size_t n = check_points(x, 3, "x");
-        float *cols = new float[n > 0 ? 3 * n : 1];
-        nb::capsule owner(cols, [](void *q) noexcept { delete[] static_cast<float *>(q); });
+        nb::capsule owner;
+        float *cols = output_buffer<float>(3 * n, owner);   // reused memory: no page faults a call
         nb::ndarray<nb::numpy, float> ca(cols, {size_t(3), n}, owner);
         bool *ok;
         auto oa = new_bool_array(n, &ok);
@@ -163,6 +164,53 @@ void bind_checks(nb::module_ &m) {
     }, "x"_a, "slack"_a,
        "(columns (3, N) float32, ok (N,)): rows x (N, 3) as float32 unit vectors (normalised first where their "
        "length is off 1 by more than `slack`); rows that are not finite non-zero vectors become +z, ok False.");
+    m.def("float64_rows", [](nb::ndarray<const float, nb::ndim<2>, nb::c_contig, nb::device::cpu> columns) {
+        const size_t c = columns.shape(0), n = columns.shape(1);
+        double *out;
+        OutArray rows = new_array(n, c, &out);
+        {
+            nb::gil_scoped_release g;
+            for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t b, int) {
+                float64_rows(columns.data(), c, n, a, b, out);
+            });
+        }
+        return rows;
+    }, "columns"_a, "(N, c) float64: the float32 columns (c, N) as rows.");
+    m.def("take_rows", [](InArray x, BoolArray keep) {
+        const size_t n = x.ndim() == 0 ? 0 : x.shape(0), k = x.ndim() == 2 ? x.shape(1) : 1;
+        if (x.ndim() < 1 || x.ndim() > 2 || keep.size() != n)
+            throw nb::value_error("'x' must be (N,) or (N, k) with one 'keep' flag per row");
+        size_t m = 0;
+        for (size_t i = 0; i < n; ++i) m += keep.data()[i];
+        double *out;
+        OutArray rows = new_array(m, x.ndim() == 2 ? k : 0, &out);
+        {
+            nb::gil_scoped_release g;
+            const double *src = x.data();
+            for (size_t i = 0; i < n; ++i, src += k) {
+                if (!keep.data()[i]) continue;
+                for (size_t j = 0; j < k; ++j) out[j] = src[j];
+                out += k;
+            }
+        }
+        return rows;
+    }, "x"_a, "keep"_a, "The rows of x (N,) or (N, k) where keep, in order: x[keep].");
+    m.def("nan_rows", [](InArray x, BoolArray keep) {
+        const size_t n = x.ndim() == 0 ? 0 : x.shape(0), k = x.ndim() == 2 ? x.shape(1) : 1;
+        if (x.ndim() < 1 || x.ndim() > 2 || keep.size() != n)
+            throw nb::value_error("'x' must be (N,) or (N, k) with one 'keep' flag per row");
+        double *out;
+        OutArray rows = new_array(n, x.ndim() == 2 ? k : 0, &out);
+        {
+            nb::gil_scoped_release g;
+            constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+            for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t b, int) {
+                for (size_t i = a; i < b; ++i)
+                    for (size_t j = 0; j < k; ++j) out[i * k + j] = keep.data()[i] ? x.data()[i * k + j] : kNaN;
+            });
+        }
+        return rows;
+    }, "x"_a, "keep"_a, "x (N,) or (N, k) with the rows not kept NaN: where(keep[:, None], x, nan).");
     m.def("cubature_nodes", [](InArray lo, InArray hi, InArray nodes) {
         const size_t k = check_boxes(lo, hi), boxes = lo.shape(0), g = nodes.size();
         const size_t per = k == 1 ? g : g * g;
@@ -366,6 +414,20 @@ void bind_checks(nb::module_ &m) {
     }, "kind"_a, "measure"_a, "s"_a, "inside"_a, "p"_a, "c"_a,
        "(bad, zero, used, h_sum): pdf values NaN/infinite/negative, zero at inside points, good inside ones, "
        "and the sum of h = p J / (p J + c) over those.");
+    m.def("pdf_mismatches", [](InArray reported, InArray p, double rtol) {
+        if (reported.ndim() != 1 || p.ndim() != 1 || reported.size() != p.size())
+            throw nb::value_error("'reported' and 'p' must be arrays (N,) of the same length");
+        std::vector<int64_t> rows;
+        {
+            nb::gil_scoped_release g;
+            pdf_mismatches(reported.data(), p.data(), p.size(), rtol, rows);
+        }
+        nb::capsule owner;
+        int64_t *out = output_buffer<int64_t>(rows.size(), owner);
+        std::copy(rows.begin(), rows.end(), out);
+        return nb::ndarray<nb::numpy, int64_t>(out, {rows.size()}, owner);
+    }, "reported"_a, "p"_a, "rtol"_a,
+       "(M,) int64: the rows where |reported - p| > rtol |p| (or NaN), or reported is infinite or negative.");
     m.def("piecewise_linear_lookup", [](InArray lo, InArray hi, InArray start, InArray mass,
                                         nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu> offsets,
                                         nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu> strip,

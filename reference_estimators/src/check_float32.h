@@ -43,16 +43,42 @@ inline void float32_unit_rows(const double *x, size_t a, size_t b, size_t stride
     }
 }
 
+// Columns (c, n) of float32 values, rows a .. b - 1, as rows (n, c) of doubles into out: a
+// float32 renderer's vectors (drjit's (3, N) arrays) in the row order the check's kernels read.
+inline void float64_rows(const float *columns, size_t c, size_t n, size_t a, size_t b, double *out) {
+    for (size_t i = a; i < b; ++i)
+        for (size_t j = 0; j < c; ++j) out[i * c + j] = double(columns[j * n + i]);
+}
+
 // Whether every finite non-zero value of v (n) is a float32 (rounds to itself through float),
 // and there is one: a float32 renderer's numbers, whether returned as float32 or float64.
-// Stops at the first value that is not.
+// Stops after the block of 1024 values holding the first value that is not.  Written so that
+// GCC vectorises it (3.8 -> 0.6 ms on a million directions, where the value-by-value loop ran
+// scalar): the range tests on the bits (|x|'s bits order as |x| does; a floating-point
+// comparison may trap on a NaN, which kept the loop's branches), the value beyond float's
+// range replaced by 0 through its bits (a select of doubles feeding the conversion became a
+// branch), flags in 64-bit integers as wide as the doubles' lanes.
 inline bool all_float32(const double *v, size_t n) {
+    constexpr uint64_t kMagnitude = ~(uint64_t(1) << 63), kInfinity = 0x7ff0000000000000ull;
+    constexpr uint64_t kFloatMax = 0x47efffffe0000000ull;   // the bits of double(FLT_MAX)
+    constexpr size_t kBlock = 1024;
     bool any = false;
-    for (size_t i = 0; i < n; ++i) {
-        const double x = v[i];
-        if (!std::isfinite(x) || x == 0) continue;
-        if (!(std::fabs(x) <= double(std::numeric_limits<float>::max())) || double(float(x)) != x) return false;
-        any = true;
+    for (size_t start = 0; start < n; start += kBlock) {
+        const size_t end = start + kBlock < n ? start + kBlock : n;
+        int64_t bad = 0, some = 0;
+        for (size_t i = start; i < end; ++i) {
+            uint64_t bits;
+            std::memcpy(&bits, v + i, 8);
+            const uint64_t magnitude = bits & kMagnitude;
+            const int64_t counted = int64_t(magnitude != 0) & int64_t(magnitude < kInfinity);   // finite, non-zero
+            const uint64_t in_range = bits & (uint64_t(0) - uint64_t(magnitude <= kFloatMax));  // else 0
+            double y;
+            std::memcpy(&y, &in_range, 8);
+            bad |= counted & int64_t(double(float(y)) != v[i]);
+            some |= counted;
+        }
+        if (bad) return false;
+        any |= some != 0;
     }
     return any;
 }

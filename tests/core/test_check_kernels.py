@@ -369,9 +369,50 @@ def test_all_float32_matches_numpy():
     rng = np.random.default_rng(13)
     x = rng.normal(size=5000).astype(np.float32).astype(float)
     cases = [x, np.append(x, F32_EDGES), np.append(x, 0.1), np.append(x, 1e39),
-             np.array([0.0, np.nan, np.inf]), np.array([]), np.array([2.0**-149]), np.array([1.0 + 2.0**-30])]
+             np.array([0.0, np.nan, np.inf]), np.array([]), np.array([2.0**-149]), np.array([1.0 + 2.0**-30]),
+             # just beyond float32's range, a float64 between float32 subnormals, one in a later block
+             np.array([float(np.finfo(np.float32).max) * (1 + 2.0**-40)]), np.array([1.5 * 2.0**-149]),
+             np.array([2.0**-140 + 2.0**-160]), np.append(np.ones(3000), [1.0 + 2.0**-30, 1.0])]
     for v in cases:
         assert rest.all_float32(v) == all_float32_reference(v), v[-3:]
+
+
+def test_pdf_mismatches_are_numpys_rows():
+    rng = np.random.default_rng(14)
+    p = rng.random(CHUNKS) * 10
+    reported = p * (1 + rng.choice([0.0, 0.99e-4, 1.01e-4, -1.01e-4, 0.5], size=p.size, p=[0.9, 0.04, 0.02, 0.02, 0.02]))
+    edges = [(1.0, np.nan), (np.nan, 1.0), (np.inf, 1.0), (-0.0, 0.0), (0.0, 0.0), (-1e-300, 0.0), (1.0, np.inf),
+             (np.inf, np.inf), (1e-300, 0.0)]
+    reported[:len(edges)], p[:len(edges)] = zip(*edges)
+    with np.errstate(invalid="ignore"):
+        want = np.flatnonzero(~(np.abs(reported - p) <= 1e-4 * np.abs(p)) | ~np.isfinite(reported) | (reported < 0))
+    got = rest.pdf_mismatches(reported, p, 1e-4)
+    assert got.dtype == np.int64 and want.size > 0.05 * p.size
+    np.testing.assert_array_equal(got, want)
+    assert rest.pdf_mismatches(p[len(edges):], p[len(edges):], 0.0).size == 0   # equal values: none
+    with pytest.raises(ValueError, match="same length"):
+        rest.pdf_mismatches(p, p[:-1], 1e-4)
+
+
+# --- rows in and out of the adapters: what numpy's indexing gives --------------------------
+@pytest.mark.parametrize("n", [0, 5, CHUNKS])
+def test_row_kernels_match_numpy(n):
+    rng = np.random.default_rng(15)
+    columns = rng.normal(size=(3, n)).astype(np.float32)
+    rows = rest.float64_rows(columns)
+    assert rows.dtype == np.float64 and rows.flags["C_CONTIGUOUS"]
+    np.testing.assert_array_equal(rows, columns.T.astype(np.float64))
+    keep = rng.random(n) < 0.7
+    for x in (rows, rows[:, 1].copy()):
+        np.testing.assert_array_equal(rest.take_rows(x, keep), x[keep])
+        np.testing.assert_array_equal(rest.nan_rows(x, keep), np.where(keep if x.ndim == 1 else keep[:, None],
+                                                                       x, np.nan))
+    with pytest.raises(ValueError, match="one 'keep' flag per row"):
+        rest.take_rows(rows, np.ones(n + 1, dtype=bool))
+    with pytest.raises(ValueError, match="one 'keep' flag per row"):
+        rest.nan_rows(rows, np.ones(n + 1, dtype=bool))
+    with pytest.raises(ValueError, match="shape"):
+        rest.float64_rows(columns[0])
 
 
 # --- histogram -------------------------------------------------------------------------------

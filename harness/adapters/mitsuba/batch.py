@@ -67,11 +67,13 @@ def floats(a: np.ndarray) -> np.ndarray:
 
 
 def uniforms(u: np.ndarray, udim: int) -> list[np.ndarray]:
-    """The columns of ``u`` (N, >= udim) as float32, clamped below 1."""
+    """The columns of ``u`` (N, >= udim) as float32, clamped below 1 (each in one pass: the
+    clamp in float32 after rounding, the same bits as before it, rounding being monotone and
+    the bound a float32)."""
     u = np.asarray(u, dtype=float)
     if u.ndim != 2 or u.shape[1] < udim:
         raise ValueError(f"'u' must have shape (N, {udim}), got {u.shape}")
-    return [np.minimum(floats(u[:, i]), _BELOW_ONE) for i in range(udim)]
+    return [np.minimum(u[:, i], _BELOW_ONE, dtype=np.float32) for i in range(udim)]
 
 
 #: a direction whose length is 1 within this (about 8 float32 ulps) is rounded to float32 as
@@ -88,10 +90,19 @@ def unit_columns(x: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
 
 
 def _to_numpy(value: Any, n: int) -> np.ndarray:
-    a = np.array(value, dtype=np.float64)
-    if a.ndim == 2:          # a JIT vector or colour: (channels, N)
-        a = a.T
-    return np.broadcast_to(a, (n,) + a.shape[1:]).copy() if a.shape[:1] != (n,) else a
+    """A drjit result as float64 (N,) or (N, channels) in C order (a vector's or colour's
+    (channels, N) transposed in the same pass as the cast, by the core
+    (:func:`reference_estimators.float64_rows`): the check's core passes read directions in
+    C order, and copied a transposed view a pass each); a literal (width 1, say a constant
+    weight) as a read-only broadcast view of its value, not N copies."""
+    a = np.asarray(value)
+    if a.ndim == 2 and a.dtype == np.float32:     # a JIT vector or colour: (channels, N)
+        out = rest.float64_rows(a)
+    elif a.ndim == 2:                             # a double variant's
+        out = np.ascontiguousarray(a.T, dtype=np.float64)
+    else:
+        out = a.astype(np.float64)
+    return np.broadcast_to(out, (n,) + out.shape[1:]) if out.shape[:1] != (n,) else out
 
 
 def run_batch(mi: Any, variant: str, kernel: Callable[..., tuple],
@@ -161,6 +172,11 @@ class SampleBatch:
     delta: np.ndarray | None = None
     extra: dict[str, np.ndarray] = field(default_factory=dict)
 
+    @property
+    def produced(self) -> np.ndarray:
+        """The directions with NaN rows where not ``valid``: ``x`` itself when every row is."""
+        return self.x if self.valid.all() else rest.nan_rows(self.x, self.valid)
+
 
 class MitsubaSampler:
     """Base of the adapters: ``sample(u)`` (N, udim) -> directions (N, 3) with NaN rows for
@@ -218,7 +234,10 @@ class MitsubaSampler:
         valid = rest.finite_rows(x) & (spdf > 0)
         if weight is not None:
             weight = weight.reshape(len(x), -1)
-            valid &= np.any(weight != 0, axis=1)
+            nonzero = weight[:, 0] != 0     # np.any(weight != 0, axis=1) took 14 ms a million rows
+            for column in weight.T[1:]:
+                nonzero |= column != 0
+            valid &= nonzero
         if delta is not None:
             delta = delta.reshape(-1) != 0
             valid &= ~delta
@@ -226,21 +245,21 @@ class MitsubaSampler:
 
     def sample(self, u: np.ndarray) -> np.ndarray:
         """Directions (N, 3) for uniforms ``u``; NaN rows for samples not produced."""
-        b = self.sample_batch(u)
-        return np.where(b.valid[:, None], b.x, np.nan)
+        return self.sample_batch(u).produced
 
     def sample_with_pdf(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(directions as ``sample`` gives them, the pdf each sample call reported (N,)): the
         pair ``check_sampler`` checks the reported pdf from (harness.samplers.reported)."""
         b = self.sample_batch(u)
-        return np.where(b.valid[:, None], b.x, np.nan), b.sample_pdf
+        return b.produced, b.sample_pdf
 
     def pdf(self, x: np.ndarray) -> np.ndarray:
         """Density per solid angle at directions x (N, 3) (0 at non-finite or zero rows; see
         the module for how x is rounded to float32)."""
         cols, ok = unit_columns(x)
         (p,) = self._run(lambda m, o, w, *c: (self._pdf_kernel(m, o, w, *c),), cols)
-        return np.where(ok, p.reshape(-1), 0.0)
+        p = p.reshape(-1)
+        return p if ok.all() else np.where(ok, p, 0.0)
 
     def eval(self, x: np.ndarray) -> np.ndarray | None:
         """The value whose ratio to the pdf the sample weight must be (BSDF: f cos theta_o;

@@ -61,7 +61,7 @@ class Mutant:
 
     def sample_with_pdf(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         b = self.sample_batch(u)
-        return np.where(b.valid[:, None], b.x, np.nan), b.sample_pdf
+        return b.produced, b.sample_pdf
 
     def pdf(self, x: np.ndarray) -> np.ndarray:
         return self.pdf_scale * self.pdf_from.pdf(x)
