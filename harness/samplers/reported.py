@@ -100,8 +100,8 @@ def reported_pdf_failure(x: np.ndarray, reported: np.ndarray, pdf: Callable[[np.
     with np.errstate(all="ignore"):
         rel = np.where(p[bad] > 0, diff / p[bad], np.inf)
     worst = float(np.nanmax(rel)) if rel.size else float("nan")
-    ex = tuple({"index": int(i if produced is None else produced[i]), "point": np.atleast_1d(xs[i]).tolist(), "reported": float(rs[i]),
-                "pdf": float(p[i])} for i in bad[:max_examples])
+    ex = tuple({"index": int(i if produced is None else produced[i]), "point": np.atleast_1d(xs[i]).tolist(),
+                "reported": float(rs[i]), "pdf": float(p[i])} for i in bad[:max_examples])
     return Failure("reported_pdf", int(bad.size),
                    f"the pdf reported with the sample differs from pdf() at the sampled point beyond "
                    f"{rtol:g} relative + float32 rounding of the point (largest relative difference "
