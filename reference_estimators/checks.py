@@ -83,10 +83,10 @@ def float64_rows(columns: Any) -> np.ndarray:
     drjit gives them) as rows, cast and transposed in one pass in C++, into memory the core
     reuses from call to call (a fresh numpy array of a million directions cost 5-10 ms of page
     faults on a loaded machine, more than the copy)."""
-    a = np.ascontiguousarray(columns, dtype=np.float32)
-    if a.ndim != 2:
-        raise ValueError(f"'columns' must have shape (c, N), got {a.shape}")
-    return _core.float64_rows(a)
+    a = np.asarray(columns)
+    if a.dtype != np.float32 or a.ndim != 2 or a.shape[0] == 0:
+        raise ValueError(f"'columns' must be float32 of shape (c, N), c >= 1, got {a.dtype} {a.shape}")
+    return _core.float64_rows(np.ascontiguousarray(a))
 
 
 def take_rows(x: Any, keep: Any) -> np.ndarray:
@@ -228,7 +228,8 @@ def finite_rows(x: Any) -> np.ndarray:
 def all_float32(v: Any) -> bool:
     """Whether every finite non-zero value of v (any shape) is a float32 (rounds to itself
     through float32), and there is one: a float32 renderer's numbers, whether returned as
-    float32 or float64.  One pass in C++, stopping at the first value that is not."""
+    float32 or float64.  One vectorised pass in C++, stopping after the block of 1024 values
+    that holds the first value that is not."""
     return bool(_core.all_float32(np.ascontiguousarray(v, dtype=np.float64).reshape(-1)))
 
 

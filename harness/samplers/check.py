@@ -407,7 +407,7 @@ def _check_drawn(u: np.ndarray, x: np.ndarray, reported: np.ndarray | None,
 
 def _float32_points(x: np.ndarray) -> bool:
     """Whether x's coordinates are float32 (:func:`reference_estimators.all_float32`, which
-    stops at a float64 sampler's first value that is not)."""
+    stops soon after a float64 sampler's first value that is not)."""
     return rest.all_float32(x)
 
 

@@ -90,6 +90,13 @@ struct BoundTransform {
     const PiecewiseLinearTable *conditional_table() const { return conditional ? conditional->table.get() : nullptr; }
 };
 
+// The rows of x (N,) or (N, k), k >= 1, with one `keep` flag per row: N.
+size_t check_rows(const InArray &x, const BoolArray &keep) {
+    if (x.ndim() < 1 || x.ndim() > 2 || (x.ndim() == 2 && x.shape(1) == 0) || keep.size() != x.shape(0))
+        throw nb::value_error("'x' must be (N,) or (N, k), k >= 1, with one 'keep' flag per row");
+    return x.shape(0);
+}
+
 }  // namespace
 
 void bind_checks(nb::module_ &m) {
@@ -166,6 +173,7 @@ void bind_checks(nb::module_ &m) {
        "length is off 1 by more than `slack`); rows that are not finite non-zero vectors become +z, ok False.");
     m.def("float64_rows", [](nb::ndarray<const float, nb::ndim<2>, nb::c_contig, nb::device::cpu> columns) {
         const size_t c = columns.shape(0), n = columns.shape(1);
+        if (c == 0) throw nb::value_error("'columns' must have at least one column (c, N), c >= 1");
         double *out;
         OutArray rows = new_array(n, c, &out);
         {
@@ -175,30 +183,31 @@ void bind_checks(nb::module_ &m) {
             });
         }
         return rows;
-    }, "columns"_a, "(N, c) float64: the float32 columns (c, N) as rows.");
+    }, "columns"_a.noconvert(), "(N, c) float64: the float32 columns (c, N) as rows.");
     m.def("take_rows", [](InArray x, BoolArray keep) {
-        const size_t n = x.ndim() == 0 ? 0 : x.shape(0), k = x.ndim() == 2 ? x.shape(1) : 1;
-        if (x.ndim() < 1 || x.ndim() > 2 || keep.size() != n)
-            throw nb::value_error("'x' must be (N,) or (N, k) with one 'keep' flag per row");
+        const size_t n = check_rows(x, keep), k = x.ndim() == 2 ? x.shape(1) : 1;
+        // the flags as bytes: a numpy bool array may hold other values than 0 and 1 (a view of
+        // uint8), which a bool read in C++ need not treat as true
+        const uint8_t *flags = reinterpret_cast<const uint8_t *>(keep.data());
         size_t m = 0;
-        for (size_t i = 0; i < n; ++i) m += keep.data()[i];
+        for (size_t i = 0; i < n; ++i) m += flags[i] != 0;
         double *out;
         OutArray rows = new_array(m, x.ndim() == 2 ? k : 0, &out);
         {
             nb::gil_scoped_release g;
+            // at most m rows, whatever another thread does to `keep` meanwhile
             const double *src = x.data();
-            for (size_t i = 0; i < n; ++i, src += k) {
-                if (!keep.data()[i]) continue;
-                for (size_t j = 0; j < k; ++j) out[j] = src[j];
-                out += k;
+            for (size_t i = 0, taken = 0; i < n && taken < m; ++i, src += k) {
+                if (flags[i] == 0) continue;
+                std::copy(src, src + k, out + taken * k);
+                ++taken;
             }
         }
         return rows;
     }, "x"_a, "keep"_a, "The rows of x (N,) or (N, k) where keep, in order: x[keep].");
     m.def("nan_rows", [](InArray x, BoolArray keep) {
-        const size_t n = x.ndim() == 0 ? 0 : x.shape(0), k = x.ndim() == 2 ? x.shape(1) : 1;
-        if (x.ndim() < 1 || x.ndim() > 2 || keep.size() != n)
-            throw nb::value_error("'x' must be (N,) or (N, k) with one 'keep' flag per row");
+        const size_t n = check_rows(x, keep), k = x.ndim() == 2 ? x.shape(1) : 1;
+        const uint8_t *flags = reinterpret_cast<const uint8_t *>(keep.data());   // bytes, as in take_rows
         double *out;
         OutArray rows = new_array(n, x.ndim() == 2 ? k : 0, &out);
         {
@@ -206,7 +215,7 @@ void bind_checks(nb::module_ &m) {
             constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
             for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t b, int) {
                 for (size_t i = a; i < b; ++i)
-                    for (size_t j = 0; j < k; ++j) out[i * k + j] = keep.data()[i] ? x.data()[i * k + j] : kNaN;
+                    for (size_t j = 0; j < k; ++j) out[i * k + j] = flags[i] != 0 ? x.data()[i * k + j] : kNaN;
             });
         }
         return rows;

@@ -372,7 +372,11 @@ def test_all_float32_matches_numpy():
              np.array([0.0, np.nan, np.inf]), np.array([]), np.array([2.0**-149]), np.array([1.0 + 2.0**-30]),
              # just beyond float32's range, a float64 between float32 subnormals, one in a later block
              np.array([float(np.finfo(np.float32).max) * (1 + 2.0**-40)]), np.array([1.5 * 2.0**-149]),
-             np.array([2.0**-140 + 2.0**-160]), np.append(np.ones(3000), [1.0 + 2.0**-30, 1.0])]
+             np.array([2.0**-140 + 2.0**-160]), np.append(np.ones(3000), [1.0 + 2.0**-30, 1.0]),
+             # float32 values with the range's ends, and with NaN and infinities (failed samples): True
+             np.append(x, [float(np.finfo(np.float32).max), -float(np.finfo(np.float32).max)]),
+             np.append(x, [np.nan, np.inf, -np.inf, -0.0])]
+    assert all_float32_reference(cases[-1]) and all_float32_reference(cases[-2])
     for v in cases:
         assert rest.all_float32(v) == all_float32_reference(v), v[-3:]
 
@@ -383,14 +387,16 @@ def test_pdf_mismatches_are_numpys_rows():
     off = rng.choice([0.0, 0.99e-4, 1.01e-4, -1.01e-4, 0.5], size=p.size, p=[0.9, 0.04, 0.02, 0.02, 0.02])
     reported = p * (1 + off)
     edges = [(1.0, np.nan), (np.nan, 1.0), (np.inf, 1.0), (-0.0, 0.0), (0.0, 0.0), (-1e-300, 0.0),
-             (1.0, np.inf), (np.inf, np.inf), (1e-300, 0.0)]
+             (1.0, np.inf), (np.inf, np.inf), (1e-300, 0.0), (-1.0, -1.0), (np.inf, 1e308)]
     reported[:len(edges)], p[:len(edges)] = zip(*edges)
-    with np.errstate(invalid="ignore"):
-        near = np.abs(reported - p) <= 1e-4 * np.abs(p)
-        want = np.flatnonzero(~near | ~np.isfinite(reported) | (reported < 0))
-    got = rest.pdf_mismatches(reported, p, 1e-4)
-    assert got.dtype == np.int64 and want.size > 0.05 * p.size
-    np.testing.assert_array_equal(got, want)
+    reported[-1] = 2 * p[-1]                                  # the last row mismatches
+    for rtol in (1e-4, 10.0):       # 10: an infinite or negative report mismatches however close
+        with np.errstate(invalid="ignore", over="ignore"):
+            near = np.abs(reported - p) <= rtol * np.abs(p)
+            want = np.flatnonzero(~near | ~np.isfinite(reported) | (reported < 0))
+        got = rest.pdf_mismatches(reported, p, rtol)
+        assert got.dtype == np.int64 and {9, 10} | ({p.size - 1} if rtol < 1 else set()) <= set(want.tolist())
+        np.testing.assert_array_equal(got, want)
     assert rest.pdf_mismatches(p[len(edges):], p[len(edges):], 0.0).size == 0   # equal values: none
     with pytest.raises(ValueError, match="same length"):
         rest.pdf_mismatches(p, p[:-1], 1e-4)
@@ -405,16 +411,22 @@ def test_row_kernels_match_numpy(n):
     assert rows.dtype == np.float64 and rows.flags["C_CONTIGUOUS"]
     np.testing.assert_array_equal(rows, columns.T.astype(np.float64))
     keep = rng.random(n) < 0.7
-    for x in (rows, rows[:, 1].copy()):
+    for x in (rows, rows[:, 1], rows[::-1]):      # 2-D, and 1-D and 2-D views copied first
         np.testing.assert_array_equal(rest.take_rows(x, keep), x[keep])
         np.testing.assert_array_equal(rest.nan_rows(x, keep), np.where(keep if x.ndim == 1 else keep[:, None],
                                                                        x, np.nan))
-    with pytest.raises(ValueError, match="one 'keep' flag per row"):
-        rest.take_rows(rows, np.ones(n + 1, dtype=bool))
-    with pytest.raises(ValueError, match="one 'keep' flag per row"):
-        rest.nan_rows(rows, np.ones(n + 1, dtype=bool))
-    with pytest.raises(ValueError, match="shape"):
-        rest.float64_rows(columns[0])
+    # a bool view of bytes other than 0 and 1 keeps those rows, and no more
+    byte_keep = (keep.astype(np.uint8) * 3).view(bool)
+    np.testing.assert_array_equal(rest.take_rows(rows, byte_keep), rows[keep])
+    np.testing.assert_array_equal(rest.nan_rows(rows, byte_keep), np.where(keep[:, None], rows, np.nan))
+    for kernel in (rest.take_rows, rest.nan_rows):
+        with pytest.raises(ValueError, match="one 'keep' flag per row"):
+            kernel(rows, np.ones(n + 1, dtype=bool))
+        with pytest.raises(ValueError, match="k >= 1"):
+            kernel(np.zeros((n, 0)), np.ones(n, dtype=bool))
+    for bad in (columns[0], columns.astype(np.float64), columns[:0]):
+        with pytest.raises(ValueError, match="float32 of shape"):
+            rest.float64_rows(bad)
 
 
 # --- histogram -------------------------------------------------------------------------------

@@ -93,8 +93,10 @@ def _to_numpy(value: Any, n: int) -> np.ndarray:
     """A drjit result as float64 (N,) or (N, channels) in C order (a vector's or colour's
     (channels, N) transposed in the same pass as the cast, by the core
     (:func:`reference_estimators.float64_rows`): the check's core passes read directions in
-    C order, and copied a transposed view a pass each); a literal (width 1, say a constant
-    weight) as a read-only broadcast view of its value, not N copies."""
+    C order, and copied a transposed view a pass each).  A literal (width 1) becomes N
+    copies of its value, except a vector's or colour's (a constant weight: a phase function's,
+    a diffuse BSDF's), which stays a read-only broadcast view of it (24 MB a million samples
+    that only :class:`SampleBatch`'s weight holds)."""
     a = np.asarray(value)
     if a.ndim == 2 and a.dtype == np.float32:     # a JIT vector or colour: (channels, N)
         out = rest.float64_rows(a)
@@ -102,7 +104,10 @@ def _to_numpy(value: Any, n: int) -> np.ndarray:
         out = np.ascontiguousarray(a.T, dtype=np.float64)
     else:
         out = a.astype(np.float64)
-    return np.broadcast_to(out, (n,) + out.shape[1:]) if out.shape[:1] != (n,) else out
+    if out.shape[:1] == (n,):
+        return out
+    view = np.broadcast_to(out, (n,) + out.shape[1:])
+    return view if out.ndim == 2 else view.copy()
 
 
 def run_batch(mi: Any, variant: str, kernel: Callable[..., tuple],
@@ -156,7 +161,8 @@ def plugin_label(plugin: dict[str, Any]) -> str:
 @dataclass(frozen=True)
 class SampleBatch:
     """What a sampler returned for uniforms ``u``: directions ``x`` (N, 3) as Mitsuba gave them
-    (also where it failed), the weight (N, channels) (None for microfacet distributions), the
+    (also where it failed), the weight (N, channels) (None for microfacet distributions; a
+    read-only broadcast view where Mitsuba returned one constant weight: copy it to write), the
     pdf the sample call reported (N,), and ``valid``: the rows in the density (weight not all
     zero, pdf > 0, finite direction, not a Dirac lobe).  ``delta``: the rows that sampled a
     Dirac delta lobe (a mask's pass-through, a smooth plastic's coating; None where the
