@@ -241,13 +241,15 @@ void bind_checks(nb::module_ &m) {
         const size_t k = check_boxes(lo, hi), g = nodes.size(), per = k == 1 ? g : g * g;
         if (size_t(domain_param_dim(d)) != k) throw nb::value_error("the boxes' dimension is not the domain's");
         const int pdim = domain_point_dim(d);
-        const bool permute = !columns.empty();
-        if (permute) {
+        Placement at;
+        if (!columns.empty()) {
             std::vector<int> seen(columns);
             std::sort(seen.begin(), seen.end());
             bool ok = int(seen.size()) == pdim;
             for (int j = 0; ok && j < pdim; ++j) ok = seen[size_t(j)] == j;
             if (!ok) throw nb::value_error("'columns' must be a permutation of the points' coordinates (or empty)");
+            // the result is x[:, columns]: coordinate columns[j] goes to column j
+            for (int j = 0; j < pdim; ++j) at.dest[columns[size_t(j)]] = j;
         }
         const size_t boxes = lo.shape(0);
         double *x;
@@ -257,15 +259,8 @@ void bind_checks(nb::module_ &m) {
             // each box's points from that box alone: chunks of boxes on all threads
             for_chunks(boxes, std::max<size_t>(kCubatureChunk / per, 1), [&](size_t, size_t a, size_t b, int) {
                 thread_local std::vector<double> scratch;
-                double *out = x + a * per * size_t(pdim);
-                cubature_points(d, dlo, dhi, lo.data() + a * k, hi.data() + a * k, b - a, k, nodes.data(), g, out,
-                                scratch);
-                if (permute)   // the chunk's rows, still in cache: numpy's x[:, columns] cost a copy
-                    for (size_t i = 0; i < (b - a) * per; ++i) {
-                        double *row = out + i * size_t(pdim), was[3];
-                        std::copy(row, row + pdim, was);
-                        for (int j = 0; j < pdim; ++j) row[j] = was[columns[size_t(j)]];
-                    }
+                cubature_points(d, dlo, dhi, lo.data() + a * k, hi.data() + a * k, b - a, k, nodes.data(), g, at,
+                                x + a * per * size_t(pdim), scratch);
             });
         }
         return xa;

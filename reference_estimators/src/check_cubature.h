@@ -47,20 +47,27 @@ RE_INLINE void radial_part(CheckDomain d, D s0, D &r, D &z) {
     r = simd::sqrt(w > 0 ? w : D{});
 }
 
+// Where each coordinate of a point goes in its row: dest[c] for coordinate c (x, y, z), the
+// identity or a permutation of the sphere's about another pole (cubature_points' `columns`).
+struct Placement {
+    int dest[3] = {0, 1, 2};
+};
+
 // Box m's nodes' points (per = g^2 rows of 2 or 3 into out) from its g radii, heights,
-// sines and cosines, lane l of each.
+// sines and cosines, lane l of each, each coordinate at its place in the row (written there
+// at once: a second pass permuting the rows had taken twice the map's time).
 template <class D>
 RE_INLINE void write_box_points(const D *r, const D *z, const D *sn, const D *cs, size_t l, size_t g, bool planar,
-                                double *out) {
+                                const Placement &at, double *out) {
     auto lane = [l](const D &v) -> double {
         if constexpr (std::is_same_v<D, double>) return v; else return v[l];
     };
     for (size_t i = 0; i < g; ++i)
         for (size_t j = 0; j < g; ++j) {
             double *p = out + (i * g + j) * (planar ? 2 : 3);
-            p[0] = lane(r[i]) * lane(cs[j]);
-            p[1] = lane(r[i]) * lane(sn[j]);
-            if (!planar) p[2] = lane(z[i]);
+            p[at.dest[0]] = lane(r[i]) * lane(cs[j]);
+            p[at.dest[1]] = lane(r[i]) * lane(sn[j]);
+            if (!planar) p[at.dest[2]] = lane(z[i]);
         }
 }
 
@@ -71,7 +78,7 @@ RE_INLINE void write_box_points(const D *r, const D *z, const D *sn, const D *cs
 // values as domain_points(cubature_nodes), the same bits, for 2g transcendental evaluations
 // a box instead of 2 g^2.  g <= 8.
 inline void separable_points(CheckDomain d, const double *lo, const double *hi, size_t boxes, const double *nodes,
-                             size_t g, double *x) {
+                             size_t g, const Placement &at, double *x) {
     const bool planar = d == CheckDomain::disk;
     const size_t stride = g * g * (planar ? 2 : 3);
     auto box = [&](auto *r, auto *z, auto *sn, auto *cs, auto s0_at, auto s1_at) {
@@ -93,33 +100,42 @@ inline void separable_points(CheckDomain d, const double *lo, const double *hi, 
             return v;
         };
         box(r, z, sn, cs, [&](size_t i) { return coordinate(0, i); }, [&](size_t i) { return coordinate(1, i); });
-        for (size_t l = 0; l < W; ++l) write_box_points(r, z, sn, cs, l, g, planar, x + (m + l) * stride);
+        for (size_t l = 0; l < W; ++l) write_box_points(r, z, sn, cs, l, g, planar, at, x + (m + l) * stride);
     }
     for (; m < boxes; ++m) {
         double r[8], z[8], sn[8], cs[8];
         auto coordinate = [&](size_t j, size_t i) { return lo[2 * m + j] + (hi[2 * m + j] - lo[2 * m + j]) * nodes[i]; };
         box(r, z, sn, cs, [&](size_t i) { return coordinate(0, i); }, [&](size_t i) { return coordinate(1, i); });
-        write_box_points(r, z, sn, cs, 0, g, planar, x + m * stride);
+        write_box_points(r, z, sn, cs, 0, g, planar, at, x + m * stride);
     }
 }
 
 // The domain points x (boxes g^k rows) of the tensor rule's nodes on boxes [lo, hi]:
 // domain_points(cubature_nodes(...)) bit for bit, without the caller's parameter array
-// (separable_points on the disk and sphere, else the nodes through `scratch`).
+// (separable_points on the disk and sphere, else the nodes through `scratch`), each point's
+// coordinates placed in its row by `at`.
 inline void cubature_points(CheckDomain d, double dlo, double dhi, const double *lo, const double *hi, size_t boxes,
-                            size_t k, const double *nodes, size_t g, double *x, std::vector<double> &scratch) {
+                            size_t k, const double *nodes, size_t g, const Placement &at, double *x,
+                            std::vector<double> &scratch) {
     if (k == 2 && g <= 8 && (d == CheckDomain::disk || d == CheckDomain::hemisphere || d == CheckDomain::sphere)) {
-        separable_points(d, lo, hi, boxes, nodes, g, x);
-        return;
-    }
-    if (d == CheckDomain::square) {  // the identity map: the nodes are the points
-        cubature_nodes(lo, hi, boxes, k, nodes, g, x);
+        separable_points(d, lo, hi, boxes, nodes, g, at, x);
         return;
     }
     const size_t count = boxes * (k == 1 ? g : g * g);
-    scratch.resize(count * k);
-    cubature_nodes(lo, hi, boxes, k, nodes, g, scratch.data());
-    domain_points(d, dlo, dhi, scratch.data(), count, x);
+    if (d == CheckDomain::square) {  // the identity map: the nodes are the points
+        cubature_nodes(lo, hi, boxes, k, nodes, g, x);
+    } else {
+        scratch.resize(count * k);
+        cubature_nodes(lo, hi, boxes, k, nodes, g, scratch.data());
+        domain_points(d, dlo, dhi, scratch.data(), count, x);
+    }
+    const int dim = domain_point_dim(d);
+    if (dim == 1 || (at.dest[0] == 0 && at.dest[1] == 1 && (dim == 2 || at.dest[2] == 2))) return;
+    for (size_t i = 0; i < count; ++i) {   // rows still in cache
+        double *row = x + size_t(dim) * i, was[3];
+        std::copy(row, row + dim, was);
+        for (int c = 0; c < dim; ++c) row[at.dest[c]] = was[c];
+    }
 }
 
 // The volume prod (hi - lo) of a box with corners lo, hi (k coordinates each), in axis order.
