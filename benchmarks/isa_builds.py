@@ -4,8 +4,10 @@ and how fast each one runs.
 Builds reference_estimators/_core with CMake into build/isa-<march>/ for each --march
 (default: haswell, the AVX2 + FMA baseline, and x86-64, plain SSE2), then
   --identity    compares, bit for bit, every catalogue estimate (all techniques, random,
-                stratified and Sobol' points, 1 and 2 threads) and the elementary functions'
-                values between the installed build and each variant; exit status 1 on any
+                stratified and Sobol' points, 1 and 2 threads), the elementary functions'
+                values and the sampler check's vectorised kernels' (dithering, float32
+                detection, domain and cubature maps) between the installed build and each
+                variant; exit status 1 on any
                 difference (tests/core/test_isa_builds.py runs this)
   --throughput  runs benchmarks/uniform_mc.py on each variant, drjit targeting the same ISA
                 where it can (haswell), so an AVX2 build is compared with AVX2 drjit code
@@ -49,6 +51,17 @@ out["exp"] = kernels.fast_exp(x).tobytes().hex()
 u = rng.random(20_000)
 out["log"] = kernels.fast_log(u * 10.0 ** rng.uniform(-300, 300, u.size)).tobytes().hex()
 out["sincos"] = b"".join(a.tobytes() for a in kernels.fast_sincos_2pi(u * 6 - 3)).hex()
+# the sampler check's vectorised kernels: any bits, float32 values, unit vectors, boxes
+bits = rng.integers(0, 2**64, size=20_000, dtype=np.uint64).view(np.float64)
+f32 = rng.normal(size=(20_000, 3)).astype(np.float32).astype(np.float64)
+out["dither"] = rest.dither_float32(np.concatenate([bits, f32.ravel()]), rng.random(80_000)).tobytes().hex()
+out["all_float32"] = [rest.all_float32(f32), rest.all_float32(bits), rest.all_float32(f32 + 1e-12)]
+unit = f32 / np.linalg.norm(f32, axis=1)[:, None]
+s, inside = rest.dithered_domain_params("sphere", unit, rng.random(unit.shape))
+out["dithered_params"] = s.tobytes().hex() + inside.tobytes().hex()
+lo = rng.random((3_001, 2)) * 0.9
+out["cubature_points"] = rest.cubature_points("sphere", lo, lo + 0.05, np.linspace(0.1, 0.9, 4),
+                                              columns=[0, 2, 1]).tobytes().hex()
 print(json.dumps(out))
 """
 
@@ -76,7 +89,8 @@ def digest(core: str) -> dict:
 
 def identity(marches: list[str]) -> int:
     base = digest("")
-    print(f"installed build: {base['isa']}, {len(base) - 4} estimates and 3 elementary functions")
+    print(f"installed build: {base['isa']}, {len(base) - 8} estimates, 3 elementary functions and 4 check "
+          "kernels")
     status = 0
     for march in marches:
         other = digest(build(march))

@@ -13,7 +13,8 @@ import numpy as np
 from . import _core
 
 __all__ = [
-    "CHECK_DOMAINS", "domain_params", "domain_points", "cubature_nodes", "cubature_points", "cubature_sums",
+    "CHECK_DOMAINS", "domain_params", "dithered_domain_params", "domain_points", "cubature_nodes",
+    "cubature_points", "cubature_sums",
     "cubature_moment_sums", "grid_histogram", "rosenblatt",
     "piecewise_linear_lookup", "transform_statistics", "cramer_von_mises_sum", "pdf_summary",
     "all_float32", "dither_float32", "finite_rows", "pdf_mismatches", "float64_rows", "take_rows",
@@ -43,6 +44,21 @@ def domain_params(kind: str, x: Any, lo: float = 0.0, hi: float = 1.0) -> tuple[
     if CHECK_DOMAINS[code] in ("interval", "half_line"):
         a = a.reshape(-1)
     return _core.domain_params(code, float(lo), float(hi), a)
+
+
+def dithered_domain_params(kind: str, x: Any, u: Any, lo: float = 0.0,
+                           hi: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """(s, inside): :func:`domain_params`' s of the points x dithered within their float32
+    rounding (:func:`dither_float32` with uniforms ``u`` of x's shape) and its ``inside`` of x
+    as given: the same bits as those two calls, in one pass in C++ that keeps the dithered
+    points in cache (the sampler check's float32 points need both, and nothing else of
+    either)."""
+    code = _check_domain(kind)
+    a = np.ascontiguousarray(x, dtype=np.float64)
+    w = np.ascontiguousarray(u, dtype=np.float64)
+    if CHECK_DOMAINS[code] in ("interval", "half_line"):
+        a, w = a.reshape(-1), w.reshape(-1)
+    return _core.dithered_domain_params(code, float(lo), float(hi), a, w)
 
 
 def domain_points(kind: str, s: Any, lo: float = 0.0, hi: float = 1.0) -> np.ndarray:
@@ -245,18 +261,19 @@ def dither_float32(v: Any, u: Any) -> np.ndarray:
 
 
 def pdf_summary(kind: str, measure: float, s: Any, inside: Any, p: Any,
-                c: float) -> tuple[int, int, int, float]:
-    """(bad, zero, used, h_sum) over pdf values p (N,) at points with parameters s (N, k) and
-    ``inside`` flags: ``bad`` counts p NaN, infinite or negative (every point), ``zero`` p == 0
-    at inside points; over the ``used`` inside points with a good p, h_sum is the sum of
-    h = q / (q + c) with q = p J the density in parameter space (J = ``measure``, the domain's
-    measure per unit of s, or 1 / (1 - s)^2 on the half line); 0 unless c > 0.  One pass in
-    C++ with a compensated sum."""
+                c: float, total: float = 1.0) -> tuple[int, int, int, float]:
+    """(bad, zero, used, h_sum) over pdf values p / ``total`` (p (N,); numpy's division, without
+    its array) at points with parameters s (N, k) and ``inside`` flags: ``bad`` counts them
+    NaN, infinite or negative (every point), ``zero`` 0 at inside points; over the ``used``
+    inside points with a good value, h_sum is the sum of h = q / (q + c) with q = p J / total
+    the density in parameter space (J = ``measure``, the domain's measure per unit of s, or
+    1 / (1 - s)^2 on the half line, the only domain that reads s); 0 unless c > 0.  One pass
+    in C++ with a compensated sum."""
     code = _check_domain(kind)
     a = np.ascontiguousarray(s, dtype=np.float64)
     m = np.ascontiguousarray(inside, dtype=bool).reshape(-1)
     v = np.ascontiguousarray(p, dtype=np.float64).reshape(-1)
-    bad, zero, used, h_sum = _core.pdf_summary(code, float(measure), a, m, v, float(c))
+    bad, zero, used, h_sum = _core.pdf_summary(code, float(measure), a, m, v, float(c), float(total))
     return int(bad), int(zero), int(used), float(h_sum)
 
 

@@ -151,21 +151,35 @@ class SamplerTest:
                    **({"value": float(values[i])} if values is not None else {})} for i in where]
             failures.append(Failure(check, int(mask.sum()), detail, tuple(ex)))
 
-        s, inside = dom.to_params(x)
+        # float32 points (a renderer's) are quantised: near a narrow lobe's peak a float32
+        # direction's z takes ~1700 values across the lobe, and cells of equal claimed
+        # probability hold whole steps of that grid, 1 % too many or too few.  The statistical
+        # tests see each such point moved uniformly within its float32 rounding interval
+        # (stream ``seed``, DITHER_CASE), which under H0 follows the pdf smoothed over that
+        # interval: the same law to O(ulp^2) (without it GGX alpha 0.01 from Mitsuba failed the
+        # equiprobable chi-square at p = 1e-6).  No check reads the parameters of the points
+        # as drawn but pdf_summary on the half line, so elsewhere the dithered parameters and
+        # the domain mask of the points as drawn come from one pass.
+        float32 = _float32_points(x)
+        dither_now = float32 and dom.kind != "half_line"
+        s, inside = dom.dithered_params(x, _dither_uniforms(x, seed)) if dither_now else dom.to_params(x)
         all_inside = bool(inside.all())
         if not all_inside:
             fail("outside_domain", ~inside, f"points outside the {dom.kind}")
-        # the claimed pdf once: the density tested is it over the total (for_total), and the
-        # reported pdf is checked against it as given (a second call had cost a Mitsuba
-        # sampler's check a tenth of its time)
+        # the claimed pdf once: the density tested is it over the total (for_total, divided
+        # in pdf_summary), and the reported pdf is checked against it as given (a second call
+        # had cost a Mitsuba sampler's check a tenth of its time)
         claimed = self.claimed_pdf(x)
-        p = claimed if self.total == 1 else claimed / self.total
         measure = 1.0 if dom.kind == "half_line" else float(dom.jacobian(s))
-        n_bad, n_zero, used, h_sum = rest.pdf_summary(dom.kind, measure, s, inside, p, self.c)
-        if n_bad:
-            fail("bad_pdf", ~np.isfinite(p) | (p < 0), "pdf NaN, infinite or negative at sampled points", p)
-        if n_zero:
-            fail("zero_pdf", (p == 0) & inside, "sampled points where the pdf is 0", p)
+        n_bad, n_zero, used, h_sum = rest.pdf_summary(dom.kind, measure, s, inside, claimed, self.c,
+                                                      self.total)
+        if n_bad or n_zero:
+            p = claimed if self.total == 1 else claimed / self.total
+            if n_bad:
+                fail("bad_pdf", ~np.isfinite(p) | (p < 0), "pdf NaN, infinite or negative at sampled points",
+                     p)
+            if n_zero:
+                fail("zero_pdf", (p == 0) & inside, "sampled points where the pdf is 0", p)
         if reported is not None:
             mismatch = reported_pdf_failure(x, reported, self.claimed_pdf, values=claimed)
             if mismatch is not None:
@@ -178,15 +192,8 @@ class SamplerTest:
             failures.append(Failure("normalization", 1, f"pdf integrates to {total:.6f} ± {total_err:.1e} "
                                                         f"over the {dom.kind}, not 1"))
 
-        # float32 points (a renderer's) are quantised: near a narrow lobe's peak a float32
-        # direction's z takes ~1700 values across the lobe, and cells of equal claimed
-        # probability hold whole steps of that grid, 1 % too many or too few.  The statistical
-        # tests see each such point moved uniformly within its float32 rounding interval
-        # (stream ``seed``, DITHER_CASE), which under H0 follows the pdf smoothed over that
-        # interval: the same law to O(ulp^2) (without it GGX alpha 0.01 from Mitsuba failed the
-        # equiprobable chi-square at p = 1e-6)
-        if _float32_points(x):
-            s = dom.to_params(_dithered(x, seed))[0]
+        if float32 and not dither_now:     # dithered as above, on the half line
+            s = dom.to_params(rest.dither_float32(x, _dither_uniforms(x, seed)))[0]
         counts = rest.grid_histogram(s, inside, base)
         grids = {"coarse": (16,) if dom.k == 1 else (16, 32), "fine": (512,) if dom.k == 1 else (64, 128)}
         tests, residuals = [], {}
@@ -411,13 +418,14 @@ def _float32_points(x: np.ndarray) -> bool:
     return rest.all_float32(x)
 
 
-def _dithered(x: np.ndarray, seed: int) -> np.ndarray:
-    """x with each coordinate moved uniformly within its float32 rounding interval (half way to
-    each float32 neighbour), uniforms from stream ``seed``, DITHER_CASE; non-finite ones kept
-    (:func:`reference_estimators.dither_float32`, one pass in the core: numpy's took 0.1 s a
-    million directions, more than the rest of the check)."""
-    u = rest.points(x.shape[0], 1 if x.ndim == 1 else x.shape[1], seed=seed, case_id=DITHER_CASE)
-    return rest.dither_float32(x, u)
+def _dither_uniforms(x: np.ndarray, seed: int) -> np.ndarray:
+    """The uniforms (x's shape, as (N, coordinates)) that move each coordinate of x within its
+    float32 rounding interval (half way to each float32 neighbour; non-finite ones kept):
+    stream ``seed``, DITHER_CASE.  The core dithers in one pass
+    (:func:`reference_estimators.dither_float32`, or with the domain map,
+    :meth:`Domain.dithered_params`): numpy's took 0.1 s a million directions, more than the
+    rest of the check."""
+    return rest.points(x.shape[0], 1 if x.ndim == 1 else x.shape[1], seed=seed, case_id=DITHER_CASE)
 
 
 def _u_examples(u: np.ndarray, mask: np.ndarray, k: int = 5) -> list[dict[str, Any]]:

@@ -117,6 +117,16 @@ class Domain:
             x = np.asarray(x)[:, _POLES[self.pole]]
         return rest.domain_params(self.kind, x, self.lo, self.hi)
 
+    def dithered_params(self, x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(:meth:`to_params`' s of the points x each coordinate moved within its float32
+        rounding interval by the uniforms u (x's shape;
+        :func:`reference_estimators.dither_float32`), its mask of x as given): one pass in the
+        core (:func:`reference_estimators.dithered_domain_params`), the same bits as the two
+        calls."""
+        if self.pole != "z":
+            x, u = np.asarray(x)[:, _POLES[self.pole]], np.asarray(u)[:, _POLES[self.pole]]
+        return rest.dithered_domain_params(self.kind, x, u, self.lo, self.hi)
+
     @property
     def pole_columns(self) -> list[int] | None:
         """The columns that take points given in the frame whose z is the pole to the domain's

@@ -120,6 +120,35 @@ void bind_checks(nb::module_ &m) {
     }, "kind"_a, "lo"_a, "hi"_a, "x"_a,
        "(s (N, k), inside (N,)): the equal-measure parameters of points x on domain `kind` "
        "(0 interval [lo, hi], 1 half line, 2 square, 3 disk, 4 hemisphere, 5 sphere).");
+    m.def("dithered_domain_params", [](int kind, double lo, double hi, InArray x, InArray u) {
+        const CheckDomain d = check_domain(kind);
+        const int pdim = domain_point_dim(d), k = domain_param_dim(d);
+        const size_t n = check_points(x, pdim, "x");
+        if (u.size() != x.size()) throw nb::value_error("'u' must have one uniform per coordinate of 'x'");
+        double *s;
+        bool *inside;
+        OutArray sa = new_array(n, size_t(k), &s);
+        auto ia = new_bool_array(n, &inside);
+        {
+            nb::gil_scoped_release g;
+            // a chunk's points dithered into this thread's scratch rows, then mapped: the
+            // dithered points never leave the cache (chunks on all threads, each point its own)
+            for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t b, int) {
+                thread_local std::vector<double> moved;
+                thread_local std::vector<unsigned char> unused;
+                const size_t rows = b - a, values = rows * size_t(pdim);
+                moved.resize(values);
+                unused.resize(rows);
+                const double *xa = x.data() + a * size_t(pdim);
+                domain_params(d, lo, hi, xa, rows, nullptr, inside + a);
+                dither_float32(xa, u.data() + a * size_t(pdim), values, moved.data());
+                domain_params(d, lo, hi, moved.data(), rows, s + a * size_t(k), reinterpret_cast<bool *>(unused.data()));
+            });
+        }
+        return nb::make_tuple(sa, ia);
+    }, "kind"_a, "lo"_a, "hi"_a, "x"_a, "u"_a,
+       "(s (N, k), inside (N,)): domain_params' s of the points x dithered by dither_float32 with uniforms u, and "
+       "its inside of x as given.");
     m.def("domain_points", [](int kind, double lo, double hi, InArray s) {
         const CheckDomain d = check_domain(kind);
         const int pdim = domain_point_dim(d), k = domain_param_dim(d);
@@ -405,19 +434,19 @@ void bind_checks(nb::module_ &m) {
         return r;
     }, "v"_a, "u"_a, "The values v (flattened) each moved to below + (above - below) u, below and above half "
        "way to its float32 neighbours; v itself where that is not finite.");
-    m.def("pdf_summary", [](int kind, double measure, InArray s, BoolArray inside, InArray p, double c) {
+    m.def("pdf_summary", [](int kind, double measure, InArray s, BoolArray inside, InArray p, double c, double total) {
         const CheckDomain d = check_domain(kind);
         const size_t n = check_params(s, size_t(domain_param_dim(d)));
         if (inside.size() != n || p.size() != n) throw nb::value_error("'inside' and 'p' must have one value per point");
         PdfSummary r;
         {
             nb::gil_scoped_release g;
-            r = pdf_summary(d, measure, s.data(), inside.data(), p.data(), n, c);
+            r = pdf_summary(d, measure, s.data(), inside.data(), p.data(), n, c, total);
         }
         return nb::make_tuple(r.bad, r.zero, r.used, r.h_sum);
-    }, "kind"_a, "measure"_a, "s"_a, "inside"_a, "p"_a, "c"_a,
-       "(bad, zero, used, h_sum): pdf values NaN/infinite/negative, zero at inside points, good inside ones, "
-       "and the sum of h = p J / (p J + c) over those.");
+    }, "kind"_a, "measure"_a, "s"_a, "inside"_a, "p"_a, "c"_a, "total"_a,
+       "(bad, zero, used, h_sum): of p / total, values NaN/infinite/negative, zero at inside points, good inside "
+       "ones, and the sum of h = p J / (p J + c) over those.");
     m.def("pdf_mismatches", [](InArray reported, InArray p, double rtol) {
         if (reported.ndim() != 1 || p.ndim() != 1 || reported.size() != p.size())
             throw nb::value_error("'reported' and 'p' must be arrays (N,) of the same length");

@@ -44,29 +44,31 @@ inline void azimuths(const double *x, size_t stride, size_t n, double *s) {
 // Parameters s (n, k) of points x (n, point_dim) and whether each lies inside the domain:
 // the equal-measure maps of harness/samplers/domains.py (see there).  Unit vectors count as
 // inside when their squared norm is within 1e-5 of 1 (float32 renderers); a non-finite
-// point is outside (its s may be NaN).
+// point is outside (its s may be NaN).  s null: `inside` alone (no azimuths).
 inline void domain_params(CheckDomain d, double lo, double hi, const double *x, size_t n, double *s,
                           bool *inside) {
     switch (d) {
         case CheckDomain::interval:
             for (size_t i = 0; i < n; ++i) {
                 const double v = x[i];
-                s[i] = (v - lo) / (hi - lo);
+                if (s) s[i] = (v - lo) / (hi - lo);
                 inside[i] = std::isfinite(v) && v >= lo && v <= hi;
             }
             return;
         case CheckDomain::half_line:
             for (size_t i = 0; i < n; ++i) {
                 const double v = x[i];
-                s[i] = v / (1.0 + v);
+                if (s) s[i] = v / (1.0 + v);
                 inside[i] = std::isfinite(v) && v >= 0;
             }
             return;
         case CheckDomain::square:
             for (size_t i = 0; i < n; ++i) {
                 const double a = x[2 * i], b = x[2 * i + 1];
-                s[2 * i] = a;
-                s[2 * i + 1] = b;
+                if (s) {
+                    s[2 * i] = a;
+                    s[2 * i + 1] = b;
+                }
                 inside[i] = std::isfinite(a) && std::isfinite(b) && a >= 0 && a <= 1 && b >= 0 && b <= 1;
             }
             return;
@@ -74,10 +76,10 @@ inline void domain_params(CheckDomain d, double lo, double hi, const double *x, 
             for (size_t i = 0; i < n; ++i) {
                 const double a = x[2 * i], b = x[2 * i + 1];
                 const double r2 = a * a + b * b;
-                s[2 * i] = r2;
+                if (s) s[2 * i] = r2;
                 inside[i] = std::isfinite(a) && std::isfinite(b) && r2 <= 1 + 1e-12;
             }
-            azimuths(x, 2, n, s);
+            if (s) azimuths(x, 2, n, s);
             return;
         case CheckDomain::hemisphere:
         case CheckDomain::sphere: {
@@ -87,10 +89,10 @@ inline void domain_params(CheckDomain d, double lo, double hi, const double *x, 
                 const double norm = a * a + b * b + c * c;
                 const bool ok = std::isfinite(a) && std::isfinite(b) && std::isfinite(c) && std::fabs(norm - 1) <= 1e-5;
                 const double z = c < -1 ? -1.0 : (c > 1 ? 1.0 : c);  // NaN passes
-                s[2 * i] = hemi ? z : (1 - z) / 2;
+                if (s) s[2 * i] = hemi ? z : (1 - z) / 2;
                 inside[i] = hemi ? ok && c >= -1e-12 : ok;
             }
-            azimuths(x, 3, n, s);
+            if (s) azimuths(x, 3, n, s);
             return;
         }
     }

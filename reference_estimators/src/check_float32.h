@@ -83,35 +83,42 @@ inline bool all_float32(const double *v, size_t n) {
     return any;
 }
 
-// The float32 after f (finite) toward +infinity, as nextafterf(f, inf): one step of its bits
-// (FLT_MAX steps to inf, -denorm_min to -0, both zeros to denorm_min); inline, where libm's
-// call took most of dither_float32's time.
-inline float float32_up(float f) {
-    if (f == 0) return std::numeric_limits<float>::denorm_min();
-    uint32_t b;
-    std::memcpy(&b, &f, 4);
-    b = f > 0 ? b + 1 : b - 1;
-    std::memcpy(&f, &b, 4);
-    return f;
-}
-
 // out[i] = v[i] moved to below + (above - below) u[i], below and above half way to v's float32
 // neighbours (v rounded to float32 first), for n values; v itself where that is not finite (v
 // NaN, infinite, or beyond the float32 range or at its end, where a neighbour is infinite).
 // The sampler check's dithering of float32 points; numpy's operations in numpy's order, the
 // same bits, in one pass where numpy's eight took 0.1 s a million directions.
+//
+// Written for GCC to vectorise it (1.5 -> 0.4 ns a value; nextafterf and a step of the
+// float's bits by sign had kept it scalar): the neighbours as f -+ the float32 spacing below
+// and above f, exact in double, the spacing 2^(max(e, -126) - 23) for f's exponent e (the
+// subnormals' 2^-149 at and below 2^-126), halved below a positive power of two (and above
+// a negative one) above the subnormals; every choice made on the bits, as all_float32's are.
 inline void dither_float32(const double *v, const double *u, size_t n, double *out) {
+    constexpr uint64_t kMagnitude = ~(uint64_t(1) << 63), kMantissa = (uint64_t(1) << 52) - 1;
+    constexpr uint64_t kFloatMax = 0x47efffffe0000000ull, kInfinity = 0x7ff0000000000000ull;
+    constexpr int64_t kMinNormal = 1023 - 126;   // the biased double exponent of 2^-126
+    auto bits = [](double x) { uint64_t b; std::memcpy(&b, &x, 8); return b; };
+    auto value = [](uint64_t b) { double x; std::memcpy(&x, &b, 8); return x; };
+    auto pick = [](uint64_t yes, uint64_t a, uint64_t b) { return (a & yes) | (b & ~yes); };  // yes: all ones or 0
+    auto all_ones = [](bool c) { return uint64_t(0) - uint64_t(c); };
     for (size_t i = 0; i < n; ++i) {
         const double x = v[i];
-        if (!(std::fabs(x) <= double(std::numeric_limits<float>::max()))) {  // float(x) would be inf (or UB)
-            out[i] = x;
-            continue;
-        }
-        const float f = float(x);
-        const double below = (x + double(-float32_up(-f))) / 2;
-        const double above = (x + double(float32_up(f))) / 2;
+        const uint64_t xb = bits(x);
+        const uint64_t in_range = all_ones((xb & kMagnitude) <= kFloatMax);     // float(x) defined
+        const double f = double(float(value(xb & in_range)));
+        const uint64_t fb = bits(f), magnitude = fb & kMagnitude;
+        const int64_t e = int64_t(magnitude >> 52);
+        const int64_t up = (e > kMinNormal ? e : kMinNormal) - 23;              // the spacing's exponent
+        const int64_t down = up - int64_t((magnitude & kMantissa) == 0 && e > kMinNormal);
+        const uint64_t negative = all_ones((fb >> 63) != 0);
+        const double step_up = value(uint64_t(pick(negative, uint64_t(down), uint64_t(up))) << 52);
+        const double step_down = value(uint64_t(pick(negative, uint64_t(up), uint64_t(down))) << 52);
+        const double below = (x + (f - step_down)) / 2;
+        const double above = (x + (f + step_up)) / 2;
         const double d = below + (above - below) * u[i];
-        out[i] = std::isfinite(d) ? d : x;
+        const uint64_t keep = ~in_range | all_ones(magnitude == kFloatMax) | all_ones((bits(d) & kMagnitude) >= kInfinity);
+        out[i] = value(pick(keep, xb, bits(d)));
     }
 }
 

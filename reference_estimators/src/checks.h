@@ -206,7 +206,9 @@ inline void transform_statistics(const PiecewiseLinearTable &marginal, const Pie
 }
 
 // The deterministic pdf checks and the pdf moment of the sampler check, in one pass over the
-// pdf values p (n) at the points with parameters s (n, k) and inside flags: `bad` counts p
+// pdf values p (n) at the points with parameters s (n, k) and inside flags, each divided by
+// `total` first (the density the check tests, pdf / total: numpy's division, here without
+// its array; 1 changes no bit): `bad` counts p
 // NaN, infinite or negative (all points), `zero` counts p == 0 at inside points; for the
 // inside points with a good p, ps = p * J(s) (J the domain's measure per unit of parameter
 // space: `measure`, or 1 / (1 - s)^2 on the half line) and h = ps / (ps + c) (c > 0) are
@@ -222,7 +224,7 @@ struct PdfSummary {
 // 256, the block sums compensated (h is in [0, 1]: a block's plain sum is exact to 256 ulp).
 // With the chunks on two threads, 2.2 -> 1.1 ms a million points.
 inline PdfSummary pdf_summary_of(const double *s, size_t k, const bool *inside, const double *p, size_t a, size_t b,
-                                 double measure, double c) {
+                                 double measure, double c, double total) {
     PdfSummary r;
     CompensatedSum h;
     for (size_t e = a; e < b;) {
@@ -230,7 +232,7 @@ inline PdfSummary pdf_summary_of(const double *s, size_t k, const bool *inside, 
         int64_t bad = 0, zero = 0, used = 0;
         double block = 0;
         for (size_t i = e; i < end; ++i) {
-            const double v = p[i];
+            const double v = p[i] / total;
             const bool is_bad = !(v >= 0 && v <= std::numeric_limits<double>::max());   // NaN, inf or < 0
             const bool in = inside[i];
             bad += is_bad;
@@ -254,7 +256,7 @@ inline PdfSummary pdf_summary_of(const double *s, size_t k, const bool *inside, 
 }
 
 inline PdfSummary pdf_summary(CheckDomain d, double measure, const double *s, const bool *inside, const double *p,
-                              size_t n, double c) {
+                              size_t n, double c, double total) {
     const size_t k = size_t(domain_param_dim(d));
     const bool half_line = d == CheckDomain::half_line;
     const size_t chunks = (n + kCheckChunk - 1) / kCheckChunk;
@@ -262,7 +264,7 @@ inline PdfSummary pdf_summary(CheckDomain d, double measure, const double *s, co
     // fixed chunks on all hardware threads, each with its own compensated sum, merged in chunk
     // order below: the same for any thread count
     for_chunks(n, kCheckChunk, [&](size_t j, size_t a, size_t b, int) {
-        part[j] = pdf_summary_of(half_line ? s : nullptr, k, inside, p, a, b, measure, c);
+        part[j] = pdf_summary_of(half_line ? s : nullptr, k, inside, p, a, b, measure, c, total);
     });
     PdfSummary r;
     CompensatedSum h;

@@ -365,6 +365,25 @@ def test_dither_float32_matches_numpy(n):
     np.testing.assert_array_equal(got, dither_reference(x, u))
 
 
+def test_dither_float32_matches_numpy_on_any_bits():
+    """Every kind of double: random bit patterns (NaN payloads, infinities, beyond float32's
+    range), float32 values of every exponent, powers of two either side of the subnormals
+    (where the spacing below halves), and uniforms at 0, just below 1 and NaN."""
+    rng = np.random.default_rng(16)
+    floats = rng.integers(0, 2**32, size=50_000, dtype=np.uint64).astype(np.uint32).view(np.float32)
+    twos = np.ldexp(1.0, np.arange(-160, 130))
+    with np.errstate(invalid="ignore"):    # float32 NaNs widened
+        wide = floats.astype(np.float64)
+    values = [rng.integers(0, 2**64, size=50_000, dtype=np.uint64).view(np.float64), wide,
+              np.concatenate([twos, -twos, twos * (1 + 2.0**-23), -twos * (1 - 2.0**-24), F32_EDGES])]
+    for x in values:
+        ends = (np.zeros(x.size), np.full(x.size, 1 - 2.0**-53), np.full(x.size, np.nan))
+        for u in (rng.random(x.size), *ends):
+            with np.errstate(invalid="ignore"):
+                want = dither_reference(x, u)
+            np.testing.assert_array_equal(rest.dither_float32(x, u).view(np.uint64), want.view(np.uint64))
+
+
 def test_all_float32_matches_numpy():
     rng = np.random.default_rng(13)
     x = rng.normal(size=5000).astype(np.float32).astype(float)
@@ -702,10 +721,12 @@ def test_pdf_summary_matches_numpy(kind, n):
     inside[:6] = True
     inside[6:9], p[6:9] = False, [0.0, np.nan, 2.0]
     measure, c = (1.0 if kind == "half_line" else 4 * math.pi), 0.7
-    bad, zero, used, h_sum = rest.pdf_summary(kind, measure, s, inside, p, c)
-    ref_bad = ~np.isfinite(p) | (p < 0)
-    jac = 1.0 / (1.0 - s[:, 0]) ** 2 if kind == "half_line" else measure
-    ps = (p * jac)[inside & ~ref_bad] if kind == "half_line" else p[inside & ~ref_bad] * jac
-    assert bad == int(ref_bad.sum()) and zero == int(((p == 0) & inside).sum()) and used == ps.size
-    assert h_sum == pytest.approx(float(np.sum(ps / (ps + c))), rel=1e-12)
+    for total in (1.0, 0.8, 3.0):      # the values divided by the total first
+        bad, zero, used, h_sum = rest.pdf_summary(kind, measure, s, inside, p, c, total)
+        q = p / total
+        ref_bad = ~np.isfinite(q) | (q < 0)
+        jac = 1.0 / (1.0 - s[:, 0]) ** 2 if kind == "half_line" else measure
+        ps = (q * jac)[inside & ~ref_bad] if kind == "half_line" else q[inside & ~ref_bad] * jac
+        assert bad == int(ref_bad.sum()) and zero == int(((q == 0) & inside).sum()) and used == ps.size
+        assert h_sum == pytest.approx(float(np.sum(ps / (ps + c))), rel=1e-12)
     assert rest.pdf_summary(kind, measure, s, inside, p, 0.0)[3] == 0.0

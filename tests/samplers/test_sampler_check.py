@@ -344,17 +344,44 @@ def test_a_float32_shaders_narrow_lobe_passes_its_points_dithered_within_their_r
 
 
 def test_dithering_moves_float32_points_within_their_rounding_interval_only():
-    from harness.samplers.check import _dithered, _float32_points
+    from harness.samplers.check import _dither_uniforms, _float32_points
 
     x = np.random.default_rng(1).normal(size=(10_000, 3)).astype(np.float32).astype(float)
     x[0] = [np.nan, np.inf, 0.0]
-    d = _dithered(x, seed=3)
+
+    def dithered(points: np.ndarray, seed: int) -> np.ndarray:
+        return rest.dither_float32(points, _dither_uniforms(points, seed))
+
+    d = dithered(x, seed=3)
     fin = np.isfinite(x)
-    assert np.array_equal(d[~fin], x[~fin], equal_nan=True) and np.array_equal(d, _dithered(x, seed=3),
+    assert np.array_equal(d[~fin], x[~fin], equal_nan=True) and np.array_equal(d, dithered(x, seed=3),
                                                                              equal_nan=True)
     assert np.all(d[fin].astype(np.float32) == x[fin].astype(np.float32))   # rounds back to the point
     assert np.mean(d[fin] != x[fin]) > 0.99
     assert _float32_points(x) and not _float32_points(x + 1e-12) and not _float32_points(np.full(3, np.nan))
+
+
+@pytest.mark.parametrize("domain", [Domain("interval", -1.0, 2.0), Domain("half_line"), Domain("square"),
+                                    Domain("disk"), Domain("hemisphere"), Domain("sphere"),
+                                    Domain("sphere", pole="y")], ids=repr)
+def test_dithered_params_are_the_params_of_the_dithered_points_and_the_mask_of_the_drawn(domain):
+    """The check's one pass for float32 points: the parameters of the points dithered, and
+    which points as drawn lie inside (a dithered point may cross an edge the drawn one is on)."""
+    rng = np.random.default_rng(4)
+    n = 70_001           # more than one of the core's chunks, an odd tail
+    x = {1: rng.random(n) * 3 - 1, 2: rng.random((n, 2)) * 2.2 - 1.1}.get(domain.point_dim)
+    if x is None:
+        x = rng.normal(size=(n, 3))
+        x /= np.linalg.norm(x, axis=1)[:, None]
+    x = x.astype(np.float32).astype(float)
+    x[:3] = np.nan if x.ndim == 1 else [np.nan, np.inf, 0.0][: x.shape[1]]
+    u = rng.random(x.shape)
+    s, inside = domain.dithered_params(x, u)
+    want_s, _ = domain.to_params(rest.dither_float32(x, u))
+    _, want_inside = domain.to_params(x)
+    np.testing.assert_array_equal(s.view(np.uint64), want_s.view(np.uint64))
+    np.testing.assert_array_equal(inside, want_inside)
+    assert 0 < inside.sum() < n
 
 
 # --- the pdf a sampler reports with its samples ------------------------------------------------
