@@ -51,23 +51,27 @@ RE_INLINE void radial_part(CheckDomain d, D s0, D &r, D &z) {
 // identity or a permutation of the sphere's about another pole (cubature_points' `columns`).
 struct Placement {
     int dest[3] = {0, 1, 2};
+    bool identity(int dim) const { return dest[0] == 0 && dest[1] == 1 && (dim < 3 || dest[2] == 2); }
 };
 
 // Box m's nodes' points (per = g^2 rows of 2 or 3 into out) from its g radii, heights,
 // sines and cosines, lane l of each, each coordinate at its place in the row (written there
-// at once: a second pass permuting the rows had taken twice the map's time).
-template <class D>
+// at once: a second pass permuting the rows had taken twice the map's time; kPlaced false:
+// the identity, with constant offsets, which the stores of a permutation read at run time
+// had slowed by a third).
+template <bool kPlaced, class D>
 RE_INLINE void write_box_points(const D *r, const D *z, const D *sn, const D *cs, size_t l, size_t g, bool planar,
                                 const Placement &at, double *out) {
     auto lane = [l](const D &v) -> double {
         if constexpr (std::is_same_v<D, double>) return v; else return v[l];
     };
+    const int d0 = kPlaced ? at.dest[0] : 0, d1 = kPlaced ? at.dest[1] : 1, d2 = kPlaced ? at.dest[2] : 2;
     for (size_t i = 0; i < g; ++i)
         for (size_t j = 0; j < g; ++j) {
             double *p = out + (i * g + j) * (planar ? 2 : 3);
-            p[at.dest[0]] = lane(r[i]) * lane(cs[j]);
-            p[at.dest[1]] = lane(r[i]) * lane(sn[j]);
-            if (!planar) p[at.dest[2]] = lane(z[i]);
+            p[d0] = lane(r[i]) * lane(cs[j]);
+            p[d1] = lane(r[i]) * lane(sn[j]);
+            if (!planar) p[d2] = lane(z[i]);
         }
 }
 
@@ -77,10 +81,14 @@ RE_INLINE void write_box_points(const D *r, const D *z, const D *sn, const D *cs
 // boxes at a time in vector lanes, and multiplied out: the same expressions on the same
 // values as domain_points(cubature_nodes), the same bits, for 2g transcendental evaluations
 // a box instead of 2 g^2.  g <= 8.
-inline void separable_points(CheckDomain d, const double *lo, const double *hi, size_t boxes, const double *nodes,
-                             size_t g, const Placement &at, double *x) {
+template <bool kPlaced>
+void separable_points(CheckDomain d, const double *lo, const double *hi, size_t boxes, const double *nodes, size_t g,
+                      const Placement &at, double *x) {
     const bool planar = d == CheckDomain::disk;
     const size_t stride = g * g * (planar ? 2 : 3);
+    auto write = [&](const auto *r, const auto *z, const auto *sn, const auto *cs, size_t l, double *out) {
+        write_box_points<kPlaced>(r, z, sn, cs, l, g, planar, at, out);
+    };
     auto box = [&](auto *r, auto *z, auto *sn, auto *cs, auto s0_at, auto s1_at) {
         for (size_t i = 0; i < g; ++i) {
             radial_part(d, s0_at(i), r[i], z[i]);
@@ -100,13 +108,13 @@ inline void separable_points(CheckDomain d, const double *lo, const double *hi, 
             return v;
         };
         box(r, z, sn, cs, [&](size_t i) { return coordinate(0, i); }, [&](size_t i) { return coordinate(1, i); });
-        for (size_t l = 0; l < W; ++l) write_box_points(r, z, sn, cs, l, g, planar, at, x + (m + l) * stride);
+        for (size_t l = 0; l < W; ++l) write(r, z, sn, cs, l, x + (m + l) * stride);
     }
     for (; m < boxes; ++m) {
         double r[8], z[8], sn[8], cs[8];
         auto coordinate = [&](size_t j, size_t i) { return lo[2 * m + j] + (hi[2 * m + j] - lo[2 * m + j]) * nodes[i]; };
         box(r, z, sn, cs, [&](size_t i) { return coordinate(0, i); }, [&](size_t i) { return coordinate(1, i); });
-        write_box_points(r, z, sn, cs, 0, g, planar, at, x + m * stride);
+        write(r, z, sn, cs, 0, x + m * stride);
     }
 }
 
@@ -118,7 +126,9 @@ inline void cubature_points(CheckDomain d, double dlo, double dhi, const double 
                             size_t k, const double *nodes, size_t g, const Placement &at, double *x,
                             std::vector<double> &scratch) {
     if (k == 2 && g <= 8 && (d == CheckDomain::disk || d == CheckDomain::hemisphere || d == CheckDomain::sphere)) {
-        separable_points(d, lo, hi, boxes, nodes, g, at, x);
+        const bool placed = !at.identity(d == CheckDomain::disk ? 2 : 3);   // the identity's stores fixed
+        placed ? separable_points<true>(d, lo, hi, boxes, nodes, g, at, x)
+               : separable_points<false>(d, lo, hi, boxes, nodes, g, at, x);
         return;
     }
     const size_t count = boxes * (k == 1 ? g : g * g);
@@ -130,7 +140,7 @@ inline void cubature_points(CheckDomain d, double dlo, double dhi, const double 
         domain_points(d, dlo, dhi, scratch.data(), count, x);
     }
     const int dim = domain_point_dim(d);
-    if (dim == 1 || (at.dest[0] == 0 && at.dest[1] == 1 && (dim == 2 || at.dest[2] == 2))) return;
+    if (dim == 1 || at.identity(dim)) return;
     for (size_t i = 0; i < count; ++i) {   // rows still in cache
         double *row = x + size_t(dim) * i, was[3];
         std::copy(row, row + dim, was);
