@@ -14,7 +14,7 @@ from . import _core
 
 __all__ = [
     "CHECK_DOMAINS", "domain_params", "dithered_domain_params", "domain_points", "cubature_nodes",
-    "cubature_points", "cubature_sums",
+    "cubature_points", "cubature_sums", "split_points", "BoxRefinement",
     "cubature_moment_sums", "grid_histogram", "rosenblatt",
     "piecewise_linear_lookup", "transform_statistics", "cramer_von_mises_sum", "pdf_summary",
     "all_float32", "dither_float32", "finite_rows", "pdf_mismatches", "float64_rows", "take_rows",
@@ -141,6 +141,26 @@ def cubature_points(kind: str, lo: Any, hi: Any, nodes: Any,
     order = [] if columns is None else [int(c) for c in columns]
     return _core.cubature_points(_check_domain(kind), float(interval[0]), float(interval[1]), a, b,
                                  np.ascontiguousarray(nodes, dtype=np.float64).reshape(-1), order)
+
+
+def split_points(lo: Any, hi: Any, breaks: Any) -> np.ndarray:
+    """Where each interval [lo, hi) (arrays (B,)) is split: the break of ``breaks`` (sorted
+    coordinates) strictly inside it, more than 1e-9 of its width from either end, nearest its
+    middle (of the first at or above the middle and the one before it, that one only when
+    strictly nearer), else its middle.  One pass in C++
+    (harness.samplers.cubature.split_points states why)."""
+    a, b = (np.ascontiguousarray(v, dtype=np.float64).reshape(-1) for v in (lo, hi))
+    return _core.split_points(a, b, np.ascontiguousarray(breaks, dtype=np.float64).reshape(-1))
+
+
+#: The bookkeeping of the sampler check's adaptive cubature in C++
+#: (harness.samplers.cubature.box_integrals): ``BoxRefinement(lo, hi, whole, tol, floor,
+#: extrapolate, breaks)`` over boxes [lo, hi] (N, k), k = 1 or 2, with the rule's integrals
+#: ``whole`` (N, m) and tolerances ``tol`` (N,), ``breaks`` a list per axis of sorted split
+#: coordinates (empty: none); then per level ``halves()`` -> (clo, chi) every box's halves
+#: along each axis (axis-major, (2 k B, k)), ``step(parts, last)`` with their integrals
+#: (2 k B, m) -> whether boxes remain, and at the end ``result()`` -> (integrals, errors) (N, m).
+BoxRefinement = _core.BoxRefinement
 
 
 def cubature_sums(lo: Any, hi: Any, values: Any, weights: Any, scale: float = 1.0) -> np.ndarray:

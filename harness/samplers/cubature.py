@@ -75,30 +75,17 @@ def _rule(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.ndarray)
                            for b in range(0, m, step)])
 
 
-#: Where a box is split along an axis: the density's declared break (a line where it may
-#: step or kink) strictly inside the box nearest its middle, else the middle.  "Strictly":
-#: more than this share of the box's width from either end, so that a box whose end was meant
-#: to lie on a break and lies a rounding away is not split into a sliver.
-_BREAK_MARGIN = 1e-9
-
-
 def split_points(lo: np.ndarray, hi: np.ndarray, breaks: np.ndarray | None) -> np.ndarray:
     """Where each interval [lo, hi) (arrays (B,)) is split: the break of ``breaks`` (sorted,
     or None) inside it nearest its middle, else its middle.  A step or kink on a break is then
     cut out of the box by one split, where halving reaches it only to the depth limit (30 to
-    40 halvings for each texel edge of an environment map that is not dyadic)."""
-    mid = (lo + hi) / 2
+    40 halvings for each texel edge of an environment map that is not dyadic).  "Inside":
+    more than 1e-9 of the box's width from either end, so that a box whose end was meant to
+    lie on a break and lies a rounding away is not split into a sliver.  In the core
+    (:func:`reference_estimators.split_points`)."""
     if breaks is None or breaks.size == 0:
-        return mid
-    margin = _BREAK_MARGIN * (hi - lo)
-    first = np.searchsorted(breaks, lo + margin, side="right")     # the breaks inside: first .. last - 1
-    last = np.searchsorted(breaks, hi - margin, side="left")
-    near = np.clip(np.searchsorted(breaks, mid), first, np.maximum(last - 1, first))
-    below = np.clip(near - 1, first, np.maximum(last - 1, first))
-    top = breaks.size - 1
-    a, b = breaks[np.minimum(near, top)], breaks[np.minimum(below, top)]
-    best = np.where(np.abs(b - mid) < np.abs(a - mid), b, a)
-    return np.where(last > first, best, mid)
+        return (lo + hi) / 2
+    return rest.split_points(lo, hi, breaks)
 
 
 def halves(lo: np.ndarray, hi: np.ndarray, axis: int, cut: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -211,9 +198,11 @@ def box_integrals(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.
     x^-a the changes shrink by r = 2^(a-1) a halving, and the error left after the last is
     r / (1 - r) times its change (2.4 times at a = 1/2, 14 times at a = 0.9: a correct
     sampler of x^-0.9 failed its normalisation test on every seed with the bare change).  So
-    its error is extrapolated (:func:`_unconverged_factor`) from the changes of its last three
-    splits, as a geometric tail (``extrapolate=False``: the bare change, for a caller that
-    refines such boxes further itself and measures its effort by those changes).
+    its error is extrapolated from the changes of its last three splits, as a geometric tail
+    (``extrapolate=False``: the bare change, for a caller that refines such boxes further
+    itself and measures its effort by those changes).  The bookkeeping of each level runs in
+    the core (:class:`reference_estimators.BoxRefinement`, which states the extrapolation);
+    q is called here, once a level on every box's halves along every axis.
 
     ``breaks``: per axis, the sorted coordinates where q may step or kink (an environment
     map's texel edges; None: none declared); a box with one inside is split there rather than
@@ -233,89 +222,20 @@ def box_integrals(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.
     """
     lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
     ncell, k = lo.shape
-    tol = np.broadcast_to(np.asarray(tol, dtype=float), (ncell,))
-    owner = np.arange(ncell)
+    tol = np.ascontiguousarray(np.broadcast_to(np.asarray(tol, dtype=float), (ncell,)))
     whole = _rule(q, lo, hi) if whole is None else np.asarray(whole, dtype=float)
-    finished: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []   # (owner, integral, error) per depth
+    # the decisions (split where, converged, the next level's boxes, the unconverged boxes'
+    # extrapolated errors) in the core, level by level, q integrated over the halves between
+    axes = [np.empty(0) if breaks is None or breaks[axis] is None else np.asarray(breaks[axis], dtype=float)
+            for axis in range(k)]
+    state = rest.BoxRefinement(lo, hi, whole, tol, floor, extrapolate, axes)
     evals = ncell * 4**k
-    share = np.ones(ncell)
-    history = np.full((ncell, 2), np.nan)   # the changes of each box's parent's and grandparent's splits
     for depth in range(max_depth + 1):
-        splits = []
-        for axis in range(k):
-            cut = split_points(lo[:, axis], hi[:, axis], None if breaks is None else breaks[axis])
-            clo, chi = halves(lo, hi, axis, cut)
-            parts = _rule(q, clo, chi).reshape(-1, 2, whole.shape[1])
-            # the first part's share of the box's tolerance: half, or its share of the width
-            # where the box is split at a break (exactly half where at the middle)
-            mid = (lo[:, axis] + hi[:, axis]) / 2
-            first = np.where(cut == mid, 0.5, (cut - lo[:, axis]) / (hi[:, axis] - lo[:, axis]))
-            splits.append((clo, chi, parts, first))
-            evals += clo.shape[0] * 4**k
-        # each split's integrals, its halves added (numpy's sum over an axis of 2 cost 10x more)
-        split_sums = [p[:, 0] + p[:, 1] for _, _, p, _ in splits]
-        change = np.stack([np.abs(t[:, 0] - whole[:, 0]) for t in split_sums], axis=1)
-        best = np.argmax(change, axis=1)
-        rows = np.arange(lo.shape[0])
-        refined = np.stack(split_sums, axis=1)[rows, best]
-        moved = change[rows, best]          # the best split's change of component 0
-        diff = np.abs(refined - whole)
-        limit = np.maximum(tol[owner] * share, floor * np.abs(whole[:, 0]))
-        converged = moved <= limit
-        done = converged | (depth == max_depth) | (evals > max_evals)
-        stopped = done & ~converged
-        if extrapolate and stopped.any():
-            diff[stopped] *= _unconverged_factor(moved[stopped], history[stopped])[:, None]
-        finished.append((owner[done], refined[done], diff[done]))
-        if done.all():
+        clo, chi = state.halves()
+        evals += clo.shape[0] * 4**k
+        if not state.step(_rule(q, clo, chi), depth == max_depth or evals > max_evals):
             break
-        keep = np.flatnonzero(~done)
-        new_lo, new_hi, new_whole = [], [], []
-        for axis in range(k):
-            sel = keep[best[keep] == axis]
-            if sel.size == 0:
-                continue
-            clo, chi, parts, first = splits[axis]
-            pick = np.stack([2 * sel, 2 * sel + 1], axis=1).reshape(-1)
-            new_lo.append(clo[pick])
-            new_hi.append(chi[pick])
-            new_whole.append(parts[sel].reshape(-1, whole.shape[1]))
-            owner_sel = np.repeat(owner[sel], 2)
-            share_sel = np.stack([share[sel] * first[sel], share[sel] * (1 - first[sel])], axis=1).reshape(-1)
-            history_sel = np.repeat(np.stack([change[sel, axis], history[sel, 0]], axis=1), 2, axis=0)
-            new_lo[-1] = (new_lo[-1], owner_sel, share_sel, history_sel)
-        lo = np.concatenate([t[0] for t in new_lo])
-        owner = np.concatenate([t[1] for t in new_lo])
-        share = np.concatenate([t[2] for t in new_lo])
-        history = np.concatenate([t[3] for t in new_lo])
-        hi = np.concatenate(new_hi)
-        whole = np.concatenate(new_whole)
-    owner, integral, error = (np.concatenate(part) for part in zip(*finished))
-    return _owner_sums(owner, integral, ncell), _owner_sums(owner, error, ncell)
-
-
-#: The largest shrink ratio a halving the extrapolation assumes: a box whose changes shrink
-#: more slowly (a singularity stronger than x^-0.985, a density not integrable there, or
-#: changes at rounding level) is taken to shrink at this ratio, 99 times its change remaining.
-_MAX_RATIO = 0.99
-
-
-def _unconverged_factor(change: np.ndarray, history: np.ndarray) -> np.ndarray:
-    """How many times its last ``change`` the error left in a box that stopped unconverged is
-    taken to be, from the changes of its parent's and grandparent's splits ``history`` (B, 2)
-    (NaN where the box has none): the changes shrinking geometrically at the ratio r of the
-    sums of two successive ones (a pair sum evens out splits alternating between axes around
-    a point singularity), the error left is the pair sum times r / (1 - r); never below 1 (the
-    change itself)."""
-    c1, c2 = history[:, 0], history[:, 1]
-    pair, before = change + c1, c1 + c2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(np.isnan(c2), change / c1, pair / before)     # depth 1: single changes
-        base = np.where(np.isnan(c2), change, pair)
-        ratio = np.clip(np.nan_to_num(ratio, nan=0.0, posinf=_MAX_RATIO), 0.0, _MAX_RATIO)
-        factor = base * ratio / (1 - ratio) / change
-    factor = np.where(np.isnan(c1) | ~(change > 0), 1.0, factor)     # depth 0, or no change: the change
-    return np.maximum(np.nan_to_num(factor, nan=1.0), 1.0)
+    return state.result()
 
 
 def _owner_sums(owner: np.ndarray, values: np.ndarray, ncell: int) -> np.ndarray:

@@ -10,6 +10,7 @@
 #include <memory>
 
 #include "bind_common.h"
+#include "check_refine.h"
 #include "checks.h"
 #include "tables.h"
 
@@ -296,6 +297,53 @@ void bind_checks(nb::module_ &m) {
     }, "kind"_a, "dlo"_a, "dhi"_a, "lo"_a, "hi"_a, "nodes"_a, "columns"_a,
        "Domain points of the tensor rule's nodes on the boxes [lo, hi] (M, k): domain_points(cubature_nodes(...)), "
        "with columns[j] as coordinate j where `columns` is given (a permutation; empty: as computed).");
+    m.def("split_points", [](InArray lo, InArray hi, InArray breaks) {
+        if (lo.ndim() != 1 || hi.ndim() != 1 || lo.size() != hi.size() || breaks.ndim() != 1)
+            throw nb::value_error("'lo' and 'hi' must be arrays (B,) and 'breaks' (n,)");
+        double *out;
+        OutArray cuts = new_array(lo.size(), 0, &out);
+        {
+            nb::gil_scoped_release g;
+            for (size_t i = 0; i < lo.size(); ++i)
+                out[i] = split_point(lo.data()[i], hi.data()[i], breaks.data(), breaks.size());
+        }
+        return cuts;
+    }, "lo"_a, "hi"_a, "breaks"_a, "Where each interval [lo, hi) is split: the break strictly inside nearest its "
+       "middle, else the middle (breaks sorted).");
+    nb::class_<BoxRefinement>(m, "BoxRefinement",
+        "The bookkeeping of box_integrals' adaptive refinement (harness/samplers/cubature.py): halves() the "
+        "boxes' halves along each axis, step(parts, last) the decision on their integrals, result() the sums.")
+        .def("__init__", [](BoxRefinement *self, InArray lo, InArray hi, InArray whole, InArray tol, double floor,
+                            bool extrapolate, std::vector<std::vector<double>> breaks) {
+            const size_t k = check_boxes(lo, hi), n = lo.shape(0);
+            if (whole.ndim() != 2 || whole.shape(0) != n || tol.size() != n)
+                throw nb::value_error("'whole' must be (N, m) and 'tol' (N,) for the N boxes");
+            new (self) BoxRefinement(lo.data(), hi.data(), whole.data(), tol.data(), n, k, whole.shape(1), floor,
+                                     extrapolate, std::move(breaks));
+        }, "lo"_a, "hi"_a, "whole"_a, "tol"_a, "floor"_a, "extrapolate"_a, "breaks"_a)
+        .def_prop_ro("boxes", &BoxRefinement::boxes)
+        .def("halves", [](BoxRefinement &r) {
+            const size_t k = r.k(), rows = 2 * k * r.boxes();
+            double *clo, *chi;
+            OutArray a = new_array(rows, k, &clo), b = new_array(rows, k, &chi);
+            {
+                nb::gil_scoped_release g;
+                r.halves(clo, chi);
+            }
+            return nb::make_tuple(a, b);
+        }, "(clo, chi): every box's two halves along each axis, axis-major, (2 k B, k) each.")
+        .def("step", [](BoxRefinement &r, InArray parts, bool last) {
+            if (parts.ndim() != 2 || parts.shape(0) != 2 * r.k() * r.boxes() || parts.shape(1) != r.m())
+                throw nb::value_error("'parts' must hold the integrals over halves()' boxes, (2 k B, m)");
+            nb::gil_scoped_release g;
+            return r.step(parts.data(), last);
+        }, "parts"_a, "last"_a, "Finishes the converged boxes (all when `last`); whether boxes remain.")
+        .def("result", [](const BoxRefinement &r) {
+            double *value, *error;
+            OutArray a = new_array(r.cells(), r.m(), &value), b = new_array(r.cells(), r.m(), &error);
+            r.result(value, error);
+            return nb::make_tuple(a, b);
+        }, "(integrals, errors) (N, m): each box's finished parts summed in the order they finished.");
     m.def("cubature_sums", [](InArray lo, InArray hi, InArray values, InArray weights, double scale) {
         const size_t k = check_boxes(lo, hi), boxes = lo.shape(0), per = weights.size();
         const size_t cols = values.ndim() == 2 ? values.shape(1) : 1;

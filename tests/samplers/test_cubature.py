@@ -102,3 +102,103 @@ def test_a_group_with_a_step_goes_through_box_integrals():
     calls.clear()
     box_integrals(counted, lo, hi, 1e-10)
     assert once == 16 + sum(calls)      # the parent's rule, then box_integrals' own work
+
+
+# --- box_integrals' refinement in the core, against its definition in numpy -------------------
+def _reference_box_integrals(q, lo, hi, tol, *, max_depth=24, max_evals=40_000_000, floor=0.0,
+                             extrapolate=True, breaks=None):
+    """box_integrals as numpy arrays level by level (the algorithm the core's BoxRefinement
+    runs): each box against its best split's halves, converged or halved along that axis."""
+    from harness.samplers.cubature import _GL_W, _GL_X, halves, split_points, tensor_rule
+
+    def rule(a, b):
+        w = _GL_W if a.shape[1] == 1 else np.outer(_GL_W, _GL_W).reshape(-1)
+        return tensor_rule(q, a, b, _GL_X, w)
+
+    def unconverged_factor(change, history):
+        c1, c2 = history[:, 0], history[:, 1]
+        pair, before = change + c1, c1 + c2
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(np.isnan(c2), change / c1, pair / before)
+            base = np.where(np.isnan(c2), change, pair)
+            ratio = np.clip(np.nan_to_num(ratio, nan=0.0, posinf=0.99), 0.0, 0.99)
+            factor = base * ratio / (1 - ratio) / change
+        factor = np.where(np.isnan(c1) | ~(change > 0), 1.0, factor)
+        return np.maximum(np.nan_to_num(factor, nan=1.0), 1.0)
+
+    ncell, k = lo.shape
+    tol = np.broadcast_to(np.asarray(tol, dtype=float), (ncell,))
+    owner, share, whole = np.arange(ncell), np.ones(ncell), rule(lo, hi)
+    history = np.full((ncell, 2), np.nan)
+    finished, evals = [], ncell * 4**k
+    for depth in range(max_depth + 1):
+        splits = []
+        for axis in range(k):
+            cut = split_points(lo[:, axis], hi[:, axis], None if breaks is None else breaks[axis])
+            clo, chi = halves(lo, hi, axis, cut)
+            parts = rule(clo, chi).reshape(-1, 2, whole.shape[1])
+            mid = (lo[:, axis] + hi[:, axis]) / 2
+            first = np.where(cut == mid, 0.5, (cut - lo[:, axis]) / (hi[:, axis] - lo[:, axis]))
+            splits.append((clo, chi, parts, first))
+            evals += clo.shape[0] * 4**k
+        sums = [p[:, 0] + p[:, 1] for _, _, p, _ in splits]
+        change = np.stack([np.abs(t[:, 0] - whole[:, 0]) for t in sums], axis=1)
+        best = np.argmax(change, axis=1)
+        rows = np.arange(lo.shape[0])
+        refined, moved = np.stack(sums, axis=1)[rows, best], change[rows, best]
+        diff = np.abs(refined - whole)
+        converged = moved <= np.maximum(tol[owner] * share, floor * np.abs(whole[:, 0]))
+        done = converged | (depth == max_depth) | (evals > max_evals)
+        stopped = done & ~converged
+        if extrapolate and stopped.any():
+            diff[stopped] *= unconverged_factor(moved[stopped], history[stopped])[:, None]
+        finished.append((owner[done], refined[done], diff[done]))
+        if done.all():
+            break
+        keep = np.flatnonzero(~done)
+        parts_next = []
+        for axis, (clo, chi, parts, first) in enumerate(splits):
+            sel = keep[best[keep] == axis]
+            pick = np.stack([2 * sel, 2 * sel + 1], axis=1).reshape(-1)
+            shares = np.stack([share[sel] * first[sel], share[sel] * (1 - first[sel])], axis=1).reshape(-1)
+            parts_next.append((clo[pick], chi[pick], parts[sel].reshape(-1, whole.shape[1]),
+                               np.repeat(owner[sel], 2), shares,
+                               np.repeat(np.stack([change[sel, axis], history[sel, 0]], axis=1), 2, axis=0)))
+        lo, hi, whole, owner, share, history = (np.concatenate(v) for v in zip(*parts_next))
+    owner, value, error = (np.concatenate(v) for v in zip(*finished))
+    sums = [np.stack([np.bincount(owner, a[:, j], minlength=ncell) for j in range(a.shape[1])], axis=1)
+            for a in (value, error)]
+    return sums[0], sums[1]
+
+
+def _step_and_singularity(x: np.ndarray) -> np.ndarray:
+    """A 1:9 step at s0 = 0.41, an x^-0.9 singularity along s1 = 0 and a narrow lobe."""
+    with np.errstate(divide="ignore"):
+        return (1 + 8 * (x[:, 0] > 0.41)) * (0.1 + x[:, 1] ** -0.9) + np.exp(-((x[:, 0] - 0.3) ** 2) / 2e-5)
+
+
+@pytest.mark.parametrize("k", [1, 2])
+@pytest.mark.parametrize("options", [{}, {"extrapolate": False}, {"max_depth": 3}, {"max_evals": 30_000},
+                                     {"floor": 1e-5}, {"breaks": "step"}, {"columns": 3}])
+def test_box_integrals_refinement_in_the_core_is_its_numpy_definition_bit_for_bit(k, options):
+    """Every decision of the refinement (the split axis, convergence at the tolerance or q's
+    rounding floor, the depth and evaluation limits, the unconverged boxes' extrapolated error,
+    splits at declared breaks, the sums in finishing order) as the numpy algorithm makes it."""
+    options = dict(options)
+    columns = options.pop("columns", 1)
+    if options.get("breaks") == "step":
+        options["breaks"] = [np.array([0.25, 0.41, 0.7]), None][:k]
+
+    def q(x):
+        v = _step_and_singularity(x if k == 2 else np.column_stack([x[:, 0], x[:, 0]]))
+        return v if columns == 1 else np.column_stack([v ** (j + 1) / 10**j for j in range(columns)])
+
+    rng = np.random.default_rng(7)
+    lo = np.floor(rng.random((40, k)) * 8) / 8             # boxes of the grid of eighths, some repeated
+    lo[:3] = 0.0                                             # the singular corner
+    hi = lo + 0.125
+    want = _reference_box_integrals(q, lo, hi, 1e-6, **options)
+    got = box_integrals(q, lo, hi, 1e-6, **options)
+    for a, b in zip(want, got):
+        np.testing.assert_array_equal(a.view(np.uint64), b.view(np.uint64))
+    assert np.all(np.isfinite(got[0]))
