@@ -220,10 +220,13 @@ def box_integrals(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.
     (:func:`grouped_integrals`), so they are not computed again; ``max_evals`` counts them all
     the same (the budget means what it did).
     """
+    if max_depth < 0:
+        raise ValueError(f"'max_depth' must be at least 0, got {max_depth}")
     lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
     ncell, k = lo.shape
     tol = np.ascontiguousarray(np.broadcast_to(np.asarray(tol, dtype=float), (ncell,)))
     whole = _rule(q, lo, hi) if whole is None else np.asarray(whole, dtype=float)
+    whole = whole.reshape(ncell, -1)       # a scalar q's (M,) as one column
     # the decisions (split where, converged, the next level's boxes, the unconverged boxes'
     # extrapolated errors) in the core, level by level, q integrated over the halves between
     axes = [np.empty(0) if breaks is None or breaks[axis] is None else np.asarray(breaks[axis], dtype=float)
@@ -233,14 +236,14 @@ def box_integrals(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.
     for depth in range(max_depth + 1):
         clo, chi = state.halves()
         evals += clo.shape[0] * 4**k
-        if not state.step(_rule(q, clo, chi), depth == max_depth or evals > max_evals):
+        parts = _rule(q, clo, chi)
+        if not state.step(parts.reshape(parts.shape[0], -1), depth == max_depth or evals > max_evals):
             break
     return state.result()
 
 
 def _owner_sums(owner: np.ndarray, values: np.ndarray, ncell: int) -> np.ndarray:
-    """(ncell, m): per box, the sum of the rows of ``values`` (L, m) that it owns, in row order
-    (the leaves in the order they finished): np.add.at's sums, by a bincount per column
-    (add.at took a tenth of a setup)."""
+    """(ncell, m): per box, the sum of the rows of ``values`` (L, m) that it owns, in row order:
+    np.add.at's sums, by a bincount per column (add.at took a tenth of a setup)."""
     columns = [np.bincount(owner, values[:, j], minlength=ncell) for j in range(values.shape[1])]
     return np.stack(columns, axis=1)

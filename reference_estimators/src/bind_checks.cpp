@@ -136,14 +136,15 @@ void bind_checks(nb::module_ &m) {
             // dithered points never leave the cache (chunks on all threads, each point its own)
             for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t b, int) {
                 thread_local std::vector<double> moved;
-                thread_local std::vector<unsigned char> unused;
+                thread_local std::unique_ptr<bool[]> unused;   // the dithered points' mask, not wanted
+                thread_local size_t unused_size = 0;
                 const size_t rows = b - a, values = rows * size_t(pdim);
                 moved.resize(values);
-                unused.resize(rows);
+                if (unused_size < rows) unused.reset(new bool[unused_size = rows]);
                 const double *xa = x.data() + a * size_t(pdim);
                 domain_params(d, lo, hi, xa, rows, nullptr, inside + a);
                 dither_float32(xa, u.data() + a * size_t(pdim), values, moved.data());
-                domain_params(d, lo, hi, moved.data(), rows, s + a * size_t(k), reinterpret_cast<bool *>(unused.data()));
+                domain_params(d, lo, hi, moved.data(), rows, s + a * size_t(k), unused.get());
             });
         }
         return nb::make_tuple(sa, ia);
@@ -300,6 +301,9 @@ void bind_checks(nb::module_ &m) {
     m.def("split_points", [](InArray lo, InArray hi, InArray breaks) {
         if (lo.ndim() != 1 || hi.ndim() != 1 || lo.size() != hi.size() || breaks.ndim() != 1)
             throw nb::value_error("'lo' and 'hi' must be arrays (B,) and 'breaks' (n,)");
+        const double *b = breaks.data();
+        if (!std::is_sorted(b, b + breaks.size()) || std::any_of(b, b + breaks.size(), [](double x) { return x != x; }))
+            throw nb::value_error("'breaks' must be sorted numbers, no NaN");
         double *out;
         OutArray cuts = new_array(lo.size(), 0, &out);
         {

@@ -86,8 +86,9 @@ inline bool all_float32(const double *v, size_t n) {
 // out[i] = v[i] moved to below + (above - below) u[i], below and above half way to v's float32
 // neighbours (v rounded to float32 first), for n values; v itself where that is not finite (v
 // NaN, infinite, or beyond the float32 range or at its end, where a neighbour is infinite).
-// The sampler check's dithering of float32 points; numpy's operations in numpy's order, the
-// same bits, in one pass where numpy's eight took 0.1 s a million directions.
+// The sampler check's dithering of float32 points: the bits of numpy's nextafter
+// expression (tests/core/test_check_kernels.py, dither_reference), in one pass where numpy's
+// eight took 0.1 s a million directions.
 //
 // Written for GCC to vectorise it (1.5 -> 0.4 ns a value; nextafterf and a step of the
 // float's bits by sign had kept it scalar): the neighbours as f -+ the float32 spacing below

@@ -57,7 +57,11 @@ class BoxRefinement {
           tol_(tol, tol + n), lo_(lo, lo + n * k), hi_(hi, hi + n * k), whole_(whole, whole + n * m),
           share_(n, 1.0), history_(2 * n, std::numeric_limits<double>::quiet_NaN()), owner_(n) {
         if (k != 1 && k != 2) throw std::invalid_argument("boxes of 1 or 2 coordinates");
+        if (m == 0) throw std::invalid_argument("integrals of at least one column");
         if (breaks_.size() != k) throw std::invalid_argument("one list of breaks per axis");
+        for (const std::vector<double> &b : breaks_)
+            if (!std::is_sorted(b.begin(), b.end()) || std::any_of(b.begin(), b.end(), [](double x) { return x != x; }))
+                throw std::invalid_argument("breaks must be sorted numbers, no NaN");
         for (size_t i = 0; i < n; ++i) owner_[i] = int64_t(i);
     }
 
@@ -91,11 +95,14 @@ class BoxRefinement {
         }
         clo_.assign(clo, clo + 2 * k_ * B * k_);
         chi_.assign(chi, chi + 2 * k_ * B * k_);
+        halved_ = true;
     }
 
     // parts (k * 2B rows of m): the integrals over halves()' boxes, in its order.  `last`:
     // finish every box (the depth or evaluation limit).  Returns whether boxes remain.
     bool step(const double *parts, bool last) {
+        if (!halved_) throw std::logic_error("step() takes the integrals over halves()' boxes: call halves() first");
+        halved_ = false;
         const size_t B = boxes(), m = m_;
         std::vector<double> change(k_ * B), refined(m), diff(m);
         std::vector<size_t> best(B);
@@ -195,7 +202,7 @@ class BoxRefinement {
 
     size_t k_, m_, cells_;
     double floor_;
-    bool extrapolate_;
+    bool extrapolate_, halved_ = false;   // halves() made this level's halves, step() not yet taken them
     std::vector<std::vector<double>> breaks_;
     std::vector<double> tol_, lo_, hi_, whole_, share_, history_, first_, clo_, chi_;
     std::vector<int64_t> owner_;

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from harness.samplers.cubature import box_integrals, cell_integrals, grouped_integrals
+from harness.samplers.cubature import box_integrals, cell_integrals, grouped_integrals, split_points
 
 
 def _lobe(x: np.ndarray) -> np.ndarray:
@@ -105,11 +105,45 @@ def test_a_group_with_a_step_goes_through_box_integrals():
 
 
 # --- box_integrals' refinement in the core, against its definition in numpy -------------------
+def _reference_split_points(lo, hi, breaks):
+    """split_points as numpy searches: the break strictly inside (1e-9 of the width from either
+    end) nearest the middle, of the first at or above it and the one before, else the middle."""
+    mid = (lo + hi) / 2
+    if breaks is None or breaks.size == 0:
+        return mid
+    margin = 1e-9 * (hi - lo)
+    first = np.searchsorted(breaks, lo + margin, side="right")
+    last = np.searchsorted(breaks, hi - margin, side="left")
+    near = np.clip(np.searchsorted(breaks, mid), first, np.maximum(last - 1, first))
+    below = np.clip(near - 1, first, np.maximum(last - 1, first))
+    top = breaks.size - 1
+    a, b = breaks[np.minimum(near, top)], breaks[np.minimum(below, top)]
+    return np.where(last > first, np.where(np.abs(b - mid) < np.abs(a - mid), b, a), mid)
+
+
+def test_split_points_in_the_core_are_the_numpy_searches():
+    """Breaks on the ends, within the 1e-9 margin, either side of the middle at equal distance
+    (the tie goes to the one at or above), outside the interval, none inside."""
+    rng = np.random.default_rng(8)
+    for _ in range(200):
+        dyadic = [0.25, 0.5, 0.625, 0.75][: rng.integers(0, 5)]
+        breaks = np.unique(np.concatenate([rng.random(rng.integers(0, 12)), dyadic]))
+        lo = rng.choice(np.concatenate([rng.random(40), breaks, np.arange(9) / 8]), 300)
+        width = rng.choice([1e-12, 1e-9, 0.01, 0.125, 0.25, 0.5], 300)
+        hi = np.minimum(lo + width, 1.0)
+        lo = np.minimum(lo, hi - 1e-15)
+        lo[:4], hi[:4] = [0.5 - 1e-10, 0.25, 0.5, 0.375], [0.75, 0.75, 0.75 + 1e-10, 0.875]
+        want = _reference_split_points(lo, hi, breaks if breaks.size else None)
+        np.testing.assert_array_equal(split_points(lo, hi, breaks if breaks.size else None), want)
+    with pytest.raises(ValueError, match="sorted numbers"):
+        split_points(np.zeros(2), np.ones(2), np.array([0.5, 0.25]))
+
+
 def _reference_box_integrals(q, lo, hi, tol, *, max_depth=24, max_evals=40_000_000, floor=0.0,
                              extrapolate=True, breaks=None):
     """box_integrals as numpy arrays level by level (the algorithm the core's BoxRefinement
     runs): each box against its best split's halves, converged or halved along that axis."""
-    from harness.samplers.cubature import _GL_W, _GL_X, halves, split_points, tensor_rule
+    from harness.samplers.cubature import _GL_W, _GL_X, halves, tensor_rule
 
     def rule(a, b):
         w = _GL_W if a.shape[1] == 1 else np.outer(_GL_W, _GL_W).reshape(-1)
@@ -134,7 +168,7 @@ def _reference_box_integrals(q, lo, hi, tol, *, max_depth=24, max_evals=40_000_0
     for depth in range(max_depth + 1):
         splits = []
         for axis in range(k):
-            cut = split_points(lo[:, axis], hi[:, axis], None if breaks is None else breaks[axis])
+            cut = _reference_split_points(lo[:, axis], hi[:, axis], None if breaks is None else breaks[axis])
             clo, chi = halves(lo, hi, axis, cut)
             parts = rule(clo, chi).reshape(-1, 2, whole.shape[1])
             mid = (lo[:, axis] + hi[:, axis]) / 2
@@ -179,26 +213,33 @@ def _step_and_singularity(x: np.ndarray) -> np.ndarray:
 
 @pytest.mark.parametrize("k", [1, 2])
 @pytest.mark.parametrize("options", [{}, {"extrapolate": False}, {"max_depth": 3}, {"max_evals": 30_000},
-                                     {"floor": 1e-5}, {"breaks": "step"}, {"columns": 3}])
+                                     {"floor": 1e-5}, {"breaks": "step"}, {"columns": 3}, {"tol": "per box"},
+                                     {"max_depth": 0}, {"max_evals": 0}, {"bad": True}])
 def test_box_integrals_refinement_in_the_core_is_its_numpy_definition_bit_for_bit(k, options):
     """Every decision of the refinement (the split axis, convergence at the tolerance or q's
     rounding floor, the depth and evaluation limits, the unconverged boxes' extrapolated error,
-    splits at declared breaks, the sums in finishing order) as the numpy algorithm makes it."""
+    splits at declared breaks, the sums in finishing order, NaN and infinite integrals,
+    zero-width boxes) as the numpy algorithm makes it."""
     options = dict(options)
-    columns = options.pop("columns", 1)
+    columns, bad = options.pop("columns", 1), options.pop("bad", False)
     if options.get("breaks") == "step":
         options["breaks"] = [np.array([0.25, 0.41, 0.7]), None][:k]
 
     def q(x):
         v = _step_and_singularity(x if k == 2 else np.column_stack([x[:, 0], x[:, 0]]))
+        if bad:   # NaN in a band, infinite on a line: boxes whose changes are NaN or infinite
+            v = np.where(np.abs(x[:, 0] - 0.6) < 0.01, np.nan, np.where(x[:, 0] == 0.8125, np.inf, v))
         return v if columns == 1 else np.column_stack([v ** (j + 1) / 10**j for j in range(columns)])
 
     rng = np.random.default_rng(7)
     lo = np.floor(rng.random((40, k)) * 8) / 8             # boxes of the grid of eighths, some repeated
     lo[:3] = 0.0                                             # the singular corner
     hi = lo + 0.125
-    want = _reference_box_integrals(q, lo, hi, 1e-6, **options)
-    got = box_integrals(q, lo, hi, 1e-6, **options)
+    hi[3] = lo[3]                                            # a box of zero width
+    tol = rng.random(40) * 1e-5 if options.pop("tol", None) == "per box" else 1e-6
+    with np.errstate(invalid="ignore"):
+        want = _reference_box_integrals(q, lo, hi, tol, **options)
+        got = box_integrals(q, lo, hi, tol, **options)
     for a, b in zip(want, got):
         np.testing.assert_array_equal(a.view(np.uint64), b.view(np.uint64))
-    assert np.all(np.isfinite(got[0]))
+    assert bad or np.all(np.isfinite(got[0]))
