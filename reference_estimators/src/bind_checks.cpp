@@ -98,56 +98,52 @@ size_t check_rows(const InArray &x, const BoolArray &keep) {
     return x.shape(0);
 }
 
+// (s, inside) of domain_params for points x on domain `kind`, on all threads in fixed chunks
+// (each point's parameters its own; the azimuths' vector and scalar paths give the same
+// bits).  With uniforms u, s is of the points dithered within their float32 rounding
+// (dither_float32), a chunk at a time into this thread's scratch rows, so that the dithered
+// points never leave the cache, and `inside` of the points as given.
+nb::tuple parameters(int kind, double lo, double hi, const InArray &x, const double *u) {
+    const CheckDomain d = check_domain(kind);
+    const int pdim = domain_point_dim(d), k = domain_param_dim(d);
+    const size_t n = check_points(x, pdim, "x");
+    double *s;
+    bool *inside;
+    OutArray sa = new_array(n, size_t(k), &s);
+    auto ia = new_bool_array(n, &inside);
+    {
+        nb::gil_scoped_release g;
+        for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t b, int) {
+            const size_t rows = b - a, values = rows * size_t(pdim);
+            const double *xa = x.data() + a * size_t(pdim);
+            if (!u) {
+                domain_params(d, lo, hi, xa, rows, s + a * size_t(k), inside + a);
+                return;
+            }
+            thread_local std::vector<double> moved;
+            thread_local std::unique_ptr<bool[]> unused;   // the dithered points' mask, not wanted
+            thread_local size_t unused_size = 0;
+            moved.resize(values);
+            if (unused_size < rows) unused.reset(new bool[unused_size = rows]);
+            domain_params(d, lo, hi, xa, rows, nullptr, inside + a);
+            dither_float32(xa, u + a * size_t(pdim), values, moved.data());
+            domain_params(d, lo, hi, moved.data(), rows, s + a * size_t(k), unused.get());
+        });
+    }
+    return nb::make_tuple(sa, ia);
+}
+
 }  // namespace
 
 void bind_checks(nb::module_ &m) {
     m.def("domain_params", [](int kind, double lo, double hi, InArray x) {
-        const CheckDomain d = check_domain(kind);
-        const int pdim = domain_point_dim(d), k = domain_param_dim(d);
-        const size_t n = check_points(x, pdim, "x");
-        double *s;
-        bool *inside;
-        OutArray sa = new_array(n, size_t(k), &s);
-        auto ia = new_bool_array(n, &inside);
-        {
-            nb::gil_scoped_release g;
-            // each point's parameters depend on that point alone (the azimuths' vector and
-            // scalar paths give the same bits): chunks on all threads
-            for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t b, int) {
-                domain_params(d, lo, hi, x.data() + a * size_t(pdim), b - a, s + a * size_t(k), inside + a);
-            });
-        }
-        return nb::make_tuple(sa, ia);
+        return parameters(kind, lo, hi, x, nullptr);
     }, "kind"_a, "lo"_a, "hi"_a, "x"_a,
        "(s (N, k), inside (N,)): the equal-measure parameters of points x on domain `kind` "
        "(0 interval [lo, hi], 1 half line, 2 square, 3 disk, 4 hemisphere, 5 sphere).");
     m.def("dithered_domain_params", [](int kind, double lo, double hi, InArray x, InArray u) {
-        const CheckDomain d = check_domain(kind);
-        const int pdim = domain_point_dim(d), k = domain_param_dim(d);
-        const size_t n = check_points(x, pdim, "x");
         if (u.size() != x.size()) throw nb::value_error("'u' must have one uniform per coordinate of 'x'");
-        double *s;
-        bool *inside;
-        OutArray sa = new_array(n, size_t(k), &s);
-        auto ia = new_bool_array(n, &inside);
-        {
-            nb::gil_scoped_release g;
-            // a chunk's points dithered into this thread's scratch rows, then mapped: the
-            // dithered points never leave the cache (chunks on all threads, each point its own)
-            for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t b, int) {
-                thread_local std::vector<double> moved;
-                thread_local std::unique_ptr<bool[]> unused;   // the dithered points' mask, not wanted
-                thread_local size_t unused_size = 0;
-                const size_t rows = b - a, values = rows * size_t(pdim);
-                moved.resize(values);
-                if (unused_size < rows) unused.reset(new bool[unused_size = rows]);
-                const double *xa = x.data() + a * size_t(pdim);
-                domain_params(d, lo, hi, xa, rows, nullptr, inside + a);
-                dither_float32(xa, u.data() + a * size_t(pdim), values, moved.data());
-                domain_params(d, lo, hi, moved.data(), rows, s + a * size_t(k), unused.get());
-            });
-        }
-        return nb::make_tuple(sa, ia);
+        return parameters(kind, lo, hi, x, u.data());
     }, "kind"_a, "lo"_a, "hi"_a, "x"_a, "u"_a,
        "(s (N, k), inside (N,)): domain_params' s of the points x dithered by dither_float32 with uniforms u, and "
        "its inside of x as given.");
