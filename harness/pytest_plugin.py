@@ -73,6 +73,12 @@ class SuiteFile(pytest.File):
             for i, name in enumerate(kind.names()):
                 yield CaseItem.from_parent(self, name=name, kind=kind.name, index=i)
 
+    def teardown(self) -> None:
+        """After the file's last case: the suite and its results go (they hold the core's
+        integrands and techniques, which pytest's tree of collected items would keep to the end
+        of the process, past the core's own teardown: nanobind reported them as leaked)."""
+        self.suite, self.summary = None, None
+
     def run(self) -> RunSummary:
         if self.summary is None:
             opt = self.config.getoption

@@ -6,6 +6,7 @@ wrong; the heavy work runs in C++ with the GIL released.
 """
 from __future__ import annotations
 
+import atexit
 import math
 import numbers
 from typing import Any
@@ -32,6 +33,9 @@ Technique = _core.Technique
 _CATALOGUE: dict[str, tuple[Any, dict[str, Any]]] = {
     f.name: (f, {t.name: t for t in ts}) for f, ts in _core.catalogue()
 }
+# emptied at exit, before the interpreter tears down its modules: the core's objects held here
+# could otherwise outlive the core's own teardown, which nanobind reports as leaked instances
+atexit.register(_CATALOGUE.clear)
 
 
 class Sampler:
