@@ -193,7 +193,7 @@ class SamplerTest:
                                                         f"over the {dom.kind}, not 1"))
 
         if float32 and not dither_now:     # dithered as above, on the half line
-            s = dom.to_params(rest.dither_float32(x, _dither_uniforms(x, seed)))[0]
+            s = dom.dithered_params(x, _dither_uniforms(x, seed))[0]
         counts = rest.grid_histogram(s, inside, base)
         grids = {"coarse": (16,) if dom.k == 1 else (16, 32), "fine": (512,) if dom.k == 1 else (64, 128)}
         tests, residuals = [], {}

@@ -83,9 +83,7 @@ def split_points(lo: np.ndarray, hi: np.ndarray, breaks: np.ndarray | None) -> n
     more than 1e-9 of the box's width from either end, so that a box whose end was meant to
     lie on a break and lies a rounding away is not split into a sliver.  In the core
     (:func:`reference_estimators.split_points`)."""
-    if breaks is None or breaks.size == 0:
-        return (lo + hi) / 2
-    return rest.split_points(lo, hi, breaks)
+    return rest.split_points(lo, hi, np.empty(0) if breaks is None else breaks)
 
 
 def halves(lo: np.ndarray, hi: np.ndarray, axis: int, cut: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -297,9 +297,7 @@ void bind_checks(nb::module_ &m) {
     m.def("split_points", [](InArray lo, InArray hi, InArray breaks) {
         if (lo.ndim() != 1 || hi.ndim() != 1 || lo.size() != hi.size() || breaks.ndim() != 1)
             throw nb::value_error("'lo' and 'hi' must be arrays (B,) and 'breaks' (n,)");
-        const double *b = breaks.data();
-        if (!std::is_sorted(b, b + breaks.size()) || std::any_of(b, b + breaks.size(), [](double x) { return x != x; }))
-            throw nb::value_error("'breaks' must be sorted numbers, no NaN");
+        if (!sorted_breaks(breaks.data(), breaks.size())) throw nb::value_error("'breaks' must be sorted numbers, no NaN");
         double *out;
         OutArray cuts = new_array(lo.size(), 0, &out);
         {

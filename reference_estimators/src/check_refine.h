@@ -38,6 +38,11 @@ inline double split_point(double lo, double hi, const double *breaks, size_t n) 
     return std::fabs(b - mid) < std::fabs(a - mid) ? b : a;
 }
 
+// Whether the n breaks are sorted numbers (no NaN), as split_point needs them.
+inline bool sorted_breaks(const double *b, size_t n) {
+    return std::is_sorted(b, b + n) && std::none_of(b, b + n, [](double x) { return x != x; });
+}
+
 // numpy's maximum: NaN if either is.
 inline double nan_max(double a, double b) { return a != a ? a : (b != b ? b : (a > b ? a : b)); }
 
@@ -60,8 +65,7 @@ class BoxRefinement {
         if (m == 0) throw std::invalid_argument("integrals of at least one column");
         if (breaks_.size() != k) throw std::invalid_argument("one list of breaks per axis");
         for (const std::vector<double> &b : breaks_)
-            if (!std::is_sorted(b.begin(), b.end()) || std::any_of(b.begin(), b.end(), [](double x) { return x != x; }))
-                throw std::invalid_argument("breaks must be sorted numbers, no NaN");
+            if (!sorted_breaks(b.data(), b.size())) throw std::invalid_argument("breaks must be sorted numbers, no NaN");
         for (size_t i = 0; i < n; ++i) owner_[i] = int64_t(i);
     }
 

@@ -61,11 +61,6 @@ def polar_angle(v: Sequence[float]) -> float:
     return math.degrees(math.acos(max(-1.0, min(1.0, v[2]))))
 
 
-def floats(a: np.ndarray) -> np.ndarray:
-    """``a`` as a contiguous float32 array."""
-    return np.ascontiguousarray(a, dtype=np.float32)
-
-
 def uniforms(u: np.ndarray, udim: int) -> list[np.ndarray]:
     """The columns of ``u`` (N, >= udim) as float32, clamped below 1 (each in one pass: the
     clamp in float32 after rounding, the same bits as before it, rounding being monotone and
