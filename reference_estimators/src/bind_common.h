@@ -1,8 +1,8 @@
 // What every binding file of reference_estimators._core shares: the array types, new numpy
 // arrays, the checks of array arguments and run options, and the conversions of estimates and
 // accumulator states to Python dicts (bind_results.cpp).  The module itself is bindings.cpp;
-// bind_checks.cpp binds the sampler check's kernels, bind_results.cpp the accumulator states,
-// tails and extremes.
+// bind_checks.cpp binds the sampler check's kernels, bind_cubature.cpp its cubature's and
+// bind_results.cpp the accumulator states, tails and extremes.
 #pragma once
 
 #include <nanobind/nanobind.h>
@@ -13,6 +13,7 @@
 #include <string>
 
 #include "buffer_cache.h"
+#include "check_domains.h"
 #include "estimators.h"
 
 namespace re::py {
@@ -113,8 +114,23 @@ nb::dict state_dict(const Estimate &e);
 Estimate state_from(const nb::dict &d);
 nb::dict tails_dict(const ValueTails &t);
 
+// A domain code 0 .. 5 as a CheckDomain, or a ValueError.
+inline CheckDomain check_domain(int kind) {
+    if (kind < 0 || kind > 5) throw nb::value_error("'kind' must be a domain code 0 .. 5");
+    return CheckDomain(kind);
+}
+
+// Boxes [lo, hi]: both of shape (M, 1) or (M, 2); returns k.
+inline size_t check_boxes(const InArray &lo, const InArray &hi) {
+    if (lo.ndim() != 2 || hi.ndim() != 2 || lo.shape(0) != hi.shape(0) || lo.shape(1) != hi.shape(1) ||
+        (lo.shape(1) != 1 && lo.shape(1) != 2))
+        throw nb::value_error("'lo' and 'hi' must both have shape (M, 1) or (M, 2)");
+    return lo.shape(1);
+}
+
 // The module's functions, by file.
 void bind_checks(nb::module_ &m);
+void bind_cubature(nb::module_ &m);
 void bind_results(nb::module_ &m);
 
 }  // namespace re::py

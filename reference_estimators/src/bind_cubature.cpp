@@ -1,0 +1,151 @@
+// Bindings of the sampler check's cubature kernels (check_cubature.h, check_refine.h): the tensor
+// rule's nodes and domain points on boxes, the split points at declared breaks, the adaptive
+// refinement's bookkeeping (BoxRefinement) and the rule's weighted sums.  Arrays are validated
+// here (shapes, sorted breaks), so no call can read out of bounds.
+#include <nanobind/stl/vector.h>
+
+#include <algorithm>
+#include <vector>
+
+#include "bind_common.h"
+#include "check_refine.h"
+#include "checks.h"
+
+namespace re::py {
+
+using namespace nb::literals;
+
+void bind_cubature(nb::module_ &m) {
+    m.def("cubature_nodes", [](InArray lo, InArray hi, InArray nodes) {
+        const size_t k = check_boxes(lo, hi), boxes = lo.shape(0), g = nodes.size();
+        const size_t per = k == 1 ? g : g * g;
+        double *out;
+        OutArray pts = new_array(boxes * per, k, &out);
+        {
+            nb::gil_scoped_release r;
+            // box by box, each box's nodes from that box alone: chunks of boxes on all threads
+            for_chunks(boxes, std::max<size_t>(kCheckChunk / per, 1), [&](size_t, size_t a, size_t b, int) {
+                cubature_nodes(lo.data() + a * k, hi.data() + a * k, b - a, k, nodes.data(), g, out + a * per * k);
+            });
+        }
+        return pts;
+    }, "lo"_a, "hi"_a, "nodes"_a,
+       "(M g^k, k) nodes of the tensor rule with points `nodes` per axis on the boxes [lo, hi] (M, k), box by box.");
+    m.def("cubature_points", [](int kind, double dlo, double dhi, InArray lo, InArray hi, InArray nodes,
+                                std::vector<int> columns) {
+        const CheckDomain d = check_domain(kind);
+        const size_t k = check_boxes(lo, hi), g = nodes.size(), per = k == 1 ? g : g * g;
+        if (size_t(domain_param_dim(d)) != k) throw nb::value_error("the boxes' dimension is not the domain's");
+        const int pdim = domain_point_dim(d);
+        Placement at;
+        if (!columns.empty()) {
+            std::vector<int> seen(columns);
+            std::sort(seen.begin(), seen.end());
+            bool ok = int(seen.size()) == pdim;
+            for (int j = 0; ok && j < pdim; ++j) ok = seen[size_t(j)] == j;
+            if (!ok) throw nb::value_error("'columns' must be a permutation of the points' coordinates (or empty)");
+            // the result is x[:, columns]: coordinate columns[j] goes to column j
+            for (int j = 0; j < pdim; ++j) at.dest[columns[size_t(j)]] = j;
+        }
+        const size_t boxes = lo.shape(0);
+        double *x;
+        OutArray xa = new_array(boxes * per, pdim == 1 ? 0 : size_t(pdim), &x);
+        {
+            nb::gil_scoped_release r;
+            // each box's points from that box alone: chunks of boxes on all threads
+            for_chunks(boxes, std::max<size_t>(kCubatureChunk / per, 1), [&](size_t, size_t a, size_t b, int) {
+                thread_local std::vector<double> scratch;
+                cubature_points(d, dlo, dhi, lo.data() + a * k, hi.data() + a * k, b - a, k, nodes.data(), g, at,
+                                x + a * per * size_t(pdim), scratch);
+            });
+        }
+        return xa;
+    }, "kind"_a, "dlo"_a, "dhi"_a, "lo"_a, "hi"_a, "nodes"_a, "columns"_a,
+       "Domain points of the tensor rule's nodes on the boxes [lo, hi] (M, k): domain_points(cubature_nodes(...)), "
+       "with columns[j] as coordinate j where `columns` is given (a permutation; empty: as computed).");
+    m.def("split_points", [](InArray lo, InArray hi, InArray breaks) {
+        if (lo.ndim() != 1 || hi.ndim() != 1 || lo.size() != hi.size() || breaks.ndim() != 1)
+            throw nb::value_error("'lo' and 'hi' must be arrays (B,) and 'breaks' (n,)");
+        if (!sorted_breaks(breaks.data(), breaks.size())) throw nb::value_error("'breaks' must be sorted numbers, no NaN");
+        double *out;
+        OutArray cuts = new_array(lo.size(), 0, &out);
+        {
+            nb::gil_scoped_release g;
+            for (size_t i = 0; i < lo.size(); ++i)
+                out[i] = split_point(lo.data()[i], hi.data()[i], breaks.data(), breaks.size());
+        }
+        return cuts;
+    }, "lo"_a, "hi"_a, "breaks"_a, "Where each interval [lo, hi) is split: the break strictly inside nearest its "
+       "middle, else the middle (breaks sorted).");
+    nb::class_<BoxRefinement>(m, "BoxRefinement",
+        "The bookkeeping of box_integrals' adaptive refinement (harness/samplers/cubature.py): halves() the "
+        "boxes' halves along each axis, step(parts, last) the decision on their integrals, result() the sums.")
+        .def("__init__", [](BoxRefinement *self, InArray lo, InArray hi, InArray whole, InArray tol, double floor,
+                            bool extrapolate, std::vector<std::vector<double>> breaks) {
+            const size_t k = check_boxes(lo, hi), n = lo.shape(0);
+            if (whole.ndim() != 2 || whole.shape(0) != n || tol.size() != n)
+                throw nb::value_error("'whole' must be (N, m) and 'tol' (N,) for the N boxes");
+            new (self) BoxRefinement(lo.data(), hi.data(), whole.data(), tol.data(), n, k, whole.shape(1), floor,
+                                     extrapolate, std::move(breaks));
+        }, "lo"_a, "hi"_a, "whole"_a, "tol"_a, "floor"_a, "extrapolate"_a, "breaks"_a)
+        .def_prop_ro("boxes", &BoxRefinement::boxes)
+        .def("halves", [](BoxRefinement &r) {
+            const size_t k = r.k(), rows = 2 * k * r.boxes();
+            double *clo, *chi;
+            OutArray a = new_array(rows, k, &clo), b = new_array(rows, k, &chi);
+            {
+                nb::gil_scoped_release g;
+                r.halves(clo, chi);
+            }
+            return nb::make_tuple(a, b);
+        }, "(clo, chi): every box's two halves along each axis, axis-major, (2 k B, k) each.")
+        .def("step", [](BoxRefinement &r, InArray parts, bool last) {
+            if (parts.ndim() != 2 || parts.shape(0) != 2 * r.k() * r.boxes() || parts.shape(1) != r.m())
+                throw nb::value_error("'parts' must hold the integrals over halves()' boxes, (2 k B, m)");
+            nb::gil_scoped_release g;
+            return r.step(parts.data(), last);
+        }, "parts"_a, "last"_a, "Finishes the converged boxes (all when `last`); whether boxes remain.")
+        .def("result", [](const BoxRefinement &r) {
+            double *value, *error;
+            OutArray a = new_array(r.cells(), r.m(), &value), b = new_array(r.cells(), r.m(), &error);
+            r.result(value, error);
+            return nb::make_tuple(a, b);
+        }, "(integrals, errors) (N, m): each box's finished parts summed in the order they finished.");
+    m.def("cubature_sums", [](InArray lo, InArray hi, InArray values, InArray weights, double scale) {
+        const size_t k = check_boxes(lo, hi), boxes = lo.shape(0), per = weights.size();
+        const size_t cols = values.ndim() == 2 ? values.shape(1) : 1;
+        if ((values.ndim() != 1 && values.ndim() != 2) || values.shape(0) != boxes * per)
+            throw nb::value_error("'values' must have one row per node: shape (M g^k,) or (M g^k, m)");
+        double *out;
+        OutArray oa = new_array(boxes, cols, &out);
+        {
+            nb::gil_scoped_release r;
+            for_chunks(boxes, std::max<size_t>(kCheckChunk / per, 1), [&](size_t, size_t a, size_t b, int) {
+                cubature_sums(lo.data() + a * k, hi.data() + a * k, b - a, k, values.data() + a * per * cols, cols,
+                              weights.data(), per, scale, out + a * cols);
+            });
+        }
+        return oa;
+    }, "lo"_a, "hi"_a, "values"_a, "weights"_a, "scale"_a,
+       "(M, m) integrals of the tensor rule on the boxes [lo, hi] (M, k): the weighted sum of the values "
+       "(M g^k, m) at their nodes times the volume, times `scale`.");
+    m.def("cubature_moment_sums", [](InArray lo, InArray hi, InArray values, InArray weights, double c) {
+        const size_t k = check_boxes(lo, hi), boxes = lo.shape(0), per = weights.size();
+        if (values.ndim() != 1 || values.shape(0) != boxes * per)
+            throw nb::value_error("'values' must have one value per node: shape (M g^k,)");
+        double *out;
+        OutArray oa = new_array(boxes, 3, &out);
+        {
+            nb::gil_scoped_release r;
+            for_chunks(boxes, std::max<size_t>(kCheckChunk / per, 1), [&](size_t, size_t a, size_t b, int) {
+                cubature_moment_sums(lo.data() + a * k, hi.data() + a * k, b - a, k, values.data() + a * per,
+                                     weights.data(), per, c, out + a * 3);
+            });
+        }
+        return oa;
+    }, "lo"_a, "hi"_a, "values"_a, "weights"_a, "c"_a,
+       "(M, 3) integrals of q, h q and h^2 q (h = q / (q + c), 0 when c <= 0) by the tensor rule on the boxes "
+       "[lo, hi] (M, k), from q's values (M g^k,) at the nodes.");
+}
+
+}  // namespace re::py
