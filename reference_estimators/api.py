@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from . import _core
+from .arguments import chunk_range, count_arg, points_arg, seed_arg, threads_arg
 from .estimate import Estimate
 
 __all__ = [
@@ -69,21 +70,21 @@ class Sampler:
     def sample(self, u: Any) -> tuple[np.ndarray, np.ndarray]:
         """Points and their pdf values from canonical uniforms u in [0, 1] of shape (N, udim)
         (ValueError, with the count and examples, for values outside it or NaN)."""
-        return self._core.sample(_points(u, self.udim, "u"))
+        return self._core.sample(points_arg(u, self.udim, "u"))
 
     def pdf(self, x: Any) -> np.ndarray:
         """Claimed density at points x of shape (N, dim); 0 outside the support."""
-        return self._core.pdf(_points(x, self.dim, "x"))
+        return self._core.pdf(points_arg(x, self.dim, "x"))
 
     def invert(self, x: Any) -> np.ndarray:
         """Canonical uniforms that map to x; NaN rows for points outside the support."""
-        return self._core.invert(_points(x, self.dim, "x"))
+        return self._core.invert(points_arg(x, self.dim, "x"))
 
     def draw(self, n: int, *, seed: int = 0,
              threads: int | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
         """n points, their pdf values and diagnostics (candidates, bound violations with
         examples), from the chunked PCG32 streams: identical for any thread count."""
-        x, p, diag = self._core.draw(_count(n, "n"), _seed(seed), 0, 0, _threads(threads))
+        x, p, diag = self._core.draw(count_arg(n, "n"), seed_arg(seed), 0, 0, threads_arg(threads))
         return x, p, diag
 
     def __repr__(self) -> str:
@@ -181,7 +182,7 @@ def roulette(s: Sampler, q: float, c: float = 0.0, *, reweight: bool = True) -> 
 
 def splitting(f: str | Integrand, m: int) -> Technique:
     """Splitting on a 2-D box: one outer sample x0, m inner samples x1, Y = |D| mean f(x0, x1_j)."""
-    return _core.splitting_technique(integrand(f), _count(m, "m"))
+    return _core.splitting_technique(integrand(f), count_arg(m, "m"))
 
 
 def mis(samplers: list[Sampler], heuristic: str = "balance") -> Technique:
@@ -196,7 +197,7 @@ def mis(samplers: list[Sampler], heuristic: str = "balance") -> Technique:
 def snis(s: Sampler, batch: int) -> Technique:
     """Self-normalised importance sampling over batches of ``batch`` samples: the ratio
     |D| sum f/p / sum 1/p.  Consistent, with a bias of order 1/batch (deliberately biased)."""
-    return _core.self_normalized_technique(_core_sampler(s), _count(batch, "batch"))
+    return _core.self_normalized_technique(_core_sampler(s), count_arg(batch, "batch"))
 
 
 def with_points(t: Technique, points: str) -> Technique:
@@ -219,10 +220,10 @@ def points(n: int, dim: int, kind: str = "random", *, seed: int = 0, case_id: in
     the whole set."""
     if isinstance(dim, bool) or not isinstance(dim, numbers.Integral) or dim < 1:
         raise ValueError(f"'dim' must be a positive integer, got {dim!r}")
-    n = _count(n, "n")
-    begin, end = _chunk_range(n, chunk_begin, chunk_end)
-    return _core.points(n, int(dim), kind, _seed(seed), _seed(case_id, "case_id"), _seed(replica, "replica"),
-                        _threads(threads), begin, end)
+    n = count_arg(n, "n")
+    begin, end = chunk_range(n, chunk_begin, chunk_end)
+    return _core.points(n, int(dim), kind, seed_arg(seed), seed_arg(case_id, "case_id"),
+                        seed_arg(replica, "replica"), threads_arg(threads), begin, end)
 
 
 def accumulate_chunk(values: Any, *, first: int = 0, points: Any = None) -> dict[str, Any]:
@@ -244,7 +245,7 @@ def accumulate_chunk(values: Any, *, first: int = 0, points: Any = None) -> dict
             u = u[:, None]
         if u.ndim != 2 or u.shape[0] != y.size:
             raise ValueError(f"'points' must have shape ({y.size}, dim), one row per value, got {u.shape}")
-    return _core.accumulate_chunk(y, _seed(first, "first"), u)
+    return _core.accumulate_chunk(y, seed_arg(first, "first"), u)
 
 
 def integrate(f: str | Integrand, t: str | Technique, n: int, *, seed: int = 0, threads: int | None = None,
@@ -260,8 +261,8 @@ def integrate(f: str | Integrand, t: str | Technique, n: int, *, seed: int = 0, 
     """
     fi = integrand(f)
     ti = technique(fi, t)
-    raw = _core.integrate(fi, ti, _count(n, "n"), _seed(seed), _seed(case_id, "case_id"),
-                          _seed(replica, "replica"), _threads(threads), bool(higher_moments))
+    raw = _core.integrate(fi, ti, count_arg(n, "n"), seed_arg(seed), seed_arg(case_id, "case_id"),
+                          seed_arg(replica, "replica"), threads_arg(threads), bool(higher_moments))
     return Estimate.from_core(raw, integrand=fi.name, technique=ti.name, reference=fi.reference,
                               nonnegative=fi.nonnegative, iid=ti.iid)
 
@@ -285,11 +286,11 @@ def integrate_chunks(f: str | Integrand, t: str | Technique, n: int, chunk_begin
     """
     fi = integrand(f)
     ti = technique(fi, t)
-    n = _count(n, "n")
-    begin, end = _chunk_range(n, chunk_begin, chunk_end)
-    return _core.integrate_chunks(fi, ti, n, _seed(seed), _seed(case_id, "case_id"),
-                                  _seed(replica, "replica"), begin, end, _threads(threads),
-                                  _count(tail_keep, "tail_keep", zero=True), bool(tail_median))
+    n = count_arg(n, "n")
+    begin, end = chunk_range(n, chunk_begin, chunk_end)
+    return _core.integrate_chunks(fi, ti, n, seed_arg(seed), seed_arg(case_id, "case_id"),
+                                  seed_arg(replica, "replica"), begin, end, threads_arg(threads),
+                                  count_arg(tail_keep, "tail_keep", zero=True), bool(tail_median))
 
 
 def value_tails(values: Any, keep: int, *, median: bool = False) -> dict[str, Any]:
@@ -302,7 +303,7 @@ def value_tails(values: Any, keep: int, *, median: bool = False) -> dict[str, An
     y = np.ascontiguousarray(values, dtype=np.float64)
     if y.ndim != 1:
         raise ValueError(f"'values' must be one-dimensional, got shape {y.shape}")
-    return _core.value_tails(y, _count(keep, "keep", zero=True), bool(median))
+    return _core.value_tails(y, count_arg(keep, "keep", zero=True), bool(median))
 
 
 def merge_tails(parts: list[dict[str, Any]], keep: int) -> dict[str, Any]:
@@ -312,7 +313,7 @@ def merge_tails(parts: list[dict[str, Any]], keep: int) -> dict[str, Any]:
     parts = list(parts)
     if not parts:
         raise ValueError("'parts' must hold at least one tails dict (from value_tails or integrate_chunks)")
-    return _core.merge_tails(parts, _count(keep, "keep", zero=True))
+    return _core.merge_tails(parts, count_arg(keep, "keep", zero=True))
 
 
 _STATE_KEYS = frozenset(("n", "mean", "m2", "m3", "m4", "sum", "comp", "min", "max", "scale_exp", "scale_set",
@@ -357,8 +358,9 @@ def contributions(f: str | Integrand, t: str | Technique, n: int, *, seed: int =
     """The n per-sample contributions Y that ``integrate`` with the same arguments averages
     (samples it would exclude for a bad pdf or a point outside the domain are NaN)."""
     fi = integrand(f)
-    return _core.contributions(fi, technique(fi, t), _count(n, "n"), _seed(seed), _seed(case_id, "case_id"),
-                               _seed(replica, "replica"), _threads(threads))
+    n = count_arg(n, "n")
+    return _core.contributions(fi, technique(fi, t), n, seed_arg(seed), seed_arg(case_id, "case_id"),
+                               seed_arg(replica, "replica"), threads_arg(threads))
 
 
 def accumulate(values: Any, *, threads: int | None = None) -> Estimate:
@@ -368,7 +370,7 @@ def accumulate(values: Any, *, threads: int | None = None) -> Estimate:
         raise ValueError(f"'values' must be one-dimensional, got shape {y.shape}")
     if y.size == 0:
         raise ValueError("'values' must not be empty")
-    return Estimate.from_core(_core.accumulate(y, _threads(threads)))
+    return Estimate.from_core(_core.accumulate(y, threads_arg(threads)))
 
 
 def build_info() -> dict[str, Any]:
@@ -391,7 +393,7 @@ def profile_stages(f: str | Integrand, t: str | Technique, n: int, *, seed: int 
     the full run's Estimate (its ``busy`` seconds per thread).  Differences of consecutive
     prefixes give each stage's cost."""
     fi = integrand(f)
-    d = _core.profile_stages(fi, technique(fi, t), _count(n, "n"), _seed(seed), _threads(threads))
+    d = _core.profile_stages(fi, technique(fi, t), count_arg(n, "n"), seed_arg(seed), threads_arg(threads))
     est = Estimate.from_core(d["estimate"])
     stages = {k: None if math.isnan(d[k]) else d[k] for k in ("sampled", "screened", "weighted")}
     return {"points": d["points"], **stages, "contributions": d["contributions"], "full": est.seconds,
@@ -406,7 +408,7 @@ def side_extremes(values: Any, center: float, *, upper: bool, keep: int) -> tupl
     y = np.ascontiguousarray(values, dtype=np.float64)
     if y.ndim != 1:
         raise ValueError(f"'values' must be one-dimensional, got shape {y.shape}")
-    peak, ties, below = _core.side_extremes(y, float(center), bool(upper), _count(keep, "keep"))
+    peak, ties, below = _core.side_extremes(y, float(center), bool(upper), count_arg(keep, "keep"))
     return peak, ties, below
 
 
@@ -416,12 +418,12 @@ def estimate_from_samples(f: str | Integrand, points: Any, pdf: Any, *, sampler:
     sampler).  Points outside ``sampler``'s domain (default: f's) and pdf values that are 0,
     negative, NaN or infinite are reported and excluded, never averaged."""
     fi = integrand(f)
-    x = _points(points, fi.dim, "points")
+    x = points_arg(points, fi.dim, "points")
     if len(x) == 0:
         raise ValueError("'points' must hold at least one sample, got none")
     p = np.ascontiguousarray(pdf, dtype=np.float64)
     raw = _core.estimate_from_samples(fi, x, p, None if sampler is None else _core_sampler(sampler),
-                                      _threads(threads))
+                                      threads_arg(threads))
     return Estimate.from_core(raw, integrand=fi.name, technique="importance:given", reference=fi.reference,
                               nonnegative=fi.nonnegative)
 
@@ -452,52 +454,3 @@ def _checked_states(states: Any) -> list[dict[str, Any]]:
             raise ValueError(f"'states'[{i}] is not an accumulator state (from integrate_chunks): "
                              f"missing {', '.join(sorted(missing))}")
     return states
-
-
-def _chunk_range(n: int, chunk_begin: Any, chunk_end: Any) -> tuple[int, int]:
-    """[begin, end) within the chunks of an estimate of n samples (end None: the last)."""
-    chunks = -(-n // _core.CHUNK_SIZE)
-    begin = _seed(chunk_begin, "chunk_begin")
-    end = chunks if chunk_end is None else _seed(chunk_end, "chunk_end")
-    if not begin < end <= chunks:
-        raise ValueError(f"chunks [{chunk_begin}, {chunk_end}) must be a non-empty range within the {chunks} "
-                         f"chunk(s) of n = {n} samples")
-    return begin, end
-
-
-def _points(a: Any, dim: int, name: str) -> np.ndarray:
-    x = np.ascontiguousarray(a, dtype=np.float64)
-    if not (x.ndim == 2 and x.shape[1] == dim) and not (dim == 1 and x.ndim == 1):
-        want = f"(N, {dim})" + (" or (N,)" if dim == 1 else "")
-        raise ValueError(f"'{name}' must have shape {want}, got {x.shape}")
-    return x
-
-
-_MAX_COUNT = 2**63 - 1   # the core counts samples in 64-bit signed integers
-
-
-def _count(n: Any, name: str, *, zero: bool = False) -> int:
-    if isinstance(n, numbers.Real) and not isinstance(n, bool) and not math.isfinite(n):
-        raise ValueError(f"'{name}' must be a finite number of samples, got {n!r}")
-    if isinstance(n, bool) or not isinstance(n, numbers.Real) or n != int(n):
-        raise TypeError(f"'{name}' must be a whole number of samples, got {n!r}")
-    if n < 0 or (n == 0 and not zero):
-        raise ValueError(f"'{name}' must be a {'non-negative' if zero else 'positive'} number of samples, "
-                         f"got {n!r}")
-    if n > _MAX_COUNT:
-        raise ValueError(f"'{name}' must be at most 2**63 - 1 samples, got {n!r}")
-    return int(n)
-
-
-def _seed(s: Any, name: str = "seed") -> int:
-    if isinstance(s, bool) or not isinstance(s, numbers.Integral) or not 0 <= s < 2**64:
-        raise ValueError(f"'{name}' must be an integer in [0, 2**64), got {s!r}")
-    return int(s)
-
-
-def _threads(t: Any) -> int:
-    if t is None:
-        return 0
-    if isinstance(t, bool) or not isinstance(t, numbers.Integral) or t < 1:
-        raise ValueError(f"'threads' must be a positive integer or None (all cores), got {t!r}")
-    return int(t)

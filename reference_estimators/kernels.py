@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from . import _core
-from .api import _count, _seed
+from .arguments import count_arg, seed_arg
 
 __all__ = ["pcg32_outputs", "uniforms", "uniforms_in_pieces", "fast_exp", "fast_log", "fast_sincos_2pi"]
 
@@ -20,7 +20,7 @@ __all__ = ["pcg32_outputs", "uniforms", "uniforms_in_pieces", "fast_exp", "fast_
 def pcg32_outputs(n: int, *, seed: int = 0, case_id: int = 0, replica: int = 0, chunk: int = 0) -> np.ndarray:
     """The first n 32-bit outputs (uint32) of the stream's scalar PCG32 generator (O'Neill's
     XSH-RR 64/32, seeded from the key by splitmix64)."""
-    out = _core.pcg32_outputs(_count(n, "n"), *_key(seed, case_id, replica, chunk))
+    out = _core.pcg32_outputs(count_arg(n, "n"), *_key(seed, case_id, replica, chunk))
     return np.array(out, dtype=np.uint32)
 
 
@@ -28,7 +28,7 @@ def uniforms(n: int, *, seed: int = 0, case_id: int = 0, replica: int = 0, chunk
     """The first n canonical uniforms (float64) of the stream: uniform k is (b + 1/2) 2^-52
     with b the top 52 bits of PCG32 outputs 2k (high word) and 2k+1 (low word), so every
     value lies strictly inside (0, 1)."""
-    return _core.uniforms(_count(n, "n"), *_key(seed, case_id, replica, chunk))
+    return _core.uniforms(count_arg(n, "n"), *_key(seed, case_id, replica, chunk))
 
 
 def uniforms_in_pieces(counts: list[int], evens: list[bool], *, seed: int = 0) -> np.ndarray:
@@ -36,8 +36,8 @@ def uniforms_in_pieces(counts: list[int], evens: list[bool], *, seed: int = 0) -
     counts[i] uniforms, all of them, or (evens[i], counts[i] even) the even-numbered ones
     alone, the u0 of (u0, u1) pairs that the polar path reads.  Concatenated, they must be
     :func:`uniforms`' values at the same positions, whatever the pieces."""
-    sizes = [_count(c, "count") for c in counts]
-    return _core.uniforms_in_pieces(sizes, [bool(e) for e in evens], _seed(seed))
+    sizes = [count_arg(c, "count") for c in counts]
+    return _core.uniforms_in_pieces(sizes, [bool(e) for e in evens], seed_arg(seed))
 
 
 def fast_exp(x: Any) -> np.ndarray:
@@ -66,4 +66,5 @@ def _flat(x: Any) -> np.ndarray:
 
 
 def _key(seed: int, case_id: int, replica: int, chunk: int) -> tuple[int, int, int, int]:
-    return _seed(seed), _seed(case_id, "case_id"), _seed(replica, "replica"), _seed(chunk, "chunk")
+    return (seed_arg(seed), seed_arg(case_id, "case_id"), seed_arg(replica, "replica"),
+            seed_arg(chunk, "chunk"))
