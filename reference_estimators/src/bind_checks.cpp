@@ -10,6 +10,7 @@
 #include <memory>
 
 #include "bind_common.h"
+#include "check_rows.h"
 #include "checks.h"
 #include "tables.h"
 
@@ -209,12 +210,9 @@ void bind_checks(nb::module_ &m) {
         {
             nb::gil_scoped_release g;
             // at most m rows, whatever another thread does to `keep` meanwhile
-            const double *src = x.data();
-            for (size_t i = 0, taken = 0; i < n && taken < m; ++i, src += k) {
-                if (flags[i] == 0) continue;
-                std::copy(src, src + k, out + taken * k);
-                ++taken;
-            }
+            with_row_width(k, [&](auto width) {
+                compact_rows<decltype(width)::value>(x.data(), flags, n, k, m, out);
+            });
         }
         return rows;
     }, "x"_a, "keep"_a, "The rows of x (N,) or (N, k) where keep, in order: x[keep].");
@@ -225,10 +223,10 @@ void bind_checks(nb::module_ &m) {
         OutArray rows = new_array(n, x.ndim() == 2 ? k : 0, &out);
         {
             nb::gil_scoped_release g;
-            constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
             for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t b, int) {
-                for (size_t i = a; i < b; ++i)
-                    for (size_t j = 0; j < k; ++j) out[i * k + j] = flags[i] != 0 ? x.data()[i * k + j] : kNaN;
+                with_row_width(k, [&](auto width) {
+                    nan_rows<decltype(width)::value>(x.data() + a * k, flags + a, b - a, k, out + a * k);
+                });
             });
         }
         return rows;

@@ -430,10 +430,15 @@ def test_row_kernels_match_numpy(n):
     assert rows.dtype == np.float64 and rows.flags["C_CONTIGUOUS"]
     np.testing.assert_array_equal(rows, columns.T.astype(np.float64))
     keep = rng.random(n) < 0.7
-    for x in (rows, rows[:, 1], rows[::-1]):      # 2-D, and 1-D and 2-D views copied first
-        np.testing.assert_array_equal(rest.take_rows(x, keep), x[keep])
-        np.testing.assert_array_equal(rest.nan_rows(x, keep), np.where(keep if x.ndim == 1 else keep[:, None],
-                                                                       x, np.nan))
+    wide = np.concatenate([rows, rows[:, :2]], axis=1)    # five columns: the kernels' general width
+    if n:   # values kept bit for bit: -0, infinities, a NaN with a payload and its sign
+        wide[0, :4] = [-0.0, np.inf, -np.inf, np.uint64(0xfff0000000000123).view(np.float64)]
+    # 2-D of widths 3, 2 and 5, 1-D, and 1-D and 2-D views copied first; compared bit for bit
+    # (numpy's NaN is the quiet NaN 0x7ff8...)
+    for x in (rows, rows[:, :2], wide, rows[:, 1], rows[::-1], wide[:, 0]):
+        np.testing.assert_array_equal(rest.take_rows(x, keep).view(np.uint64), x[keep].view(np.uint64))
+        want = np.where(keep if x.ndim == 1 else keep[:, None], x, np.nan)
+        np.testing.assert_array_equal(rest.nan_rows(x, keep).view(np.uint64), want.view(np.uint64))
     # a bool view of bytes other than 0 and 1 keeps those rows, and no more
     byte_keep = (keep.astype(np.uint8) * 3).view(bool)
     np.testing.assert_array_equal(rest.take_rows(rows, byte_keep), rows[keep])
