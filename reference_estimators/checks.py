@@ -17,7 +17,8 @@ __all__ = [
     "cubature_points", "cubature_sums", "split_points", "BoxRefinement",
     "cubature_moment_sums", "grid_histogram", "rosenblatt",
     "piecewise_linear_lookup", "transform_statistics", "cramer_von_mises_sum", "pdf_summary",
-    "all_float32", "dither_float32", "finite_rows", "pdf_mismatches", "float64_rows", "take_rows",
+    "all_float32", "dither_float32", "finite_rows", "pdf_mismatches", "float64_rows", "float32_columns",
+    "take_rows",
     "nan_rows",
     "float32_unit_rows", "cap_to_world",
 ]
@@ -92,6 +93,19 @@ def float32_unit_rows(x: Any, slack: float) -> tuple[np.ndarray, np.ndarray]:
     renderer's pdf is called with, in one pass in C++ (numpy took 34 ns a row)."""
     a = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3)
     return _core.float32_unit_rows(a, float(slack))
+
+
+def float32_columns(rows: Any, cap: float) -> np.ndarray:
+    """(c, N) float32: the rows (N, c) (float64) as columns, each value rounded to float32 and
+    then capped at ``cap`` (a float32; NaN kept): numpy's minimum(rows[:, j], cap,
+    dtype=float32) for every column j, in one pass in C++ into memory the core reuses (see
+    :func:`float64_rows`).  What a float32 renderer's sample call is given from the uniforms."""
+    a = np.ascontiguousarray(rows, dtype=np.float64)
+    if a.ndim != 2 or a.shape[1] == 0:
+        raise ValueError(f"'rows' must have shape (N, c), c >= 1, got {a.shape}")
+    if not float(np.float32(cap)) == cap:
+        raise ValueError(f"'cap' must be a float32 value, got {cap!r}")
+    return _core.float32_columns(a, float(cap))
 
 
 def float64_rows(columns: Any) -> np.ndarray:

@@ -198,6 +198,22 @@ void bind_checks(nb::module_ &m) {
         }
         return rows;
     }, "columns"_a.noconvert(), "(N, c) float64: the float32 columns (c, N) as rows.");
+    m.def("float32_columns", [](nb::ndarray<const double, nb::ndim<2>, nb::c_contig, nb::device::cpu> rows,
+                                float cap) {
+        const size_t n = rows.shape(0), c = rows.shape(1);
+        if (c == 0) throw nb::value_error("'rows' must have at least one column (N, c), c >= 1");
+        nb::capsule owner;
+        float *out = output_buffer<float>(c * n, owner);   // reused memory, as float64_rows'
+        nb::ndarray<nb::numpy, float> columns(out, {c, n}, owner);
+        {
+            nb::gil_scoped_release g;
+            for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t b, int) {
+                float32_columns(rows.data(), c, n, a, b, cap, out);
+            });
+        }
+        return columns;
+    }, "rows"_a.noconvert(), "cap"_a, "(c, N) float32: the float64 rows (N, c) as columns, each value rounded to "
+       "float32, then capped at `cap` (NaN kept).");
     m.def("take_rows", [](InArray x, BoolArray keep) {
         const size_t n = check_rows(x, keep), k = x.ndim() == 2 ? x.shape(1) : 1;
         // the flags as bytes: a numpy bool array may hold other values than 0 and 1 (a view of

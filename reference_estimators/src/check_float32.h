@@ -50,6 +50,19 @@ inline void float64_rows(const float *columns, size_t c, size_t n, size_t a, siz
         for (size_t j = 0; j < c; ++j) out[i * c + j] = double(columns[j * n + i]);
 }
 
+// Rows (n, c) of doubles, rows a .. b - 1, as columns (c, n) of float32 into out, each value
+// rounded to float32 (to nearest) and then capped at `cap` (a NaN stays NaN): what a float32
+// renderer's sample call is given, the uniforms u (N, udim) clamped below 1 after rounding
+// (numpy's minimum(u[:, j], cap, dtype=float32), the same bits; its strided pass a column
+// took 2.5 ms a million uniforms).
+inline void float32_columns(const double *rows, size_t c, size_t n, size_t a, size_t b, float cap, float *out) {
+    for (size_t j = 0; j < c; ++j)
+        for (size_t i = a; i < b; ++i) {
+            const float v = float(rows[i * c + j]);
+            out[j * n + i] = cap < v ? cap : v;   // v NaN: the comparison is false, v kept
+        }
+}
+
 // Whether every finite non-zero value of v (n) is a float32 (rounds to itself through float),
 // and there is one: a float32 renderer's numbers, whether returned as float32 or float64.
 // Stops after the block of 1024 values holding the first value that is not.  Written so that

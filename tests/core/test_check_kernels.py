@@ -453,6 +453,29 @@ def test_row_kernels_match_numpy(n):
             rest.float64_rows(bad)
 
 
+@pytest.mark.parametrize("n", [0, 7, CHUNKS])
+def test_float32_columns_match_numpy(n):
+    """float32_columns is numpy's minimum(rows[:, j], cap, dtype=float32) for every column j,
+    bit for bit: values rounded to float32 first (those between the cap and 1 round to 1 or to
+    the cap), then capped; NaN, -0 and values off [0, 1] kept as numpy keeps them."""
+    rng = np.random.default_rng(16)
+    cap = float(np.float32(1.0) - np.float32(2.0**-24))
+    special = [1.0, np.nextafter(1.0, 0.0), cap, np.nextafter(cap, 2.0), np.nextafter(cap, 0.0), 0.0, -0.0,
+               np.nan, 2.0, -1e-300, 1e-46, 0.5 + 2.0**-25]
+    for c in (1, 2, 3):
+        rows = rng.random((n, c))
+        rows.flat[:min(len(special), rows.size)] = special[:rows.size]
+        got = rest.float32_columns(rows, cap)
+        assert got.dtype == np.float32 and got.shape == (c, n) and got.flags["C_CONTIGUOUS"]
+        want = np.stack([np.minimum(rows[:, j], np.float32(cap), dtype=np.float32) for j in range(c)]) \
+            if n else np.zeros((c, 0), np.float32)
+        np.testing.assert_array_equal(got.view(np.uint32), want.view(np.uint32))
+    with pytest.raises(ValueError, match="c >= 1"):
+        rest.float32_columns(np.zeros((n, 0)), cap)
+    with pytest.raises(ValueError, match="float32 value"):
+        rest.float32_columns(np.zeros((n, 2)), 0.1)
+
+
 # --- histogram -------------------------------------------------------------------------------
 def histogram_reference(s: np.ndarray, inside: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     s = np.clip(s[inside], 0, np.nextafter(1, 0))

@@ -62,13 +62,13 @@ def polar_angle(v: Sequence[float]) -> float:
 
 
 def uniforms(u: np.ndarray, udim: int) -> list[np.ndarray]:
-    """The columns of ``u`` (N, >= udim) as float32, clamped below 1 (each in one pass: the
-    clamp in float32 after rounding, the same bits as before it, rounding being monotone and
-    the bound a float32)."""
+    """The first ``udim`` columns of ``u`` (N, >= udim) as float32, clamped below 1, in one
+    pass in the core (reference_estimators.float32_columns: the clamp in float32 after
+    rounding, the same bits as before it, rounding being monotone and the bound a float32)."""
     u = np.asarray(u, dtype=float)
     if u.ndim != 2 or u.shape[1] < udim:
         raise ValueError(f"'u' must have shape (N, {udim}), got {u.shape}")
-    return [np.minimum(u[:, i], _BELOW_ONE, dtype=np.float32) for i in range(udim)]
+    return list(rest.float32_columns(u[:, :udim], float(_BELOW_ONE)))
 
 
 #: a direction whose length is 1 within this (about 8 float32 ulps) is rounded to float32 as
