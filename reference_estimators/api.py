@@ -1,8 +1,8 @@
 """Python face of the C++ core: catalogue look-ups, samplers and estimators over numpy arrays,
 and estimates computed in pieces (accumulator states of chunk ranges, merged in chunk order).
 
-Every call validates its arguments here and names the argument and the rule when one is
-wrong; the heavy work runs in C++ with the GIL released.
+Every call validates its arguments here (through arguments.py) and names the argument and
+the rule when one is wrong; the heavy work runs in C++ with the GIL released.
 """
 from __future__ import annotations
 

@@ -1,12 +1,11 @@
 // Bindings of the sampler check's batch kernels (checks.h, tables.h): domain maps, histograms,
-// the Rosenblatt transform and its statistics, pdf summaries and float32 helpers (the cubature's
-// kernels are bound in bind_cubature.cpp).  Arrays are validated here (shape, table layout), so no call can read out
-// of bounds.
+// the Rosenblatt transform and its statistics, pdf summaries, row selection and float32
+// helpers (the cubature's kernels are bound in bind_cubature.cpp).  Arrays are validated here
+// (shape, table layout), so no call can read out of bounds.
 #include <nanobind/stl/pair.h>
 #include <nanobind/stl/vector.h>
 
 #include <algorithm>
-#include <limits>
 #include <memory>
 
 #include "bind_common.h"

@@ -120,14 +120,6 @@ inline CheckDomain check_domain(int kind) {
     return CheckDomain(kind);
 }
 
-// Boxes [lo, hi]: both of shape (M, 1) or (M, 2); returns k.
-inline size_t check_boxes(const InArray &lo, const InArray &hi) {
-    if (lo.ndim() != 2 || hi.ndim() != 2 || lo.shape(0) != hi.shape(0) || lo.shape(1) != hi.shape(1) ||
-        (lo.shape(1) != 1 && lo.shape(1) != 2))
-        throw nb::value_error("'lo' and 'hi' must both have shape (M, 1) or (M, 2)");
-    return lo.shape(1);
-}
-
 // The module's functions, by file.
 void bind_checks(nb::module_ &m);
 void bind_cubature(nb::module_ &m);

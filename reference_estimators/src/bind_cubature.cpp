@@ -15,6 +15,18 @@ namespace re::py {
 
 using namespace nb::literals;
 
+namespace {
+
+// Boxes [lo, hi]: both of shape (M, 1) or (M, 2); returns k.
+size_t check_boxes(const InArray &lo, const InArray &hi) {
+    if (lo.ndim() != 2 || hi.ndim() != 2 || lo.shape(0) != hi.shape(0) || lo.shape(1) != hi.shape(1) ||
+        (lo.shape(1) != 1 && lo.shape(1) != 2))
+        throw nb::value_error("'lo' and 'hi' must both have shape (M, 1) or (M, 2)");
+    return lo.shape(1);
+}
+
+}  // namespace
+
 void bind_cubature(nb::module_ &m) {
     m.def("cubature_nodes", [](InArray lo, InArray hi, InArray nodes) {
         const size_t k = check_boxes(lo, hi), boxes = lo.shape(0), g = nodes.size();

@@ -1,8 +1,9 @@
 // Row selection for the sampler check's arrays (bind_checks.cpp's take_rows and nan_rows): rows
 // of k doubles, one keep flag (a byte, any non-zero value true) a row.  Both are branch-free:
 // the flags of a sampler's rows follow its lobes and failures, not a pattern a branch predictor
-// learns (a mask plugin passing 70 % of its samples through a Dirac lobe: branching took 7 ms
-// for a million 3-vectors where these take 1-2).
+// learns (a mask plugin passing 70 % of its samples through a Dirac lobe: inside its check,
+// nan_rows took 7 ms and take_rows 3.4 ms for a million 3-vectors with branches, 1-4 and
+// 0.8-1.3 ms without).
 #pragma once
 
 #include <cstddef>
@@ -12,8 +13,8 @@
 
 namespace re {
 
-// f(std::integral_constant<size_t, k>) for the row widths 1, 2 and 3 (directions, parameters,
-// values), else f(std::integral_constant<size_t, 0>): the caller's loops with k fixed.
+// f(std::integral_constant<size_t, k>) for the row widths 1, 2 and 3 (values, parameters,
+// directions), else f(std::integral_constant<size_t, 0>): the caller's loops with k fixed.
 template <class F>
 void with_row_width(size_t k, F f) {
     switch (k) {

@@ -1,9 +1,11 @@
 // The 2-D table sampler's kernel for small tables on AVX-512 (piecewise_constant_2d with at
 // most 16 rows and 64 columns and no gaps, SmallTable2D::fits): each vector of points finds
-// its bins by counting CDF entries in its lanes, where sample_many counts them point by point.
+// its row by a halving search and its column by counting CDF entries, in its lanes, where
+// sample_many searches point by point.
 // The same bits as PiecewiseConstant2D's passes through PiecewiseTables::sample_many.
 #pragma once
 
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -18,13 +20,13 @@ namespace re {
 // at or below u, as bins_of_u's searches find it, u = 1 included) and without gaps (an empty
 // bin after the first, which bins_of_u moves down through `below`; an empty first bin is never
 // chosen by either): a point's row is found by a halving search over the marginal's entries,
-// one 16-entry permute (vpermt2pd) a step (4 for 16 rows, where counting took 15 compares and
-// blends), and its column by counting entry e of the rows' CDFs, read for every lane's row by
-// one permute an entry, from the entries e of all rows laid out together (a halving search
-// there needs a gather a step: 1.2x slower on Zen 4).  Each bin's CDF ends are kept on the way
-// by masked blends, so a point's bins and entries cost no dependent loads, where
-// sample_many's scalar count and entry loads held a point at its latency.  The cells'
-// densities are gathered.  The conditional and the cell are those of the row searched, where
+// one 16-entry permute (vpermt2pd) a step and one more for the row's upper CDF end (4 + 1 for
+// 16 rows, where counting took 15 compares and blends), and its column by counting entry e of
+// the rows' CDFs, read for every lane's row by one permute an entry, from the entries e of all
+// rows laid out together (a halving search there needs a gather a step: 1.2x slower on Zen
+// 4).  The row's lower CDF end and the column's two are kept on the way by masked blends, so
+// a point's bins and entries cost no dependent loads, where sample_many's scalar count and
+// entry loads held a point at its latency.  The cells' densities are gathered.  The conditional and the cell are those of the row searched, where
 // PiecewiseConstant2D's passes take the row the point landed in: the same on [0, 1], whose
 // bins all hold doubles below 2^50 bins.
 // (gaussian2d's 16 x 16 table: 8.2 -> 6.0 ns a point, blocks of 2048 in L1, Zen 4; the row's
@@ -47,11 +49,11 @@ class SmallTable2D {
     }
 
     SmallTable2D(const PiecewiseTables &marginal, const PiecewiseTables &conditional)
-        : row_steps_(half_ceil(marginal.bins)), by_entry_((conditional.bins + 1) * kMaxRows, 0.0) {
+        : row_first_step_(first_step(marginal.bins)), by_entry_((conditional.bins + 1) * kMaxRows, 0.0) {
         const size_t rows = marginal.bins, cols = conditional.bins;
         for (size_t r = 0; r < kMaxRows; ++r) {
-            marginal_entries_[r] = r < rows ? marginal.cdf[r] : INFINITY;
-            marginal_next_[r] = r < rows ? marginal.cdf[r + 1] : INFINITY;
+            marginal_entries_[r] = r < rows ? marginal.cdf[r] : NAN;
+            marginal_next_[r] = r < rows ? marginal.cdf[r + 1] : NAN;
         }
         for (size_t e = 0; e <= cols; ++e)
             for (size_t r = 0; r < rows; ++r) by_entry_[e * kMaxRows + r] = conditional.cdf[r * (cols + 1) + e];
@@ -75,11 +77,12 @@ class SmallTable2D {
         for (; i + W <= n; i += W) {
             f64v u0, u1;
             simd::deinterleave(u + 2 * i, u0, u1);
-            // the row: a halving search over the marginal's entries 0 .. rows - 1 (+inf above), one
-            // permute a step; lo = its entry (mc[0] = 0 to begin), hi the entry after
+            // the row: a halving search over the marginal's entries 0 .. rows - 1 (NaN above: never
+            // taken, whatever u), one permute a step; lo = its entry (marginal.cdf[0] = +0 to
+            // begin), hi the entry after
             i64v row{};
             f64v lo{};
-            for (int64_t step = int64_t(row_steps_); step > 0; step >>= 1) {
+            for (int64_t step = int64_t(row_first_step_); step > 0; step >>= 1) {
                 const i64v cand = row + step;
                 const f64v v = (f64v)_mm512_permutex2var_pd(m0, (__m512i)cand, m1);
                 const auto ok = v <= u1;
@@ -103,7 +106,6 @@ class SmallTable2D {
             }
             const f64v xv = conditional.points_in(u0, clo, chi, __builtin_convertvector(col, f64v));
             const i64v cell = row * row_width + col;
-            // the all-lanes mask form: the unmasked intrinsic trips GCC 12's -Wmaybe-uninitialized
             simd::store(p + i, gather(cell_pdf, cell));
             simd::store(x + 2 * i, __builtin_shufflevector(xv, y, 0, 8, 1, 9, 2, 10, 3, 11));
             simd::store(x + 2 * i + W, __builtin_shufflevector(xv, y, 4, 12, 5, 13, 6, 14, 7, 15));
@@ -116,8 +118,8 @@ class SmallTable2D {
     }
 
   private:
-    // Half the least power of 2 >= n: a halving search's first step over n entries (0 for one).
-    static size_t half_ceil(size_t n) {
+    // A halving search's first step over n entries: half the least power of 2 >= n (0 for one).
+    static size_t first_step(size_t n) {
         size_t w = 1;
         while (w < n) w *= 2;
         return w / 2;
@@ -135,8 +137,9 @@ class SmallTable2D {
     }
 #endif
 
-    size_t row_steps_;   // the row search's first step
-    double marginal_entries_[kMaxRows], marginal_next_[kMaxRows];   // mc[r] (+inf from rows on), mc[r + 1]
+    size_t row_first_step_;   // the row search's first step
+    // marginal.cdf[r] and marginal.cdf[r + 1] for the rows r, NaN after them
+    double marginal_entries_[kMaxRows], marginal_next_[kMaxRows];
     std::vector<double> by_entry_;   // entry e of row r's CDF at [e kMaxRows + r]
 };
 

@@ -430,9 +430,12 @@ def test_row_kernels_match_numpy(n):
     assert rows.dtype == np.float64 and rows.flags["C_CONTIGUOUS"]
     np.testing.assert_array_equal(rows, columns.T.astype(np.float64))
     keep = rng.random(n) < 0.7
+    if n:   # values kept bit for bit in a kept row (and made NaN in a dropped one): -0,
+        # infinities, a NaN with a payload and its sign
+        rows[:2] = [[-0.0, np.inf, np.uint64(0xfff0000000000123).view(np.float64)],
+                    [-np.inf, np.uint64(0x7ff0000000000456).view(np.float64), -0.0]]
+        keep[:2] = [True, False]
     wide = np.concatenate([rows, rows[:, :2]], axis=1)    # five columns: the kernels' general width
-    if n:   # values kept bit for bit: -0, infinities, a NaN with a payload and its sign
-        wide[0, :4] = [-0.0, np.inf, -np.inf, np.uint64(0xfff0000000000123).view(np.float64)]
     # 2-D of widths 3, 2 and 5, 1-D, and 1-D and 2-D views copied first; compared bit for bit
     # (numpy's NaN is the quiet NaN 0x7ff8...)
     for x in (rows, rows[:, :2], wide, rows[:, 1], rows[::-1], wide[:, 0]):
