@@ -18,8 +18,7 @@ __all__ = [
     "cubature_moment_sums", "grid_histogram", "rosenblatt",
     "piecewise_linear_lookup", "transform_statistics", "cramer_von_mises_sum", "pdf_summary",
     "all_float32", "dither_float32", "finite_rows", "pdf_mismatches", "float64_rows", "float32_columns",
-    "take_rows",
-    "nan_rows",
+    "take_rows", "nan_rows",
     "float32_unit_rows", "cap_to_world",
 ]
 
@@ -103,7 +102,7 @@ def float32_columns(rows: Any, cap: float) -> np.ndarray:
     a = np.ascontiguousarray(rows, dtype=np.float64)
     if a.ndim != 2 or a.shape[1] == 0:
         raise ValueError(f"'rows' must have shape (N, c), c >= 1, got {a.shape}")
-    if not float(np.float32(cap)) == cap:
+    if not (abs(cap) <= float(np.finfo(np.float32).max) and float(np.float32(cap)) == cap):
         raise ValueError(f"'cap' must be a float32 value, got {cap!r}")
     return _core.float32_columns(a, float(cap))
 

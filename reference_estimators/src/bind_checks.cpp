@@ -2,7 +2,6 @@
 // the Rosenblatt transform and its statistics, pdf summaries, row selection and float32
 // helpers (the cubature's kernels are bound in bind_cubature.cpp).  Arrays are validated here
 // (shape, table layout), so no call can read out of bounds.
-#include <nanobind/stl/pair.h>
 #include <nanobind/stl/vector.h>
 
 #include <algorithm>

@@ -1,6 +1,8 @@
 // A float32 renderer's numbers in the sampler check: directions rounded to float32 unit
-// vectors as Mitsuba's pdf takes them (float32_unit_rows), whether values are float32
-// (all_float32), and float32 points dithered within their rounding intervals (dither_float32).
+// vectors as Mitsuba's pdf takes them (float32_unit_rows), its float32 columns as float64
+// rows and float64 rows as its float32 columns (float64_rows, float32_columns), whether values
+// are float32 (all_float32), and float32 points dithered within their rounding intervals
+// (dither_float32).
 #pragma once
 
 #include <cmath>

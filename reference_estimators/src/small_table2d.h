@@ -26,9 +26,10 @@ namespace re {
 // rows laid out together (a halving search there needs a gather a step: 1.2x slower on Zen
 // 4).  The row's lower CDF end and the column's two are kept on the way by masked blends, so
 // a point's bins and entries cost no dependent loads, where sample_many's scalar count and
-// entry loads held a point at its latency.  The cells' densities are gathered.  The conditional and the cell are those of the row searched, where
-// PiecewiseConstant2D's passes take the row the point landed in: the same on [0, 1], whose
-// bins all hold doubles below 2^50 bins.
+// entry loads held a point at its latency.  The cells' densities are gathered.  The
+// conditional and the cell are those of the row searched, where PiecewiseConstant2D's passes
+// take the row the point landed in: the same on [0, 1], whose bins all hold doubles below
+// 2^50 bins.
 // (gaussian2d's 16 x 16 table: 8.2 -> 6.0 ns a point, blocks of 2048 in L1, Zen 4; the row's
 // halving search: importance sampling 9.1-9.6 -> 8.9-9.1 ns a sample on one thread)
 class SmallTable2D {

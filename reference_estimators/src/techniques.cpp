@@ -9,7 +9,6 @@
 #include <vector>
 
 #include "integrands.h"
-#include "sampling.h"
 
 namespace re {
 

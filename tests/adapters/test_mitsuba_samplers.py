@@ -241,6 +241,25 @@ def test_directions_in_the_local_frame_and_failed_rows_nan():
     np.testing.assert_allclose(mean / np.linalg.norm(mean), [-math.sqrt(0.5), 0, math.sqrt(0.5)], atol=0.01)
 
 
+def test_the_sample_calls_uniforms_are_float32_columns_below_one():
+    """The uniforms a sample call takes: the first udim columns of u as float32, each rounded
+    and then capped below 1 (batch.uniforms, one core pass), bit for bit numpy's minimum with
+    dtype float32, from a wider, column-major u; too few columns are refused."""
+    from harness.adapters.mitsuba.batch import uniforms
+
+    cap = np.float32(1.0) - np.float32(2.0**-24)
+    u = np.asfortranarray(np.random.default_rng(3).random((1001, 3)))
+    u[:4, 0] = [1.0, np.nextafter(1.0, 0.0), float(cap), 0.0]
+    cols = uniforms(u, 2)
+    assert len(cols) == 2 and all(c.dtype == np.float32 and c.flags["C_CONTIGUOUS"] for c in cols)
+    for j, c in enumerate(cols):
+        want = np.minimum(u[:, j], cap, dtype=np.float32)
+        np.testing.assert_array_equal(c.view(np.uint32), want.view(np.uint32))
+    assert np.all(cols[0] < 1) and cols[0][0] == cap
+    with pytest.raises(ValueError, match=r"shape \(N, 4\)"):
+        uniforms(u, 4)
+
+
 def test_dielectric_samples_both_hemispheres():
     s = ms.bsdf_sampler({"type": "roughdielectric", "alpha": 0.1, "int_ior": 1.5}, wi=45)
     assert s.domain == "sphere" and s.transmits

@@ -432,9 +432,10 @@ def test_row_kernels_match_numpy(n):
     keep = rng.random(n) < 0.7
     if n:   # values kept bit for bit in a kept row (and made NaN in a dropped one): -0,
         # infinities, a NaN with a payload and its sign
-        rows[:2] = [[-0.0, np.inf, np.uint64(0xfff0000000000123).view(np.float64)],
+        nan_a, nan_b = (np.uint64(b).view(np.float64) for b in (0xfff0000000000123, 0x7ff4000000000789))
+        rows[:3] = [[-0.0, np.inf, nan_a], [nan_b, nan_a, -0.0],
                     [-np.inf, np.uint64(0x7ff0000000000456).view(np.float64), -0.0]]
-        keep[:2] = [True, False]
+        keep[:3] = [True, True, False]
     wide = np.concatenate([rows, rows[:, :2]], axis=1)    # five columns: the kernels' general width
     # 2-D of widths 3, 2 and 5, 1-D, and 1-D and 2-D views copied first; compared bit for bit
     # (numpy's NaN is the quiet NaN 0x7ff8...)
@@ -464,19 +465,22 @@ def test_float32_columns_match_numpy(n):
     rng = np.random.default_rng(16)
     cap = float(np.float32(1.0) - np.float32(2.0**-24))
     special = [1.0, np.nextafter(1.0, 0.0), cap, np.nextafter(cap, 2.0), np.nextafter(cap, 0.0), 0.0, -0.0,
-               np.nan, 2.0, -1e-300, 1e-46, 0.5 + 2.0**-25]
+               np.nan, -np.nan, np.uint64(0xfff4000000000123).view(np.float64), 2.0, -1e-300, 1e-46,
+               0.5 + 2.0**-25]
     for c in (1, 2, 3):
         rows = rng.random((n, c))
         rows.flat[:min(len(special), rows.size)] = special[:rows.size]
         got = rest.float32_columns(rows, cap)
         assert got.dtype == np.float32 and got.shape == (c, n) and got.flags["C_CONTIGUOUS"]
-        want = np.stack([np.minimum(rows[:, j], np.float32(cap), dtype=np.float32) for j in range(c)]) \
-            if n else np.zeros((c, 0), np.float32)
+        with np.errstate(invalid="ignore"):      # numpy warns as it casts a NaN
+            want = np.stack([np.minimum(rows[:, j], np.float32(cap), dtype=np.float32) for j in range(c)]) \
+                if n else np.zeros((c, 0), np.float32)
         np.testing.assert_array_equal(got.view(np.uint32), want.view(np.uint32))
     with pytest.raises(ValueError, match="c >= 1"):
         rest.float32_columns(np.zeros((n, 0)), cap)
-    with pytest.raises(ValueError, match="float32 value"):
-        rest.float32_columns(np.zeros((n, 2)), 0.1)
+    for bad_cap in (0.1, 1e300, math.nan):
+        with pytest.raises(ValueError, match="float32 value"):
+            rest.float32_columns(np.zeros((n, 2)), bad_cap)
 
 
 # --- histogram -------------------------------------------------------------------------------
