@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from . import _core
+from .arguments import seed_arg
 
 __all__ = [
     "CHECK_DOMAINS", "domain_params", "dithered_domain_params", "domain_points", "cubature_nodes",
@@ -46,19 +47,27 @@ def domain_params(kind: str, x: Any, lo: float = 0.0, hi: float = 1.0) -> tuple[
     return _core.domain_params(code, float(lo), float(hi), a)
 
 
-def dithered_domain_params(kind: str, x: Any, u: Any, lo: float = 0.0,
-                           hi: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+def dithered_domain_params(kind: str, x: Any, u: Any = None, lo: float = 0.0, hi: float = 1.0, *,
+                           stream: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(s, inside): :func:`domain_params`' s of the points x dithered within their float32
     rounding (:func:`dither_float32` with uniforms ``u`` of x's shape) and its ``inside`` of x
     as given: the same bits as those two calls, in one pass in C++ that keeps the dithered
     points in cache (the sampler check's float32 points need both, and nothing else of
-    either)."""
+    either).  ``stream`` = (seed, case_id) in place of ``u``: the uniforms
+    ``points(N, coordinates, seed=seed, case_id=case_id)`` gives, drawn chunk by chunk inside
+    the pass (a million directions' 24 MB of uniforms never written out)."""
+    if (u is None) == (stream is None):
+        raise ValueError("give the uniforms 'u' or a 'stream' (seed, case_id), one of them")
     code = _check_domain(kind)
     a = np.ascontiguousarray(x, dtype=np.float64)
+    flat = CHECK_DOMAINS[code] in ("interval", "half_line")
+    if flat:
+        a = a.reshape(-1)
+    if stream is not None:
+        seed, case_id = (seed_arg(v, name) for v, name in zip(stream, ("seed", "case_id")))
+        return _core.streamed_dithered_domain_params(code, float(lo), float(hi), a, seed, case_id)
     w = np.ascontiguousarray(u, dtype=np.float64)
-    if CHECK_DOMAINS[code] in ("interval", "half_line"):
-        a, w = a.reshape(-1), w.reshape(-1)
-    return _core.dithered_domain_params(code, float(lo), float(hi), a, w)
+    return _core.dithered_domain_params(code, float(lo), float(hi), a, w.reshape(-1) if flat else w)
 
 
 def domain_points(kind: str, s: Any, lo: float = 0.0, hi: float = 1.0) -> np.ndarray:

@@ -47,7 +47,11 @@ __all__ = ["SAMPLE_CASE", "SamplerTest", "check_sampler", "check_with_missing",
 #: The stream (case id) the sampler check draws its canonical uniforms from.
 SAMPLE_CASE = 0x5A3F
 
-#: The stream (case id) of the uniforms that dither float32 points (SamplerTest.check_points).
+#: The stream (case id) of the uniforms that dither float32 points (SamplerTest.check_points):
+#: ``reference_estimators.points(N, coordinates, seed=seed, case_id=DITHER_CASE)``, each
+#: coordinate moved half way to each float32 neighbour (non-finite ones kept), drawn and
+#: applied inside the core's pass (:meth:`Domain.dithered_params` with ``stream``): numpy's
+#: dithering took 0.1 s a million directions, more than the rest of the check.
 DITHER_CASE = 0xD17E
 
 #: pdf evaluations the base grid's cubature may spend (SamplerTest)
@@ -162,7 +166,7 @@ class SamplerTest:
         # the domain mask of the points as drawn come from one pass.
         float32 = _float32_points(x)
         dither_now = float32 and dom.kind != "half_line"
-        s, inside = dom.dithered_params(x, _dither_uniforms(x, seed)) if dither_now else dom.to_params(x)
+        s, inside = dom.dithered_params(x, stream=(seed, DITHER_CASE)) if dither_now else dom.to_params(x)
         all_inside = bool(inside.all())
         if not all_inside:
             fail("outside_domain", ~inside, f"points outside the {dom.kind}")
@@ -193,7 +197,7 @@ class SamplerTest:
                                                         f"over the {dom.kind}, not 1"))
 
         if float32 and not dither_now:     # dithered as above, on the half line
-            s = dom.dithered_params(x, _dither_uniforms(x, seed))[0]
+            s = dom.dithered_params(x, stream=(seed, DITHER_CASE))[0]
         counts = rest.grid_histogram(s, inside, base)
         grids = {"coarse": (16,) if dom.k == 1 else (16, 32), "fine": (512,) if dom.k == 1 else (64, 128)}
         tests, residuals = [], {}
@@ -416,16 +420,6 @@ def _float32_points(x: np.ndarray) -> bool:
     """Whether x's coordinates are float32 (:func:`reference_estimators.all_float32`, which
     stops soon after a float64 sampler's first value that is not)."""
     return rest.all_float32(x)
-
-
-def _dither_uniforms(x: np.ndarray, seed: int) -> np.ndarray:
-    """The uniforms (x's shape, as (N, coordinates)) that move each coordinate of x within its
-    float32 rounding interval (half way to each float32 neighbour; non-finite ones kept):
-    stream ``seed``, DITHER_CASE.  The core dithers in one pass
-    (:func:`reference_estimators.dither_float32`, or with the domain map,
-    :meth:`Domain.dithered_params`): numpy's took 0.1 s a million directions, more than the
-    rest of the check."""
-    return rest.points(x.shape[0], 1 if x.ndim == 1 else x.shape[1], seed=seed, case_id=DITHER_CASE)
 
 
 def _u_examples(u: np.ndarray, mask: np.ndarray, k: int = 5) -> list[dict[str, Any]]:

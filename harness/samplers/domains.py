@@ -117,15 +117,22 @@ class Domain:
             x = np.asarray(x)[:, _POLES[self.pole]]
         return rest.domain_params(self.kind, x, self.lo, self.hi)
 
-    def dithered_params(self, x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def dithered_params(self, x: np.ndarray, u: np.ndarray | None = None, *,
+                        stream: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(:meth:`to_params`' s of the points x each coordinate moved within its float32
         rounding interval by the uniforms u (x's shape;
         :func:`reference_estimators.dither_float32`), its mask of x as given): one pass in the
         core (:func:`reference_estimators.dithered_domain_params`), the same bits as the two
-        calls."""
+        calls.  ``stream`` = (seed, case_id) in place of u: the uniforms
+        ``reference_estimators.points(N, coordinates, seed=seed, case_id=case_id)``, drawn
+        inside the core's pass (about another pole, drawn first: they move with the columns)."""
         if self.pole != "z":
-            x, u = np.asarray(x)[:, _POLES[self.pole]], np.asarray(u)[:, _POLES[self.pole]]
-        return rest.dithered_domain_params(self.kind, x, u, self.lo, self.hi)
+            if u is None and stream is not None:
+                u = rest.points(len(x), 3, seed=stream[0], case_id=stream[1])
+                stream = None
+            x = np.asarray(x)[:, _POLES[self.pole]]
+            u = None if u is None else np.asarray(u)[:, _POLES[self.pole]]
+        return rest.dithered_domain_params(self.kind, x, u, self.lo, self.hi, stream=stream)
 
     @property
     def pole_columns(self) -> list[int] | None:

@@ -87,8 +87,14 @@ size_t check_rows(const InArray &x, const BoolArray &keep) {
 // (each point's parameters its own; the azimuths' vector and scalar paths give the same
 // bits).  With uniforms u, s is of the points dithered within their float32 rounding
 // (dither_float32), a chunk at a time into this thread's scratch rows, so that the dithered
-// points never leave the cache, and `inside` of the points as given.
-nb::tuple parameters(int kind, double lo, double hi, const InArray &x, const double *u) {
+// points never leave the cache, and `inside` of the points as given.  With a stream key in
+// place of u, the uniforms are those of points(N, coordinates, seed, case_id) (chunk c of
+// them from the stream (seed, case_id, 0, c), as the bindings' `points` draws them), drawn a
+// chunk at a time into scratch too: the 24 MB of a million directions' uniforms are never
+// written out and read back.
+static_assert(kCheckChunk == kChunkSize, "a check chunk's dither uniforms are one stream chunk's");
+nb::tuple parameters(int kind, double lo, double hi, const InArray &x, const double *u,
+                     const StreamKey *stream = nullptr) {
     const CheckDomain d = check_domain(kind);
     const int pdim = domain_point_dim(d), k = domain_param_dim(d);
     const size_t n = check_points(x, pdim, "x");
@@ -101,17 +107,24 @@ nb::tuple parameters(int kind, double lo, double hi, const InArray &x, const dou
         for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t b, int) {
             const size_t rows = b - a, values = rows * size_t(pdim);
             const double *xa = x.data() + a * size_t(pdim);
-            if (!u) {
+            if (!u && !stream) {
                 domain_params(d, lo, hi, xa, rows, s + a * size_t(k), inside + a);
                 return;
             }
-            thread_local std::vector<double> moved;
+            thread_local std::vector<double> moved, drawn;
             thread_local std::unique_ptr<bool[]> unused;   // the dithered points' mask, not wanted
             thread_local size_t unused_size = 0;
             moved.resize(values);
             if (unused_size < rows) unused.reset(new bool[unused_size = rows]);
             domain_params(d, lo, hi, xa, rows, nullptr, inside + a);
-            dither_float32(xa, u + a * size_t(pdim), values, moved.data());
+            const double *ua = u ? u + a * size_t(pdim) : nullptr;
+            if (!ua) {
+                drawn.resize(values);
+                UniformStream chunk({stream->seed, stream->case_id, stream->replica, a / kChunkSize});
+                chunk.fill(drawn.data(), values);
+                ua = drawn.data();
+            }
+            dither_float32(xa, ua, values, moved.data());
             domain_params(d, lo, hi, moved.data(), rows, s + a * size_t(k), unused.get());
         });
     }
@@ -132,6 +145,13 @@ void bind_checks(nb::module_ &m) {
     }, "kind"_a, "lo"_a, "hi"_a, "x"_a, "u"_a,
        "(s (N, k), inside (N,)): domain_params' s of the points x dithered by dither_float32 with uniforms u, and "
        "its inside of x as given.");
+    m.def("streamed_dithered_domain_params", [](int kind, double lo, double hi, InArray x, uint64_t seed,
+                                                uint64_t case_id) {
+        const StreamKey key{seed, case_id, 0, 0};
+        return parameters(kind, lo, hi, x, nullptr, &key);
+    }, "kind"_a, "lo"_a, "hi"_a, "x"_a, "seed"_a, "case_id"_a,
+       "dithered_domain_params with the uniforms points(N, coordinates, seed=seed, case_id=case_id) would give, "
+       "drawn chunk by chunk inside the pass.");
     m.def("domain_points", [](int kind, double lo, double hi, InArray s) {
         const CheckDomain d = check_domain(kind);
         const int pdim = domain_point_dim(d), k = domain_param_dim(d);

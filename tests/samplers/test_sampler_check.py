@@ -353,13 +353,13 @@ def test_a_float32_shaders_narrow_lobe_passes_its_points_dithered_within_their_r
 
 
 def test_dithering_moves_float32_points_within_their_rounding_interval_only():
-    from harness.samplers.check import _dither_uniforms, _float32_points
+    from harness.samplers.check import DITHER_CASE, _float32_points
 
     x = np.random.default_rng(1).normal(size=(10_000, 3)).astype(np.float32).astype(float)
     x[0] = [np.nan, np.inf, 0.0]
 
     def dithered(points: np.ndarray, seed: int) -> np.ndarray:
-        return rest.dither_float32(points, _dither_uniforms(points, seed))
+        return rest.dither_float32(points, rest.points(len(points), 3, seed=seed, case_id=DITHER_CASE))
 
     d = dithered(x, seed=3)
     fin = np.isfinite(x)
@@ -396,6 +396,14 @@ def test_dithered_params_are_the_params_of_the_dithered_points_and_the_mask_of_t
     np.testing.assert_array_equal(s.view(np.uint64), want_s.view(np.uint64))
     np.testing.assert_array_equal(inside, want_inside)
     assert 0 < inside.sum() < n
+    # the uniforms of a stream, drawn inside the pass: the same bits as those points() gives
+    drawn = rest.points(n, domain.point_dim, seed=7, case_id=11)
+    s, inside = domain.dithered_params(x, stream=(7, 11))
+    want_s, want_inside = domain.dithered_params(x, drawn.reshape(x.shape))
+    np.testing.assert_array_equal(s.view(np.uint64), want_s.view(np.uint64))
+    np.testing.assert_array_equal(inside, want_inside)
+    with pytest.raises(ValueError, match="one of them"):
+        domain.dithered_params(x)
 
 
 # --- the pdf a sampler reports with its samples ------------------------------------------------
