@@ -6,8 +6,8 @@ Builds reference_estimators/_core with CMake into build/isa-<march>/ for each --
   --identity    compares, bit for bit, every catalogue estimate (all techniques, random,
                 stratified and Sobol' points, 1 and 2 threads), the elementary functions'
                 values and the sampler check's vectorised kernels' (dithering, float32
-                detection, domain and cubature maps) between the installed build and each
-                variant; exit status 1 on any
+                detection, domain maps with given and streamed uniforms, cubature maps)
+                between the installed build and each variant; exit status 1 on any
                 difference (tests/core/test_isa_builds.py runs this)
   --throughput  runs benchmarks/uniform_mc.py on each variant, drjit targeting the same ISA
                 where it can (haswell), so an AVX2 build is compared with AVX2 drjit code
@@ -59,6 +59,9 @@ out["all_float32"] = [rest.all_float32(f32), rest.all_float32(bits), rest.all_fl
 unit = f32 / np.linalg.norm(f32, axis=1)[:, None]
 s, inside = rest.dithered_domain_params("sphere", unit, rng.random(unit.shape))
 out["dithered_params"] = s.tobytes().hex() + inside.tobytes().hex()
+# 80 000 points: the uniforms drawn inside the pass from two stream chunks
+s, inside = rest.dithered_domain_params("sphere", np.repeat(unit, 4, axis=0), stream=(3, 0xD17E))
+out["dithered_stream"] = s.tobytes().hex() + inside.tobytes().hex()
 lo = rng.random((3_001, 2)) * 0.9
 out["cubature_points"] = rest.cubature_points("sphere", lo, lo + 0.05, np.linspace(0.1, 0.9, 4),
                                               columns=[0, 2, 1]).tobytes().hex()
@@ -89,8 +92,9 @@ def digest(core: str) -> dict:
 
 def identity(marches: list[str]) -> int:
     base = digest("")
-    print(f"installed build: {base['isa']}, {len(base) - 8} estimates, 3 elementary functions and 4 check "
-          "kernels")
+    estimates = sum("/" in k for k in base)        # keys integrand/technique/threads
+    print(f"installed build: {base['isa']}, {estimates} estimates, 3 elementary functions and "
+          f"{len(base) - estimates - 4} check kernels")
     status = 0
     for march in marches:
         other = digest(build(march))

@@ -1,5 +1,5 @@
-"""Checks of the arguments the core's Python face passes on (api.py, kernels.py): sample
-counts, seeds and stream keys, thread counts, point arrays and chunk ranges.  Each returns the
+"""Checks of the arguments the core's Python face passes on (api.py, kernels.py, checks.py):
+sample counts, seeds and stream keys, thread counts, point arrays and chunk ranges.  Each returns the
 value as the core takes it or raises a TypeError / ValueError naming the argument and the rule.
 """
 from __future__ import annotations
@@ -52,6 +52,13 @@ def seed_arg(s: Any, name: str = "seed") -> int:
     if isinstance(s, bool) or not isinstance(s, numbers.Integral) or not 0 <= s < 2**64:
         raise ValueError(f"'{name}' must be an integer in [0, 2**64), got {s!r}")
     return int(s)
+
+
+def stream_arg(stream: Any) -> tuple[int, int]:
+    """A stream key (seed, case_id): exactly two integers in [0, 2**64)."""
+    if not isinstance(stream, (tuple, list)) or len(stream) != 2:
+        raise ValueError(f"'stream' must be a pair (seed, case_id), got {stream!r}")
+    return seed_arg(stream[0], "seed"), seed_arg(stream[1], "case_id")
 
 
 def threads_arg(t: Any) -> int:

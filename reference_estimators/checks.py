@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from . import _core
-from .arguments import seed_arg
+from .arguments import stream_arg
 
 __all__ = [
     "CHECK_DOMAINS", "domain_params", "dithered_domain_params", "domain_points", "cubature_nodes",
@@ -60,14 +60,13 @@ def dithered_domain_params(kind: str, x: Any, u: Any = None, lo: float = 0.0, hi
         raise ValueError("give the uniforms 'u' or a 'stream' (seed, case_id), one of them")
     code = _check_domain(kind)
     a = np.ascontiguousarray(x, dtype=np.float64)
-    flat = CHECK_DOMAINS[code] in ("interval", "half_line")
-    if flat:
-        a = a.reshape(-1)
+    if CHECK_DOMAINS[code] in ("interval", "half_line") and a.ndim == 2 and a.shape[1] == 1:
+        a = a.reshape(-1)    # (N, 1) as (N,); another shape is refused by the core, named
     if stream is not None:
-        seed, case_id = (seed_arg(v, name) for v, name in zip(stream, ("seed", "case_id")))
-        return _core.streamed_dithered_domain_params(code, float(lo), float(hi), a, seed, case_id)
+        return _core.streamed_dithered_domain_params(code, float(lo), float(hi), a, *stream_arg(stream))
     w = np.ascontiguousarray(u, dtype=np.float64)
-    return _core.dithered_domain_params(code, float(lo), float(hi), a, w.reshape(-1) if flat else w)
+    w = w.reshape(a.shape) if w.size == a.size else w     # else the core says what is wrong
+    return _core.dithered_domain_params(code, float(lo), float(hi), a, w)
 
 
 def domain_points(kind: str, s: Any, lo: float = 0.0, hi: float = 1.0) -> np.ndarray:

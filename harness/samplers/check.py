@@ -49,9 +49,10 @@ SAMPLE_CASE = 0x5A3F
 
 #: The stream (case id) of the uniforms that dither float32 points (SamplerTest.check_points):
 #: ``reference_estimators.points(N, coordinates, seed=seed, case_id=DITHER_CASE)``, each
-#: coordinate moved half way to each float32 neighbour (non-finite ones kept), drawn and
-#: applied inside the core's pass (:meth:`Domain.dithered_params` with ``stream``): numpy's
-#: dithering took 0.1 s a million directions, more than the rest of the check.
+#: coordinate moved uniformly within its float32 rounding interval (up to half way to each
+#: float32 neighbour; non-finite ones kept), drawn and applied inside the core's pass
+#: (:meth:`Domain.dithered_params` with ``stream``): numpy's dithering took 0.1-0.13 s a
+#: million directions, more than the rest of the check.
 DITHER_CASE = 0xD17E
 
 #: pdf evaluations the base grid's cubature may spend (SamplerTest)

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 import reference_estimators as rest
+from reference_estimators.arguments import stream_arg
 
 __all__ = ["DOMAINS", "Domain", "MomentColumns", "ParamDensity", "as_domain", "checked_breaks"]
 
@@ -125,10 +126,12 @@ class Domain:
         core (:func:`reference_estimators.dithered_domain_params`), the same bits as the two
         calls.  ``stream`` = (seed, case_id) in place of u: the uniforms
         ``reference_estimators.points(N, coordinates, seed=seed, case_id=case_id)``, drawn
-        inside the core's pass (about another pole, drawn first: they move with the columns)."""
+        inside the core's pass (about another pole, drawn here first: they move with the
+        columns)."""
         if self.pole != "z":
-            if u is None and stream is not None:
-                u = rest.points(len(x), 3, seed=stream[0], case_id=stream[1])
+            if u is None and stream is not None:   # drawn here: they move with the columns
+                seed, case_id = stream_arg(stream)
+                u = rest.points(len(x), 3, seed=seed, case_id=case_id) if len(x) else np.empty((0, 3))
                 stream = None
             x = np.asarray(x)[:, _POLES[self.pole]]
             u = None if u is None else np.asarray(u)[:, _POLES[self.pole]]

@@ -384,6 +384,36 @@ def test_dither_float32_matches_numpy_on_any_bits():
             np.testing.assert_array_equal(rest.dither_float32(x, u).view(np.uint64), want.view(np.uint64))
 
 
+@pytest.mark.parametrize("n", [1, 7, 65_536, 65_537, 140_001])
+@pytest.mark.parametrize("kind", ["interval", "hemisphere"])
+def test_dither_uniforms_drawn_in_the_pass_are_those_of_points(kind, n):
+    """dithered_domain_params with stream=(seed, case_id) draws the uniforms points(N,
+    coordinates, seed, case_id) gives, chunk by chunk inside the pass: the same bits as
+    passing them, below one chunk, at its edge, past it and over several; an interval's
+    points as (N,) or (N, 1), and any other shape refused."""
+    rng = np.random.default_rng(n)
+    dim = 1 if kind == "interval" else 3
+    x = rng.random(n) if dim == 1 else rng.normal(size=(n, 3))
+    if dim == 3:
+        x[:, 2] = np.abs(x[:, 2])
+        x /= np.linalg.norm(x, axis=1)[:, None]
+    x = x.astype(np.float32).astype(float)
+    u = rest.points(n, dim, seed=9, case_id=0xD17E)
+    want = rest.dithered_domain_params(kind, x, u)
+    for points in ((x, x[:, None]) if dim == 1 else (x,)):
+        got = rest.dithered_domain_params(kind, points, stream=(9, 0xD17E))
+        np.testing.assert_array_equal(got[0].view(np.uint64), want[0].view(np.uint64))
+        np.testing.assert_array_equal(got[1], want[1])
+    if dim == 1:
+        with pytest.raises(ValueError, match=r"shape \(N, 1\)"):
+            rest.dithered_domain_params(kind, np.stack([x, x], axis=1), stream=(9, 0xD17E))
+    for bad in ((9,), (9, 1, 2), 9, (9, -1), {"seed": 9, "case_id": 1}):
+        with pytest.raises(ValueError, match="'stream' must be a pair|'case_id' must be"):
+            rest.dithered_domain_params(kind, x, stream=bad)
+    with pytest.raises(ValueError, match="one of them"):
+        rest.dithered_domain_params(kind, x, u, stream=(9, 0xD17E))
+
+
 def test_all_float32_matches_numpy():
     rng = np.random.default_rng(13)
     x = rng.normal(size=5000).astype(np.float32).astype(float)

@@ -370,6 +370,32 @@ def test_dithering_moves_float32_points_within_their_rounding_interval_only():
     assert _float32_points(x) and not _float32_points(x + 1e-12) and not _float32_points(np.full(3, np.nan))
 
 
+@pytest.mark.parametrize("kind", ["hemisphere", "half_line"])
+def test_the_check_dithers_float32_points_with_its_own_stream(kind, monkeypatch):
+    """check_points dithers float32 points with the uniforms of stream (seed, DITHER_CASE),
+    on the half line as elsewhere: the stream the check's docs define, no other."""
+    from harness.samplers import domains
+    from harness.samplers.check import DITHER_CASE
+
+    seen = []
+    dithered = domains.Domain.dithered_params
+
+    def spy(self, x, u=None, *, stream=None):
+        seen.append((u is None, stream))
+        return dithered(self, x, u, stream=stream)
+
+    monkeypatch.setattr(domains.Domain, "dithered_params", spy)
+    u = rest.points(20_000, 2, seed=1)
+    if kind == "hemisphere":
+        s = correct("cosine_hemisphere")
+        pdf, x = s.pdf, s.sample(u)
+    else:   # the exponential law on the half line
+        pdf, x = (lambda t: np.exp(-t)), -np.log1p(-u[:, 0])
+    x = x.astype(np.float32).astype(float)
+    SamplerTest(pdf, kind, sample_count=len(x)).check_points(x, seed=5)
+    assert seen == [(True, (5, DITHER_CASE))]
+
+
 @pytest.mark.parametrize("domain", [Domain("interval", -1.0, 2.0), Domain("half_line"), Domain("square"),
                                     Domain("disk"), Domain("hemisphere"), Domain("sphere"),
                                     Domain("sphere", pole="y")], ids=repr)
@@ -404,6 +430,9 @@ def test_dithered_params_are_the_params_of_the_dithered_points_and_the_mask_of_t
     np.testing.assert_array_equal(inside, want_inside)
     with pytest.raises(ValueError, match="one of them"):
         domain.dithered_params(x)
+    for bad in ((7, 11, 0), (7,), 7, (-1, 11)):
+        with pytest.raises(ValueError, match="'stream' must be a pair|'seed' must be"):
+            domain.dithered_params(x, stream=bad)
 
 
 # --- the pdf a sampler reports with its samples ------------------------------------------------
