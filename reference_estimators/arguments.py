@@ -1,6 +1,7 @@
 """Checks of the arguments the core's Python face passes on (api.py, kernels.py, checks.py):
-sample counts, seeds and stream keys, thread counts, point arrays and chunk ranges.  Each returns the
-value as the core takes it or raises a TypeError / ValueError naming the argument and the rule.
+sample counts, seeds and stream keys, thread counts, point arrays and chunk ranges.  Each
+returns the value as the core takes it or raises a TypeError / ValueError naming the argument
+and the rule.
 """
 from __future__ import annotations
 

@@ -51,11 +51,11 @@ def dithered_domain_params(kind: str, x: Any, u: Any = None, lo: float = 0.0, hi
                            stream: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(s, inside): :func:`domain_params`' s of the points x dithered within their float32
     rounding (:func:`dither_float32` with uniforms ``u`` of x's shape) and its ``inside`` of x
-    as given: the same bits as those two calls, in one pass in C++ that keeps the dithered
-    points in cache (the sampler check's float32 points need both, and nothing else of
-    either).  ``stream`` = (seed, case_id) in place of ``u``: the uniforms
+    as given: the same bits as those two calls, in one pass in C++ whose dithered points go to
+    reused scratch rows, never to an array (the sampler check's float32 points need both, and
+    nothing else of either).  ``stream`` = (seed, case_id) in place of ``u``: the uniforms
     ``points(N, coordinates, seed=seed, case_id=case_id)`` gives, drawn chunk by chunk inside
-    the pass (a million directions' 24 MB of uniforms never written out)."""
+    the pass, so that no array of them is written out either."""
     if (u is None) == (stream is None):
         raise ValueError("give the uniforms 'u' or a 'stream' (seed, case_id), one of them")
     code = _check_domain(kind)
