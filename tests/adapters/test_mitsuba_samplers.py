@@ -260,6 +260,20 @@ def test_the_sample_calls_uniforms_are_float32_columns_below_one():
         uniforms(u, 4)
 
 
+@pytest.mark.parametrize("plugin", [{"type": "hg", "g": 0.3}, {"type": "rayleigh"}], ids=lambda p: p["type"])
+def test_a_constant_weight_decides_validity_by_its_one_row(plugin):
+    """A phase function's weight is one constant, kept a read-only broadcast view: its one row
+    says whether the samples are in the density, as every row of it would."""
+    from harness.adapters.mitsuba.phase import phase_sampler
+
+    s = phase_sampler(plugin, wi=30)
+    b = s.sample_batch(np.random.default_rng(2).random((4096, s.udim)))
+    assert b.weight.strides[0] == 0
+    want = np.all(np.isfinite(b.x), axis=1) & (b.sample_pdf > 0) & np.any(np.asarray(b.weight) != 0, axis=1)
+    np.testing.assert_array_equal(b.valid, want)
+    assert b.valid.all()
+
+
 def test_dielectric_samples_both_hemispheres():
     s = ms.bsdf_sampler({"type": "roughdielectric", "alpha": 0.1, "int_ior": 1.5}, wi=45)
     assert s.domain == "sphere" and s.transmits

@@ -235,10 +235,13 @@ class MitsubaSampler:
         valid = rest.finite_rows(x) & (spdf > 0)
         if weight is not None:
             weight = weight.reshape(len(x), -1)
-            nonzero = weight[:, 0] != 0     # np.any(weight != 0, axis=1) took 14 ms a million rows
-            for column in weight.T[1:]:
-                nonzero |= column != 0
-            valid &= nonzero
+            if len(x) and weight.strides[0] == 0:   # one constant weight (_to_numpy's view): its row decides
+                valid &= bool(np.any(weight[0] != 0))
+            else:
+                nonzero = weight[:, 0] != 0     # np.any(weight != 0, axis=1) took 14 ms a million rows
+                for column in weight.T[1:]:
+                    nonzero |= column != 0
+                valid &= nonzero
         if delta is not None:
             delta = delta.reshape(-1) != 0
             valid &= ~delta
