@@ -76,29 +76,20 @@ class BoxRefinement {
 
     // The halves of every box along every axis, into clo, chi (k * 2B rows of k): rows
     // axis * 2B + 2i and + 2i + 1 are box i's lower and upper part along `axis`, cut at its
-    // split point.  Keeps each cut's first part's share of the width for step().
+    // split point.  Keeps the cuts for step(), which makes the next level's boxes from them.
     void halves(double *clo, double *chi) {
         const size_t B = boxes();
-        first_.assign(k_ * B, 0.0);
+        cut_.resize(k_ * B);
         for (size_t axis = 0; axis < k_; ++axis) {
             const std::vector<double> &br = breaks_[axis];
             for (size_t i = 0; i < B; ++i) {
-                const double a = lo_[i * k_ + axis], b = hi_[i * k_ + axis];
-                const double cut = split_point(a, b, br.data(), br.size());
-                const double mid = (a + b) / 2;
-                first_[axis * B + i] = cut == mid ? 0.5 : (cut - a) / (b - a);
-                for (size_t half = 0; half < 2; ++half) {
-                    const size_t r = (axis * 2 * B + 2 * i + half) * k_;   // row axis 2B + 2i + half
-                    for (size_t j = 0; j < k_; ++j) {
-                        clo[r + j] = lo_[i * k_ + j];
-                        chi[r + j] = hi_[i * k_ + j];
-                    }
-                    (half ? clo : chi)[r + axis] = cut;
-                }
+                const double cut = split_point(lo_[i * k_ + axis], hi_[i * k_ + axis], br.data(), br.size());
+                cut_[axis * B + i] = cut;
+                for (size_t half = 0; half < 2; ++half)
+                    half_box(i, axis, cut, half, clo + (axis * 2 * B + 2 * i + half) * k_,
+                             chi + (axis * 2 * B + 2 * i + half) * k_);
             }
         }
-        clo_.assign(clo, clo + 2 * k_ * B * k_);
-        chi_.assign(chi, chi + 2 * k_ * B * k_);
         halved_ = true;
     }
 
@@ -149,11 +140,15 @@ class BoxRefinement {
         for (size_t axis = 0; axis < k_; ++axis)
             for (size_t i = 0; i < B; ++i) {
                 if (!keep[i] || best[i] != axis) continue;
-                const double f = first_[axis * B + i];
+                // the first part's share of the box's tolerance: half, or its share of the
+                // width where the box is cut at a break (exactly half where at the middle)
+                const double a = lo_[i * k_ + axis], b = hi_[i * k_ + axis], cut = cut_[axis * B + i];
+                const double f = cut == (a + b) / 2 ? 0.5 : (cut - a) / (b - a);
                 for (size_t half = 0; half < 2; ++half) {
                     const size_t r = axis * 2 * B + 2 * i + half;
-                    lo.insert(lo.end(), &clo_[r * k_], &clo_[r * k_] + k_);
-                    hi.insert(hi.end(), &chi_[r * k_], &chi_[r * k_] + k_);
+                    lo.resize(lo.size() + k_);
+                    hi.resize(hi.size() + k_);
+                    half_box(i, axis, cut, half, &lo[lo.size() - k_], &hi[hi.size() - k_]);
                     whole.insert(whole.end(), parts + r * m, parts + r * m + m);
                     owner.push_back(owner_[i]);
                     share.push_back(half ? share_[i] * (1 - f) : share_[i] * f);
@@ -179,6 +174,15 @@ class BoxRefinement {
     }
 
   private:
+    // Box i's lower (half 0) or upper part along `axis`, cut at `cut`, into lo, hi (k each).
+    void half_box(size_t i, size_t axis, double cut, size_t half, double *lo, double *hi) const {
+        for (size_t j = 0; j < k_; ++j) {
+            lo[j] = lo_[i * k_ + j];
+            hi[j] = hi_[i * k_ + j];
+        }
+        (half ? lo : hi)[axis] = cut;
+    }
+
     // How many times its last change `change` the error left in a box that stopped
     // unconverged is taken to be, from the changes of its parent's and grandparent's splits
     // c1, c2 (NaN where none): the changes shrinking geometrically at the ratio r of the sums
@@ -208,7 +212,7 @@ class BoxRefinement {
     double floor_;
     bool extrapolate_, halved_ = false;   // halves() made this level's halves, step() not yet taken them
     std::vector<std::vector<double>> breaks_;
-    std::vector<double> tol_, lo_, hi_, whole_, share_, history_, first_, clo_, chi_;
+    std::vector<double> tol_, lo_, hi_, whole_, share_, history_, cut_;   // cut_: halves()' cuts, axis-major
     std::vector<int64_t> owner_;
     std::vector<int64_t> fin_owner_;
     std::vector<double> fin_value_, fin_error_;
