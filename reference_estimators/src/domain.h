@@ -89,9 +89,19 @@ struct Domain {
                     for (size_t i = 0; i < n; ++i) out += !((x[i] >= a) & (x[i] <= b));
                     return out;
                 }
-                if (dim == 2) {  // the square's points (table samplers)
+                if (dim == 2) {  // the square's points (table samplers), in vector lanes
                     const double a0 = lo[0], b0 = hi[0], a1 = lo[1], b1 = hi[1];
-                    for (size_t i = 0; i < n; ++i) out += !in_rectangle(x[2 * i], x[2 * i + 1], a0, b0, a1, b1);
+                    using simd::f64v;
+                    simd::i64v lanes{};
+                    size_t i = 0;
+                    for (; i + simd::kWidth <= n; i += simd::kWidth) {
+                        f64v u, v;
+                        simd::deinterleave(x + 2 * i, u, v);
+                        const auto in = (u >= a0) & (u <= b0) & (v >= a1) & (v <= b1);
+                        lanes += in ? simd::i64v{} : simd::i64v{} + 1;
+                    }
+                    for (size_t l = 0; l < simd::kWidth; ++l) out += size_t(lanes[l]);
+                    for (; i < n; ++i) out += !in_rectangle(x[2 * i], x[2 * i + 1], a0, b0, a1, b1);
                     return out;
                 }
                 for (size_t i = 0; i < n; ++i) out += !contains(x + i * size_t(dim));

@@ -110,29 +110,60 @@ class UniformBox final : public Pointwise<UniformBox> {
         bool in = domain.contains(x);
         for (int j = 0; j < domain.dim; ++j) u[j] = in ? (x[j] - domain.lo[j]) / (domain.hi[j] - domain.lo[j]) : kNaN;
     }
-    // The square's batches with its corners in locals and the membership test branch-free (the
-    // generic loops reloaded the corners a coordinate and called contains() a point: an eighth
-    // of an MIS estimate with a table sampler); the same bits.  Other boxes: Pointwise's loops.
+    // The square's batches in vector lanes, the corners in registers: a sample's two
+    // coordinates are neighbours in x, so a vector of coordinates takes its lanes' corners
+    // from vectors alternating between the two axes' (the generic loops reloaded the corners a
+    // coordinate and called contains() a point: an eighth of an MIS estimate with a table
+    // sampler; then stride-2 loops, 0.6 ns a sample of such an estimate's 12.5 for sample, pdf
+    // and the screening's passes together).  The same bits.  Other boxes: Pointwise's loops.
     void sample(const double *u, double *x, double *p, size_t n) const override {
         if (domain.dim != 2) return Pointwise::sample(u, x, p, n);
-        const double a0 = domain.lo[0], w0 = domain.hi[0] - a0, a1 = domain.lo[1], w1 = domain.hi[1] - a1;
-        const double q = inv_measure_;
-        for (size_t i = 0; i < n; ++i) {
-            x[2 * i] = a0 + w0 * u[2 * i];
-            x[2 * i + 1] = a1 + w1 * u[2 * i + 1];
-            p[i] = q;
-        }
+        square_points<false>(u, x, p, n);
+    }
+    bool sample_valid(const double *u, double *x, double *p, size_t n) const override {
+        if (domain.dim != 2) return Sampler::sample_valid(u, x, p, n);
+        return square_points<true>(u, x, p, n) && (n == 0 || valid_pdf(inv_measure_));
     }
     void pdf(const double *x, double *p, size_t n) const override {
         if (domain.dim != 2) return Pointwise::pdf(x, p, n);
         const double a0 = domain.lo[0], b0 = domain.hi[0], a1 = domain.lo[1], b1 = domain.hi[1], q = inv_measure_;
-        for (size_t i = 0; i < n; ++i) {
-            const double s = x[2 * i], t = x[2 * i + 1];
-            p[i] = in_rectangle(s, t, a0, b0, a1, b1) ? q : 0.0;
-        }
+        simd::map2(x, p, n, [=](auto s, auto t) {
+            using D = decltype(s);
+            return (s >= a0) & (s <= b0) & (t >= a1) & (t <= b1) ? D{} + q : D{};
+        });
     }
 
   private:
+    // The square's points and pdfs of the uniforms u (n x 2); with `screen`, whether all of
+    // them lie in the square (a NaN coordinate does not).
+    template <bool screen>
+    bool square_points(const double *u, double *x, double *p, size_t n) const {
+        using simd::f64v;
+        constexpr size_t W = simd::kWidth;
+        f64v lo, width, hi;   // the axes' corners, alternating
+        for (size_t l = 0; l < W; ++l) {
+            lo[l] = domain.lo[l % 2];
+            width[l] = domain.hi[l % 2] - domain.lo[l % 2];
+            hi[l] = domain.hi[l % 2];
+        }
+        const size_t coords = 2 * n;
+        simd::i64v outside{};
+        size_t j = 0;
+        for (; j + W <= coords; j += W) {
+            const f64v v = lo + width * simd::load(u + j);
+            if (screen) outside |= (v >= lo) & (v <= hi) ? simd::i64v{} : simd::i64v{} + 1;
+            simd::store(x + j, v);
+        }
+        bool inside = true;
+        for (; j < coords; ++j) {
+            x[j] = lo[j % 2] + width[j % 2] * u[j];
+            inside &= (x[j] >= lo[j % 2]) & (x[j] <= hi[j % 2]);
+        }
+        std::fill(p, p + n, inv_measure_);
+        for (size_t l = 0; l < W; ++l) inside &= outside[l] == 0;
+        return inside;
+    }
+
     double inv_measure_;
 };
 

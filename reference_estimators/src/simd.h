@@ -40,6 +40,8 @@ typedef uint64_t u64v __attribute__((vector_size(8 * kWidth)));
 
 RE_INLINE f64v load(const double *p) { f64v v; std::memcpy(&v, p, sizeof v); return v; }
 RE_INLINE void store(double *p, f64v v) { std::memcpy(p, &v, sizeof v); }
+RE_INLINE i64v load(const int64_t *p) { i64v v; std::memcpy(&v, p, sizeof v); return v; }
+RE_INLINE void store(int64_t *p, i64v v) { std::memcpy(p, &v, sizeof v); }
 // The pairs p[0..2 kWidth) split into their first and second members: two loads and two
 // shuffles (GCC loads a lane at a time for a stride it cannot see).
 RE_INLINE void deinterleave(const double *p, f64v &even, f64v &odd) {

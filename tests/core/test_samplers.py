@@ -1032,6 +1032,43 @@ def test_small_2d_tables_sample_the_same_in_vector_lanes_and_one_at_a_time(shape
     np.testing.assert_allclose(p, t[rows, cols] / t.mean(), rtol=1e-12)
 
 
+@pytest.mark.parametrize("n", [1, 7, 2048, 70001])
+def test_an_mis_pair_of_square_samplers_is_its_samplers_and_the_balance_heuristic(n):
+    """The general path's MIS of the uniform square and the 2-D table sampler (which screen
+    their points in the lanes that draw them, and take their uniforms' columns by shuffles):
+    each contribution is f / (p_0 + p_1) at each technique's point, recomputed from the
+    samplers' own batches on the stream's uniforms, bit for bit, at block and vector tails."""
+    name = "mis_balance:uniform_box+piecewise_constant_2d"
+    box, table = rest.techniques("gaussian2d")[name].mis
+    f = rest.integrand("gaussian2d")
+    u = rest.points(n, 4, seed=3)
+    x0, p0 = box.sample(u[:, :2])
+    x1, p1 = table.sample(u[:, 2:])
+    np.testing.assert_array_equal(x0, u[:, :2])   # 0 + 1 u on the unit square
+    np.testing.assert_array_equal(p0, np.ones(n))
+    f0, f1 = f.eval(x0), f.eval(x1)
+    assert np.all(f0 > 0) and np.all(f1 > 0)
+    y = (0.0 + f0 / ((0.0 + p0) + table.pdf(x0))) + f1 / ((0.0 + box.pdf(x1)) + p1)
+    c = rest.contributions("gaussian2d", name, n, seed=3)
+    np.testing.assert_array_equal(c.view(np.uint64), y.view(np.uint64))
+
+
+def test_the_uniform_square_samples_and_rates_its_points_in_vector_lanes():
+    """The uniform square's batches (vector lanes, a scalar tail): lo + (hi - lo) u and pdf 1
+    inside, 0 outside, at the edges, just past them, and at NaN, in any lane."""
+    box = rest.techniques("gaussian2d")["mis_balance:uniform_box+piecewise_constant_2d"].mis[0]
+    u = np.random.default_rng(8).random((1003, 2))
+    u[:4] = [[0.0, 0.0], [1.0, 1.0], [0.0, 1.0], [np.nextafter(1.0, 0.0), 0.5]]
+    x, p = box.sample(u)
+    np.testing.assert_array_equal(x, u)
+    np.testing.assert_array_equal(p, np.ones(len(u)))
+    edges = [0.0, -0.0, 1.0, np.nextafter(0.0, -1.0), np.nextafter(1.0, 2.0), np.nan, -np.inf, np.inf, 0.5]
+    pts = np.array([(a, b) for a in edges for b in edges])
+    pts = np.concatenate([pts, pts[::-1][:13]])           # 94 points: whole vectors and a tail
+    inside = (pts >= 0.0).all(axis=1) & (pts <= 1.0).all(axis=1)
+    np.testing.assert_array_equal(box.pdf(pts), np.where(inside, 1.0, 0.0))
+
+
 @pytest.mark.parametrize("name, params", [
     ("exponential", {}), ("exponential", {"rate": 7.5}), ("linear", {}), ("linear", {"a": 0.0, "b": 1.0}),
     ("power", {}), ("power", {"k": -0.9}), ("power", {"k": 3.0}), ("lomax", {}),
