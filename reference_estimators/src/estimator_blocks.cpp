@@ -416,13 +416,17 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
             // the first technique's points stand for the sample (examples name them): drawn
             // straight into the block's points, the others' after them
             double *xi_pts = s.x.data() + (a == 0 ? 0 : m * xd);
-            take_columns(s.u.data(), m, ud, col, sa.udim, s.cols.data());
+            const double *ua = s.u.data() + 2 * m * a;   // drawn apart (Kernel::pairs_split)
+            if (!k.pairs_split) {
+                take_columns(s.u.data(), m, ud, col, sa.udim, s.cols.data());
+                ua = s.cols.data();
+            }
             col += sa.udim;
             if (last == Stage::Sampled) {  // the profile's prefix: the points alone, unchecked
-                sa.sample(s.cols.data(), xi_pts, s.p.data(), m);
+                sa.sample(ua, xi_pts, s.p.data(), m);
                 continue;
             }
-            size_t bad = sample_and_check(sa, s.cols.data(), xi_pts, s.p.data(), m, first, diag, s.sub_drop.data());
+            size_t bad = sample_and_check(sa, ua, xi_pts, s.p.data(), m, first, diag, s.sub_drop.data());
             if (last == Stage::Screened) continue;
             if (mis_pair(t)) {
                 t.mis[1 - a]->pdf(xi_pts, s.q.data(), m);

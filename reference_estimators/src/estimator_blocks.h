@@ -98,13 +98,18 @@ struct Kernel {
     // with `evens`, for MIS of a pair whose integrand is one technique's pdf: the kernel that
     // runs the pair in one loop (fused_polar_pair), or null
     FusedPairKernel fused;
+    // an MIS pair of 2-D samplers on the general path from random points: draw_uniforms
+    // writes each sampler's columns apart, sampler a's at u[2 m a ..] (fill_pairs)
+    bool pairs_split;
     Kernel(const Integrand &f_, const Technique &t_, uint64_t n, const StreamKey &key)
         : f(f_), t(t_), ud(t_.udim(f_)), xd(f_.domain.dim), polar(polar_path(f_, t_)),
           f_is_pdf(polar ? polar_pdf_equal_to_f(f_, t_) : -1),
           evens(polar && t_.points == PointSetKind::Random && ud == 2 * int(std::max<size_t>(t_.mis.size(), 1)) &&
                 std::all_of(t_.mis.begin(), t_.mis.end(), [](const SamplerPtr &s) { return s->udim == 2; }) &&
                 (t_.kind == TechniqueKind::Mis || t_.sampler->udim == 2)),
-          fused(evens && mis_pair(t_) ? fused_polar_pair(*t_.mis[0], *t_.mis[1], f_is_pdf, t_.mis_power) : nullptr) {
+          fused(evens && mis_pair(t_) ? fused_polar_pair(*t_.mis[0], *t_.mis[1], f_is_pdf, t_.mis_power) : nullptr),
+          pairs_split(!polar && t_.kind == TechniqueKind::Mis && t_.mis.size() == 2 && t_.mis[0]->udim == 2 &&
+                      t_.mis[1]->udim == 2 && t_.points == PointSetKind::Random) {
         points.kind = t_.points;
         points.n = n;
         points.key = key;
@@ -123,7 +128,8 @@ struct Kernel {
     }
 };
 
-// The block's uniforms u[m * ud] (fill_points), or on a polar path reading u0 alone
+// The block's uniforms u[m * ud] (fill_points; Kernel::pairs_split: the two samplers' columns
+// apart, u[2 m a ..] sampler a's m x 2, UniformStream::fill_pairs), or on a polar path reading u0 alone
 // (Kernel::evens) with the stream row-aligned, the even-numbered ones alone u[m * ud / 2]:
 // each sampler's u0, sample i's of sampler a at u[i * ud / 2 + a] (fill_even: half the
 // generator's work, which drjit's tracer leaves out too).  Returns, where it drew the evens
@@ -134,6 +140,10 @@ inline std::optional<LaneGenerator> draw_uniforms(const Kernel &k, UniformStream
         const LaneGenerator before = stream.position();
         stream.fill_even(u, m * size_t(k.ud));
         return before;
+    }
+    if (k.pairs_split) {
+        stream.fill_pairs(u, u + 2 * m, m);
+        return std::nullopt;
     }
     fill_points(k.points, stream, first, m, k.ud, u);
     return std::nullopt;

@@ -22,13 +22,13 @@ namespace re {
 // at or below u, as bins_of_u's searches find it, u = 1 included) and without gaps (an empty
 // bin after the first, which bins_of_u moves down through `below`; an empty first bin is never
 // chosen by either): a point's row is found by a halving search over the marginal's entries,
-// one 16-entry permute (vpermt2pd) a step and one more for the row's upper CDF end (4 + 1 for
-// 16 rows, where counting took 15 compares and blends), and its column by counting entry e of
-// the rows' CDFs, read for every lane's row by one permute an entry, from the entries e of all
-// rows laid out together (a halving search there needs a gather a step: 1.2x slower on Zen
-// 4).  The row's lower CDF end and the column's two are kept on the way by masked blends, so
-// a point's bins and entries cost no dependent loads, where sample_many's scalar count and
-// entry loads held a point at its latency.  The cells' densities are gathered.  The
+// one 16-entry permute (vpermt2pd) a step and one more for each of the row's CDF ends (4 + 2
+// for 16 rows, where counting took 15 compares and blends), and its column by counting entry
+// e of the rows' CDFs, read for every lane's row by one permute an entry, from the entries e
+// of all rows laid out together (a halving search there needs a gather a step: 1.2x slower on
+// Zen 4).  The column's two CDF ends are kept on the way by masked blends (two gathers after
+// the count were slower), so a point's bins and entries cost no dependent loads, where
+// sample_many's scalar count and entry loads held a point at its latency.  The cells' densities are gathered.  The
 // conditional and the cell are those of the row searched, where PiecewiseConstant2D's passes
 // take the row the point landed in: the same on [0, 1], whose bins all hold doubles below
 // 2^50 bins.
@@ -94,22 +94,19 @@ class SmallTable2D {
         for (size_t start = 0; start < whole; start += kSub) {
             const size_t m = std::min(kSub, whole - start);
             // the rows: a halving search over the marginal's entries 0 .. rows - 1 (NaN above:
-            // never taken, whatever u), one permute a step; lo = its entry (marginal.cdf[0] = +0
-            // to begin), hi the entry after
+            // never taken, whatever u), one permute a step; then the row's entry (lo) and the
+            // entry after (hi), one permute each
             for (size_t j = 0; j < m; j += W) {
                 f64v u0, u1;
                 simd::deinterleave(u + 2 * (start + j), u0, u1);
                 i64v row{};
-                f64v lo{};
                 for (int64_t step = int64_t(row_first_step_); step > 0; step >>= 1) {
                     const i64v cand = row + step;
                     const f64v v = (f64v)_mm512_permutex2var_pd(m0, (__m512i)cand, m1);
-                    const auto ok = v <= u1;
-                    row = ok ? cand : row;
-                    lo = ok ? v : lo;
+                    row = v <= u1 ? cand : row;
                 }
+                simd::store(row_lo + j, (f64v)_mm512_permutex2var_pd(m0, (__m512i)row, m1));
                 simd::store(row_hi + j, (f64v)_mm512_permutex2var_pd(n0, (__m512i)row, n1));
-                simd::store(row_lo + j, lo);
                 simd::store(u0s + j, u0);
                 simd::store(u1s + j, u1);
                 simd::store(row_of + j, row);

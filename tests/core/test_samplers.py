@@ -1032,12 +1032,13 @@ def test_small_2d_tables_sample_the_same_in_vector_lanes_and_one_at_a_time(shape
     np.testing.assert_allclose(p, t[rows, cols] / t.mean(), rtol=1e-12)
 
 
-@pytest.mark.parametrize("n", [1, 7, 2048, 70001])
+@pytest.mark.parametrize("n", [1, 7, 2048, 65545, 70001])
 def test_an_mis_pair_of_square_samplers_is_its_samplers_and_the_balance_heuristic(n):
     """The general path's MIS of the uniform square and the 2-D table sampler (which screen
-    their points in the lanes that draw them, and take their uniforms' columns by shuffles):
-    each contribution is f / (p_0 + p_1) at each technique's point, recomputed from the
-    samplers' own batches on the stream's uniforms, bit for bit, at block and vector tails."""
+    their points in the lanes that draw them, their uniforms drawn straight into each one's
+    columns, whole generator rows and one value at a time after them): each contribution is
+    f / (p_0 + p_1) at each technique's point, recomputed from the samplers' own batches on
+    the stream's uniforms, bit for bit, at chunk, block, row and vector tails."""
     name = "mis_balance:uniform_box+piecewise_constant_2d"
     box, table = rest.techniques("gaussian2d")[name].mis
     f = rest.integrand("gaussian2d")
