@@ -92,7 +92,7 @@ import numpy as np
 from scipy.stats import qmc
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from uniform_mc import Drjit, add_core_arguments, alternating, best_of, cpu_line, load_core  # noqa: E402
+from uniform_mc import Drjit, add_core_arguments, alternating, best_of, cpu_line, load_core, numpy_simd  # noqa: E402
 
 BATCH = 1 << 21             # numpy samples per batch
 N_VALIDATE = 1 << 18        # samples of each validation run
@@ -670,6 +670,7 @@ def main() -> None:
           f"samples a row, best of {repeat}")
     print(f"CPU: {cpu_line()}")
     print(f"core build_info: {rest.build_info()}")
+    print(f"numpy {np.__version__}: kernels run {numpy_simd()}")
     table = PiecewiseConstant2D(gaussian2d_table(rest))
     peers: dict[str, tuple[Any, Callable]] = {"numpy": (NumpyOps, numpy_estimate)}
     drjit = None

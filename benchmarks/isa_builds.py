@@ -10,7 +10,8 @@ Builds reference_estimators/_core with CMake into build/isa-<march>/ for each --
                 between the installed build and each variant; exit status 1 on any
                 difference (tests/core/test_isa_builds.py runs this)
   --throughput  runs benchmarks/uniform_mc.py on each variant, drjit targeting the same ISA
-                where it can (haswell), so an AVX2 build is compared with AVX2 drjit code
+                where it can (haswell) and numpy's kernels held to it (NUMPY_ABOVE), so an
+                AVX2 build is compared with AVX2 drjit and numpy code
 
     .venv/bin/python benchmarks/isa_builds.py --identity [--march haswell x86-64]
     .venv/bin/python benchmarks/isa_builds.py --throughput --march haswell
@@ -105,6 +106,23 @@ def identity(marches: list[str]) -> int:
     return status
 
 
+#: numpy's dispatch targets above each variant's ISA: turned off (NPY_DISABLE_CPU_FEATURES)
+#: so that numpy runs the kernels it would run on a machine of that ISA (numpy cannot go
+#: below its SSE4.2 baseline)
+NUMPY_ABOVE = {"haswell": ("X86_V4", "AVX512_ICL", "AVX512_SPR"),
+               "x86-64": ("X86_V3", "X86_V4", "AVX512_ICL", "AVX512_SPR")}
+
+
+def numpy_env(march: str) -> dict[str, str]:
+    """The environment for a variant's run: numpy's targets above its ISA off, where this
+    CPU has them (numpy refuses to turn off what the machine lacks)."""
+    import numpy  # noqa: F401 - loads the feature table read below
+    from numpy._core._multiarray_umath import __cpu_features__ as features
+
+    off = [t for t in NUMPY_ABOVE.get(march, ()) if features.get(t)]
+    return {**os.environ, "NPY_DISABLE_CPU_FEATURES": " ".join(off)} if off else dict(os.environ)
+
+
 def throughput(marches: list[str], extra: list[str]) -> None:
     for march in marches:
         script = os.path.join(ROOT, "benchmarks", "uniform_mc.py")
@@ -112,7 +130,7 @@ def throughput(marches: list[str], extra: list[str]) -> None:
         if march == "haswell":
             cmd += ["--drjit-target", "haswell"]
         print(f"\n=== -march={march} ===", flush=True)
-        subprocess.run(cmd, check=True)
+        subprocess.run(cmd, check=True, env=numpy_env(march))
 
 
 if __name__ == "__main__":

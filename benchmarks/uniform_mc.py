@@ -21,7 +21,9 @@ stage profile in ns per sample and thread:
 
 --core loads another build of the C++ core (benchmarks/isa_builds.py makes them);
 --drjit-target haswell makes drjit's LLVM backend emit AVX2 code of width 4, for a comparison
-with an AVX2 build on an AVX-512 machine.
+with an AVX2 build on an AVX-512 machine.  numpy picks its kernels' ISA at import; the line
+"numpy:" says which it runs (an AVX2-only machine's: NPY_DISABLE_CPU_FEATURES="X86_V4
+AVX512_ICL AVX512_SPR", which benchmarks/isa_builds.py --throughput sets for an AVX2 build).
 """
 from __future__ import annotations
 
@@ -79,6 +81,25 @@ def alternating(repeat: int, runs: dict[Any, Callable[[], Any]]) -> dict[Any, fl
             fn()
             best[k] = min(best[k], time.perf_counter() - t)
     return best
+
+
+#: numpy's x86 dispatch targets (numpy >= 2.4), widest first: the ISA each stands for
+NUMPY_TARGETS = (("AVX512_SPR", "AVX-512 (Sapphire Rapids)"), ("AVX512_ICL", "AVX-512 (Ice Lake)"),
+                 ("X86_V4", "AVX-512"), ("X86_V3", "AVX2"))
+
+
+def numpy_simd() -> str:
+    """The widest x86 target numpy's kernels dispatch to in this process (lowered by
+    NPY_DISABLE_CPU_FEATURES), from numpy's runtime feature table."""
+    try:
+        from numpy._core._multiarray_umath import __cpu_features__ as features
+    except ImportError:   # a numpy whose table lives elsewhere: say so rather than guess
+        return "unknown"
+    if not any(key in features for key, _ in NUMPY_TARGETS):
+        return "unknown (no x86 dispatch targets in numpy's table)"
+    level = next((name for key, name in NUMPY_TARGETS if features.get(key)), "the SSE4.2 baseline")
+    off = os.environ.get("NPY_DISABLE_CPU_FEATURES")
+    return level + (f" (NPY_DISABLE_CPU_FEATURES={off!r})" if off else "")
 
 
 def cpu_line() -> str:
@@ -174,6 +195,7 @@ def main() -> None:
     print(f"core: built for {info['isa']} (-march={info['march'] or '(none)'}, GCC {info['compiler']}), "
           f"{info['vector_doubles']} doubles a vector, {info['rng_lanes']} PCG32 lanes; kernels run: "
           f"{info['isa']} (no runtime dispatch; this CPU's best: {info['cpu_isa']})")
+    print(f"numpy {np.__version__}: kernels run {numpy_simd()}")
     chunks = -(-n // info["chunk_size"])
     print(f"chunks: {chunks} of {info['chunk_size']} samples (each its own PCG32 stream, merged in order)")
     drjit = None
