@@ -175,6 +175,24 @@ RE_INLINE unsigned count_at_most(const double *c, double u) {
 #endif
 }
 
+// count_at_most over the kVectors * kWidth doubles at c.  AVX: four vectors' compare masks
+// packed to one byte mask (two packs and a pack) and counted once, where a movemask and a
+// population count for each vector lengthened the chain a point's count waits on.
+template <size_t kVectors>
+RE_INLINE unsigned count_at_most_vectors(const double *c, double u) {
+#if defined(__AVX__) && !defined(__AVX512F__) && defined(__AVX2__)
+    if constexpr (kVectors == 4) {
+        const __m256d uv = _mm256_set1_pd(u);
+        const auto le = [&](int v) { return _mm256_castpd_si256(_mm256_cmp_pd(_mm256_loadu_pd(c + 4 * v), uv, _CMP_LE_OQ)); };
+        const __m256i packed = _mm256_packs_epi16(_mm256_packs_epi32(le(0), le(1)), _mm256_packs_epi32(le(2), le(3)));
+        return unsigned(__builtin_popcount(unsigned(_mm256_movemask_epi8(packed)))) / 2;
+    }
+#endif
+    unsigned n = 0;
+    for (size_t v = 0; v < kVectors; ++v) n += count_at_most(c + v * kWidth, u);
+    return n;
+}
+
 // table[bits(t) & 15]: the low four bits of t's representation pick the entry (table: 16
 // doubles, 64-byte aligned).
 RE_INLINE double lookup16(const double *table, double t) { return table[bits(t) & 15u]; }
