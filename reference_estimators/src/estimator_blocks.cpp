@@ -28,9 +28,11 @@ bool rows_drawn_in_sampler(const Kernel &k, UniformStream &stream, size_t m) {
            (m * size_t(k.ud)) % LaneGenerator::kLanes == 0;
 }
 
-// Columns F and F + 1 of the m x 4 matrix u into out (m x 2): an MIS pair of 2-D samplers'
-// uniforms, whole vectors of rows by one shuffle of two loads (the copy a row took 0.55 ns a
-// sample of such an estimate's 12.5).
+// Columns F and F + 1 of the m x 4 matrix u into out (m x 2): the uniforms of an MIS pair of
+// samplers that read two each, where they are not drawn apart (Kernel::pairs_split: Sobol' or
+// stratified points, and a polar pair's blocks handed back to the general path), whole vectors
+// of rows by one shuffle of two loads (a row at a time, the copies had cost gaussian2d's MIS
+// on random points 0.55 ns a sample of its 12.5 before its uniforms were drawn apart).
 template <int F>
 void take_pair_of_four(const double *__restrict u, size_t m, double *__restrict out) {
     size_t i = 0;
@@ -416,11 +418,11 @@ size_t block_contributions(const Kernel &k, UniformStream &stream, size_t m, uin
             // the first technique's points stand for the sample (examples name them): drawn
             // straight into the block's points, the others' after them
             double *xi_pts = s.x.data() + (a == 0 ? 0 : m * xd);
-            const double *ua = s.u.data() + 2 * m * a;   // drawn apart (Kernel::pairs_split)
-            if (!k.pairs_split) {
+            const double *ua = s.cols.data();
+            if (k.pairs_split)
+                ua = s.u.data() + 2 * m * a;   // drawn apart
+            else
                 take_columns(s.u.data(), m, ud, col, sa.udim, s.cols.data());
-                ua = s.cols.data();
-            }
             col += sa.udim;
             if (last == Stage::Sampled) {  // the profile's prefix: the points alone, unchecked
                 sa.sample(ua, xi_pts, s.p.data(), m);

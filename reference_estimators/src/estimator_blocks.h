@@ -98,7 +98,8 @@ struct Kernel {
     // with `evens`, for MIS of a pair whose integrand is one technique's pdf: the kernel that
     // runs the pair in one loop (fused_polar_pair), or null
     FusedPairKernel fused;
-    // an MIS pair of 2-D samplers on the general path from random points: draw_uniforms
+    // an MIS pair of samplers that read two uniforms each, on the general path from random
+    // points: draw_uniforms
     // writes each sampler's columns apart, sampler a's at u[2 m a ..] (fill_pairs)
     bool pairs_split;
     Kernel(const Integrand &f_, const Technique &t_, uint64_t n, const StreamKey &key)

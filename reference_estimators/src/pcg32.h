@@ -208,8 +208,8 @@ class LaneGenerator {
     };
     static constexpr int kEvensPerRow = Rows<true>::kPerRow;
 
-    // fill's next rows * L uniforms as samples of four (a0 a1 b0 b1: an MIS pair of 2-D
-    // samplers), sample i's a0 a1 to a[2 i ..] and b0 b1 to b[2 i ..]: each row split where it
+    // fill's next rows * L uniforms as samples of four (a0 a1 b0 b1: an MIS pair of samplers
+    // that read two each), sample i's a0 a1 to a[2 i ..] and b0 b1 to b[2 i ..]: each row split where it
     // was drawn, in L1 (a block's worth of samples written whole and copied column by column
     // after had cost 0.8 ns a sample of such an estimate's 11.9).
     void fill_pairs(double *a, double *b, size_t rows) {
@@ -299,7 +299,7 @@ class UniformStream {
             next();
         }
     }
-    // The next 4 samples uniforms as fill gives them, split into two samplers' pairs (sample
+    // The next 4 x `samples` uniforms as fill gives them, split into two samplers' pairs (sample
     // i's first two to a[2 i ..], its last two to b[2 i ..]): by whole generator rows
     // (LaneGenerator::fill_pairs) where the stream is row-aligned (an estimate's blocks are),
     // one value at a time after them and elsewhere.

@@ -157,7 +157,7 @@ class UniformBox final : public Pointwise<UniformBox> {
         bool inside = true;
         for (; j < coords; ++j) {
             x[j] = lo[j % 2] + width[j % 2] * u[j];
-            inside &= (x[j] >= lo[j % 2]) & (x[j] <= hi[j % 2]);
+            if (screen) inside &= (x[j] >= lo[j % 2]) & (x[j] <= hi[j % 2]);
         }
         std::fill(p, p + n, inv_measure_);
         for (size_t l = 0; l < W; ++l) inside &= outside[l] == 0;

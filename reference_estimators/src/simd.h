@@ -175,12 +175,13 @@ RE_INLINE unsigned count_at_most(const double *c, double u) {
 #endif
 }
 
-// count_at_most over the kVectors * kWidth doubles at c.  AVX: four vectors' compare masks
-// packed to one byte mask (two packs and a pack) and counted once, where a movemask and a
-// population count for each vector lengthened the chain a point's count waits on.
+// count_at_most over the kVectors * kWidth doubles at c.  AVX2 without AVX-512, four vectors:
+// their compare masks packed to one byte mask (two packs and a pack) and counted once, where a
+// movemask and a population count for each vector lengthened the chain a point's count waits
+// on; elsewhere count_at_most a vector.
 template <size_t kVectors>
 RE_INLINE unsigned count_at_most_vectors(const double *c, double u) {
-#if defined(__AVX__) && !defined(__AVX512F__) && defined(__AVX2__)
+#if defined(__AVX2__) && !defined(__AVX512F__)
     if constexpr (kVectors == 4) {
         const __m256d uv = _mm256_set1_pd(u);
         const auto le = [&](int v) { return _mm256_castpd_si256(_mm256_cmp_pd(_mm256_loadu_pd(c + 4 * v), uv, _CMP_LE_OQ)); };

@@ -5,9 +5,9 @@
 // The same bits as PiecewiseConstant2D's passes through PiecewiseTables::sample_many.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
-#include <algorithm>
 #include <cstdint>
 #include <vector>
 

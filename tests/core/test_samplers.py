@@ -1032,17 +1032,21 @@ def test_small_2d_tables_sample_the_same_in_vector_lanes_and_one_at_a_time(shape
     np.testing.assert_allclose(p, t[rows, cols] / t.mean(), rtol=1e-12)
 
 
+@pytest.mark.parametrize("kind", ["random", "sobol", "stratified"])
 @pytest.mark.parametrize("n", [1, 7, 2048, 65545, 70001])
-def test_an_mis_pair_of_square_samplers_is_its_samplers_and_the_balance_heuristic(n):
+def test_an_mis_pair_of_square_samplers_is_its_samplers_and_the_balance_heuristic(n, kind):
     """The general path's MIS of the uniform square and the 2-D table sampler (which screen
-    their points in the lanes that draw them, their uniforms drawn straight into each one's
-    columns, whole generator rows and one value at a time after them): each contribution is
-    f / (p_0 + p_1) at each technique's point, recomputed from the samplers' own batches on
-    the stream's uniforms, bit for bit, at chunk, block, row and vector tails."""
+    their points in the lanes that draw them; their uniforms, from random points, drawn
+    straight into each one's columns, whole generator rows and one value at a time after
+    them, and from Sobol' or stratified points taken out of the block's rows by shuffles):
+    each contribution is f / (p_0 + p_1) at each technique's point, recomputed from the
+    samplers' own batches on the point set's uniforms, bit for bit, at chunk, block, row and
+    vector tails."""
     name = "mis_balance:uniform_box+piecewise_constant_2d"
-    box, table = rest.techniques("gaussian2d")[name].mis
+    technique = rest.techniques("gaussian2d")[name]
+    box, table = technique.mis
     f = rest.integrand("gaussian2d")
-    u = rest.points(n, 4, seed=3)
+    u = rest.points(n, 4, kind, seed=3)
     x0, p0 = box.sample(u[:, :2])
     x1, p1 = table.sample(u[:, 2:])
     np.testing.assert_array_equal(x0, u[:, :2])   # 0 + 1 u on the unit square
@@ -1050,8 +1054,26 @@ def test_an_mis_pair_of_square_samplers_is_its_samplers_and_the_balance_heuristi
     f0, f1 = f.eval(x0), f.eval(x1)
     assert np.all(f0 > 0) and np.all(f1 > 0)
     y = (0.0 + f0 / ((0.0 + p0) + table.pdf(x0))) + f1 / ((0.0 + box.pdf(x1)) + p1)
-    c = rest.contributions("gaussian2d", name, n, seed=3)
+    points = technique if kind == "random" else rest.with_points(technique, kind)
+    c = rest.contributions("gaussian2d", points, n, seed=3)
     np.testing.assert_array_equal(c.view(np.uint64), y.view(np.uint64))
+
+
+@pytest.mark.parametrize("shape", [(16, 16), (4, 128)], ids=["small table in vector lanes", "batch loop"])
+@pytest.mark.parametrize("n", [1003, 70001])
+def test_a_table_samplers_bad_densities_are_screened_where_they_are_drawn(shape, n):
+    """A table of subnormal values has every cell's density overflow to +inf: importance
+    sampling and MIS with the uniform square report every sample as a bad pdf (none averaged),
+    whether the small-table kernel screens its lanes or the batch loop's points are screened
+    after, at vector and block tails."""
+    s = rest.sampler("piecewise_constant_2d", table=np.full(shape, 1e-320))
+    avx512 = rest.build_info()["isa"] == "AVX-512"
+    assert s.kernel == ("small table in vector lanes" if shape == (16, 16) and avx512 else "batch loop")
+    assert np.all(s.sample(np.full((9, 2), 0.3))[1] == np.inf)
+    box = rest.techniques("gaussian2d")["mis_balance:uniform_box+piecewise_constant_2d"].mis[0]
+    for technique in (rest.importance(s), rest.mis([box, s])):
+        e = rest.integrate("gaussian2d", technique, n, seed=1)
+        assert e.issues == {"bad_pdf": n} and e.n == 0
 
 
 def test_the_uniform_square_samples_and_rates_its_points_in_vector_lanes():
