@@ -186,7 +186,8 @@ class SamplerTest:
             if n_zero:
                 fail("zero_pdf", (p == 0) & inside, "sampled points where the pdf is 0", p)
         if reported is not None:
-            mismatch = reported_pdf_failure(x, reported, self.claimed_pdf, values=claimed)
+            mismatch = reported_pdf_failure(x, reported, self.claimed_pdf, values=claimed,
+                                            all_finite=all_inside)
             if mismatch is not None:
                 failures.append(mismatch)
         if self.quadrature_faults:

@@ -57,22 +57,24 @@ def rounding_spread(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray, at: np
 
 def reported_pdf_failure(x: np.ndarray, reported: np.ndarray, pdf: Callable[[np.ndarray], np.ndarray], *,
                          rtol: float = 1e-4, max_examples: int = 5,
-                         values: np.ndarray | None = None) -> Failure | None:
+                         values: np.ndarray | None = None, all_finite: bool = False) -> Failure | None:
     """A "reported_pdf" Failure (count, largest relative difference, examples) where the pdf
     a sampler reported with its samples x differs from pdf(x) beyond the module's tolerance,
     else None.  Rows of x that are not finite (samples not produced) are skipped; a reported
     value that is NaN, infinite or negative at a produced sample is a mismatch.  ``values``:
     pdf(x) (N,) where the caller has it already (the sampler check does), so that pdf is
-    called again only for the nudged copies of mismatching samples."""
+    called again only for the nudged copies of mismatching samples.  ``all_finite``: the
+    caller knows every row of x is finite (the sampler check, where every point lies inside
+    its domain), so that they are not tested again (1.2-1.9 ms a million directions)."""
     x = np.asarray(x, dtype=float)
     n = x.shape[0]
     rep = np.asarray(reported, dtype=float).reshape(-1)
     if rep.size != n:
         return Failure("reported_pdf", n, f"the sampler reported {rep.size} pdf values for {n} samples", ())
-    finite = rest.finite_rows(x)
+    finite = None if all_finite else rest.finite_rows(x)
     # every sample produced (the sampler check passes the produced ones): the arrays as they
     # are, where indexing them copied 40 MB a million directions
-    every = bool(finite.all())
+    every = all_finite or bool(finite.all())
     produced = None if every else np.flatnonzero(finite)    # the rows of x that xs holds
     if produced is not None and produced.size == 0:
         return None
