@@ -57,6 +57,19 @@ RE_INLINE void deinterleave(const double *p, f64v &even, f64v &odd) {
     odd = __builtin_shufflevector(a, b, 1, 3);
 #endif
 }
+// deinterleave's inverse: even and odd stored as the pairs p[0..2 kWidth).
+RE_INLINE void interleave(double *p, f64v even, f64v odd) {
+#if defined(__AVX512F__)
+    store(p, __builtin_shufflevector(even, odd, 0, 8, 1, 9, 2, 10, 3, 11));
+    store(p + kWidth, __builtin_shufflevector(even, odd, 4, 12, 5, 13, 6, 14, 7, 15));
+#elif defined(__AVX__)
+    store(p, __builtin_shufflevector(even, odd, 0, 4, 1, 5));
+    store(p + kWidth, __builtin_shufflevector(even, odd, 2, 6, 3, 7));
+#else
+    store(p, __builtin_shufflevector(even, odd, 0, 2));
+    store(p + kWidth, __builtin_shufflevector(even, odd, 1, 3));
+#endif
+}
 // p[0], p[stride], ..., p[(kWidth - 1) stride]: whole loads for strides 1 and 2 (deinterleave),
 // a lane at a time otherwise.
 RE_INLINE f64v load_strided(const double *p, size_t stride) {

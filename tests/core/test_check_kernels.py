@@ -119,6 +119,19 @@ def test_azimuth_is_within_2_ulp_of_long_double_atan2_and_keeps_signed_zeros():
     assert s[4, 1] == 0.125 and s[5, 1] == 0.625
 
 
+@pytest.mark.parametrize("kind", ["hemisphere", "sphere"])
+def test_direction_params_are_the_same_in_vector_lanes_and_one_at_a_time(kind):
+    """The (hemi)sphere's map runs whole vectors of directions in lanes and a scalar tail: the
+    points above (the norm tolerance's edges, the horizon's, NaN and infinite coordinates, the
+    poles, signed zeros) give the same parameters and flags bit for bit either way."""
+    x = points(kind, np.random.default_rng(3))[:203]
+    x[10:14] = [[-0.0, -0.0, 1.0], [0.0, 0.0, 0.0], [0.0, 0.0, -np.inf], [0.0, 0.0, 1.0000001]]
+    s, inside = rest.domain_params(kind, x)
+    one = [rest.domain_params(kind, x[i:i + 1]) for i in range(len(x))]
+    np.testing.assert_array_equal(s.view(np.uint64), np.concatenate([o[0] for o in one]).view(np.uint64))
+    np.testing.assert_array_equal(inside, np.concatenate([o[1] for o in one]))
+
+
 def test_domain_params_reject_a_wrong_shape_or_kind():
     with pytest.raises(ValueError, match="shape"):
         rest.domain_params("sphere", np.zeros((5, 2)))
