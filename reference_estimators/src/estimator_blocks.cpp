@@ -28,28 +28,6 @@ bool rows_drawn_in_sampler(const Kernel &k, UniformStream &stream, size_t m) {
            (m * size_t(k.ud)) % LaneGenerator::kLanes == 0;
 }
 
-// Columns F and F + 1 of the m x 4 matrix u into out (m x 2): the uniforms of an MIS pair of
-// samplers that read two each, where they are not drawn apart (Kernel::pairs_split: Sobol' or
-// stratified points, and a polar pair's blocks handed back to the general path), whole vectors
-// of rows by one shuffle of two loads (a row at a time, the copies had cost gaussian2d's MIS
-// on random points 0.55 ns a sample of its 12.5 before its uniforms were drawn apart).
-template <int F>
-void take_pair_of_four(const double *__restrict u, size_t m, double *__restrict out) {
-    size_t i = 0;
-#if defined(__AVX__)
-    constexpr size_t W = simd::kWidth, R = W / 2;   // rows an output vector holds
-    for (; i + R <= m; i += R) {
-        const simd::f64v a = simd::load(u + 4 * i), b = simd::load(u + 4 * i + W);
-#if defined(__AVX512F__)
-        simd::store(out + 2 * i, __builtin_shufflevector(a, b, F, F + 1, F + 4, F + 5, F + 8, F + 9, F + 12, F + 13));
-#else
-        simd::store(out + 2 * i, __builtin_shufflevector(a, b, F, F + 1, F + 4, F + 5));
-#endif
-    }
-#endif
-    for (; i < m; ++i) std::memcpy(out + 2 * i, u + 4 * i + F, 2 * sizeof(double));
-}
-
 // Copies columns [from, from + count) of the m x ud matrix u into out (m x count).
 // (the common widths by fixed-size copies: the generic double loop, its trip counts unknown,
 // was a fifth of an MIS estimate's time)
@@ -58,7 +36,9 @@ void take_columns(const double *__restrict u, size_t m, int ud, int from, int co
     if (count == 1) {
         for (size_t i = 0; i < m; ++i) out[i] = src[i * ud];
     } else if (count == 2 && ud == 4 && (from == 0 || from == 2)) {
-        from == 0 ? take_pair_of_four<0>(u, m, out) : take_pair_of_four<2>(u, m, out);
+        // an MIS pair of samplers reading two uniforms each where they are not drawn apart
+        // (Kernel::pairs_split): Sobol' or stratified points, a polar pair's blocks handed back
+        from == 0 ? simd::pair_columns<0>(u, m, out) : simd::pair_columns<2>(u, m, out);
     } else if (count == 2) {
         for (size_t i = 0; i < m; ++i) std::memcpy(out + 2 * i, src + i * ud, 2 * sizeof(double));
     } else {

@@ -9,6 +9,8 @@
 #include <cstdint>
 #include <cstring>
 
+#include "simd.h"
+
 #if defined(__AVX2__) || defined(__AVX512F__)
 #include <immintrin.h>
 #endif
@@ -215,30 +217,12 @@ class LaneGenerator {
     void fill_pairs(double *a, double *b, size_t rows) {
         static_assert(kLanes % 4 == 0, "a row holds whole samples of four");
         constexpr int kSamples = kLanes / 4;
-        typedef double f64v __attribute__((vector_size(8 * kVec)));
         Rows<false> draw(*this);
         alignas(64) double row[kLanes];
         for (size_t r = 0; r < rows; ++r) {
             draw.next(row);
-            double *ra = a + 2 * kSamples * r, *rb = b + 2 * kSamples * r;
-            // two vectors of the row hold kVec / 2 samples: one shuffle of them for each sampler
-            for (int v = 0; v < kVecs; v += 2) {
-                f64v x0, x1, pa, pb;
-                std::memcpy(&x0, row + v * kVec, sizeof x0);
-                std::memcpy(&x1, row + (v + 1) * kVec, sizeof x1);
-#if defined(__AVX512F__)
-                pa = __builtin_shufflevector(x0, x1, 0, 1, 4, 5, 8, 9, 12, 13);
-                pb = __builtin_shufflevector(x0, x1, 2, 3, 6, 7, 10, 11, 14, 15);
-#elif defined(__AVX__)
-                pa = __builtin_shufflevector(x0, x1, 0, 1, 4, 5);
-                pb = __builtin_shufflevector(x0, x1, 2, 3, 6, 7);
-#else   // a vector is half a sample
-                pa = x0;
-                pb = x1;
-#endif
-                std::memcpy(ra + v / 2 * kVec, &pa, sizeof pa);
-                std::memcpy(rb + v / 2 * kVec, &pb, sizeof pb);
-            }
+            simd::pair_columns<0>(row, kSamples, a + 2 * kSamples * r);
+            simd::pair_columns<2>(row, kSamples, b + 2 * kSamples * r);
         }
     }
 

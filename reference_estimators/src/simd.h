@@ -70,6 +70,26 @@ RE_INLINE void interleave(double *p, f64v even, f64v odd) {
     store(p + kWidth, __builtin_shufflevector(even, odd, 1, 3));
 #endif
 }
+// Columns F and F + 1 of the m rows of four at u into out (m x 2): whole vectors of rows by one
+// shuffle of two loads, the rest a row at a time.  The uniforms of each sampler of an MIS pair
+// that read two each (UniformStream::fill_pairs, the estimators' column copies).
+template <int F>
+RE_INLINE void pair_columns(const double *__restrict u, size_t m, double *__restrict out) {
+    static_assert(F == 0 || F == 2, "a pair of columns of rows of four");
+    size_t i = 0;
+#if defined(__AVX__)
+    constexpr size_t R = kWidth / 2;   // rows an output vector holds
+    for (; i + R <= m; i += R) {
+        const f64v a = load(u + 4 * i), b = load(u + 4 * i + kWidth);
+#if defined(__AVX512F__)
+        store(out + 2 * i, __builtin_shufflevector(a, b, F, F + 1, F + 4, F + 5, F + 8, F + 9, F + 12, F + 13));
+#else
+        store(out + 2 * i, __builtin_shufflevector(a, b, F, F + 1, F + 4, F + 5));
+#endif
+    }
+#endif
+    for (; i < m; ++i) std::memcpy(out + 2 * i, u + 4 * i + F, 2 * sizeof(double));
+}
 // p[0], p[stride], ..., p[(kWidth - 1) stride]: whole loads for strides 1 and 2 (deinterleave),
 // a lane at a time otherwise.
 RE_INLINE f64v load_strided(const double *p, size_t stride) {
