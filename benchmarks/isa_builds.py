@@ -63,6 +63,13 @@ out["dithered_params"] = s.tobytes().hex() + inside.tobytes().hex()
 # 80 000 points: the uniforms drawn inside the pass from two stream chunks
 s, inside = rest.dithered_domain_params("sphere", np.repeat(unit, 4, axis=0), stream=(3, 0xD17E))
 out["dithered_stream"] = s.tobytes().hex() + inside.tobytes().hex()
+# the (hemi)sphere map's lanes and tail: the norm tolerance's and the horizon's edges, NaN,
+# infinities, signed zeros
+edge = unit[:1_003] * (1 + rng.uniform(-2e-5, 2e-5, (1_003, 1)))
+edge[:8] = [[0, 0, -1e-12], [0, 0, -2e-12], [np.nan, 0, 1], [0, np.inf, 0], [-0.0, -0.0, 1],
+            [0, 0, -1.0000001], [0, 0, 0], [0.6, -0.8, -0.0]]
+out["direction_params"] = "".join(a.tobytes().hex() for kind in ("hemisphere", "sphere")
+                                  for a in rest.domain_params(kind, edge))
 lo = rng.random((3_001, 2)) * 0.9
 out["cubature_points"] = rest.cubature_points("sphere", lo, lo + 0.05, np.linspace(0.1, 0.9, 4),
                                               columns=[0, 2, 1]).tobytes().hex()

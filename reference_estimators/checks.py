@@ -42,8 +42,8 @@ def domain_params(kind: str, x: Any, lo: float = 0.0, hi: float = 1.0) -> tuple[
     on the hemisphere and sphere.  One pass in C++ with the GIL released."""
     code = _check_domain(kind)
     a = np.ascontiguousarray(x, dtype=np.float64)
-    if CHECK_DOMAINS[code] in ("interval", "half_line"):
-        a = a.reshape(-1)
+    if CHECK_DOMAINS[code] in ("interval", "half_line") and a.ndim == 2 and a.shape[1] == 1:
+        a = a.reshape(-1)    # (N, 1) as (N,); another shape is refused by the core, named
     return _core.domain_params(code, float(lo), float(hi), a)
 
 

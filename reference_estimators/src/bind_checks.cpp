@@ -84,7 +84,7 @@ size_t check_rows(const InArray &x, const BoolArray &keep) {
 }
 
 // (s, inside) of domain_params for points x on domain `kind`, on all threads in fixed chunks
-// (each point's parameters its own; the azimuths' vector and scalar paths give the same
+// (each point's parameters its own; the maps' vector lanes and scalar tails give the same
 // bits).  With uniforms u, s is of the points dithered within their float32 rounding
 // (dither_float32), a chunk at a time into this thread's scratch rows (reused from chunk to
 // chunk: no fresh memory), and `inside` of the points as given.  With a stream key in place

@@ -24,21 +24,18 @@ inline int domain_point_dim(CheckDomain d) {
     }
 }
 
-// s[2 i + 1] = the azimuth in turns of (x[stride i], x[stride i + 1]), for n points: whole
-// vectors of fastmath's atan2_turns, then the scalar tail (the same bits).
-inline void azimuths(const double *x, size_t stride, size_t n, double *s) {
+// s[2 i + 1] = the azimuth in turns of the disk's point (x[2 i], x[2 i + 1]), for n points:
+// whole vectors of fastmath's atan2_turns, then the scalar tail (the same bits).
+inline void disk_azimuths(const double *x, size_t n, double *s) {
     constexpr size_t W = simd::kWidth;
     size_t i = 0;
     for (; i + W <= n; i += W) {
         simd::f64v a, b;
-        for (size_t w = 0; w < W; ++w) {
-            a[w] = x[stride * (i + w)];
-            b[w] = x[stride * (i + w) + 1];
-        }
+        simd::deinterleave(x + 2 * i, a, b);
         const simd::f64v turns = fm::atan2_turns(b, a);
         for (size_t w = 0; w < W; ++w) s[2 * (i + w) + 1] = turns[w];
     }
-    for (; i < n; ++i) s[2 * i + 1] = fm::atan2_turns(x[stride * i + 1], x[stride * i]);
+    for (; i < n; ++i) s[2 * i + 1] = fm::atan2_turns(x[2 * i + 1], x[2 * i]);
 }
 
 // domain_params on the hemisphere or the sphere: a unit vector (a, b, c) within 1e-5 of unit
@@ -50,9 +47,9 @@ inline void azimuths(const double *x, size_t stride, size_t n, double *s) {
 template <bool hemi, class D, class In>
 RE_INLINE void direction_param(D a, D b, D c, D &s0, In &in) {
     const D norm = a * a + b * b + c * c, off = norm - 1.0;
-    // x - x is 0 exactly for finite x (NaN for NaN and the infinities); |off| <= 1e-5 by two
-    // comparisons, false for NaN as fabs's is
-    const auto ok = (a - a == 0.0) & (b - b == 0.0) & (c - c == 0.0) & (off <= 1e-5) & (off >= -1e-5);
+    // |off| <= 1e-5 by two comparisons, false for NaN as fabs's is: a NaN or infinite
+    // coordinate (or squares that overflow) makes the norm NaN or +inf, so it fails this too
+    const auto ok = (off <= 1e-5) & (off >= -1e-5);
     const D z = c < -1.0 ? D{} - 1.0 : (c > 1.0 ? D{} + 1.0 : c);  // NaN passes
     s0 = hemi ? z : (1.0 - z) / 2.0;
     in = hemi ? ok & (c >= -1e-12) : ok;
@@ -120,7 +117,7 @@ inline void domain_params(CheckDomain d, double lo, double hi, const double *x, 
                 if (s) s[2 * i] = r2;
                 inside[i] = std::isfinite(a) && std::isfinite(b) && r2 <= 1 + 1e-12;
             }
-            if (s) azimuths(x, 2, n, s);
+            if (s) disk_azimuths(x, n, s);
             return;
         case CheckDomain::hemisphere:
         case CheckDomain::sphere:

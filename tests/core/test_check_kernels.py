@@ -135,6 +135,11 @@ def test_direction_params_are_the_same_in_vector_lanes_and_one_at_a_time(kind):
 def test_domain_params_reject_a_wrong_shape_or_kind():
     with pytest.raises(ValueError, match="shape"):
         rest.domain_params("sphere", np.zeros((5, 2)))
+    for kind in ("interval", "half_line"):     # (N, 1) is N points; (N, 2) is not 2N of them
+        np.testing.assert_array_equal(rest.domain_params(kind, np.full((5, 1), 0.5))[0],
+                                      rest.domain_params(kind, np.full(5, 0.5))[0])
+        with pytest.raises(ValueError, match="shape"):
+            rest.domain_params(kind, np.zeros((5, 2)))
     with pytest.raises(ValueError, match="'kind' must be one of"):
         rest.domain_params("torus", np.zeros((5, 2)))
 

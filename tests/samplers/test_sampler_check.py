@@ -466,6 +466,23 @@ def test_a_reported_pdf_off_by_a_factor_fails_with_counts_and_examples(fault, fa
     assert f"{factor - 1:.3g}" in f["reported_pdf"].detail
 
 
+def test_the_reported_pdf_check_told_every_point_is_finite_finds_the_same():
+    """The sampler check tells the reported-pdf check that every point is finite where every
+    point lies inside the domain (all_finite, which skips finite_rows): the same failure, count,
+    detail and examples as that check testing the rows itself, on mismatches spread over the
+    rows and on none."""
+    from harness.samplers.reported import reported_pdf_failure
+    cos = rest.sampler("cosine_hemisphere")
+    w, p = cos.sample(rest.points(5_000, 2, seed=2))
+    off = p.copy()
+    off[::7] *= 1.01
+    for reported in (p, off):
+        told = reported_pdf_failure(w, reported, cos.pdf, all_finite=True)
+        found = reported_pdf_failure(w, reported, cos.pdf)
+        assert told == found
+    assert found is not None and found.count == len(off[::7])
+
+
 def test_the_sampled_lobes_pdf_reported_instead_of_the_mixtures_fails():
     """A two-lobe mixture (cosine and uniform, half each) whose sample() reports the pdf of
     the lobe it sampled: where the samples go is right, so only this check sees it."""
