@@ -70,6 +70,11 @@ edge[:8] = [[0, 0, -1e-12], [0, 0, -2e-12], [np.nan, 0, 1], [0, np.inf, 0], [-0.
             [0, 0, -1.0000001], [0, 0, 0], [0.6, -0.8, -0.0]]
 out["direction_params"] = "".join(a.tobytes().hex() for kind in ("hemisphere", "sphere")
                                   for a in rest.domain_params(kind, edge))
+# a float32 renderer's directions both ways: rows inside the slack, near it, far off it, not finite
+rows = np.concatenate([unit[:2_003] * (1 + rng.uniform(-3e-6, 3e-6, (2_003, 1))), edge[:11], unit[:5] * 3])
+out["float32_unit_rows"] = "".join(a.tobytes().hex() for a in rest.float32_unit_rows(rows, 1e-6))
+columns = np.ascontiguousarray(f32[:2_011].T.astype(np.float32))
+out["float64_rows"] = rest.float64_rows(columns).tobytes().hex()
 lo = rng.random((3_001, 2)) * 0.9
 out["cubature_points"] = rest.cubature_points("sphere", lo, lo + 0.05, np.linspace(0.1, 0.9, 4),
                                               columns=[0, 2, 1]).tobytes().hex()
