@@ -24,9 +24,11 @@ RE_INLINE auto on_sphere_v(V w0, V w1, V w2) {
 }
 inline bool on_sphere(const double *w) { return on_sphere_v(w[0], w[1], w[2]); }
 
-// (u, v) in [a0, b0] x [a1, b1], without a branch (NaN: false); the square's test inline where
-// Domain::contains, a call with a loop over the dimensions, was a large part of a 2-D batch.
-RE_INLINE bool in_rectangle(double u, double v, double a0, double b0, double a1, double b1) {
+// (u, v) in [a0, b0] x [a1, b1], without a branch (NaN: false), for double or simd::f64v (a
+// truth value, or a lane mask); the square's test inline where Domain::contains, a call with a
+// loop over the dimensions, was a large part of a 2-D batch.
+template <class D>
+RE_INLINE auto in_rectangle(D u, D v, double a0, double b0, double a1, double b1) {
     return (u >= a0) & (u <= b0) & (v >= a1) & (v <= b1);
 }
 inline bool on_hemisphere(const double *w) { return on_sphere(w) & (w[2] >= 0); }
@@ -97,8 +99,7 @@ struct Domain {
                     for (; i + simd::kWidth <= n; i += simd::kWidth) {
                         f64v u, v;
                         simd::deinterleave(x + 2 * i, u, v);
-                        const auto in = (u >= a0) & (u <= b0) & (v >= a1) & (v <= b1);
-                        lanes += in ? simd::i64v{} : simd::i64v{} + 1;
+                        lanes += in_rectangle(u, v, a0, b0, a1, b1) ? simd::i64v{} : simd::i64v{} + 1;
                     }
                     for (size_t l = 0; l < simd::kWidth; ++l) out += size_t(lanes[l]);
                     for (; i < n; ++i) out += !in_rectangle(x[2 * i], x[2 * i + 1], a0, b0, a1, b1);

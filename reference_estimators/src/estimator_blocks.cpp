@@ -241,7 +241,7 @@ bool polar_mis(const Kernel &k, bool evens, size_t m, Scratch &s, Stage last, La
 
 size_t check_samples(const Domain &dom, const double *x, const double *p, size_t m, uint64_t first,
                      Diagnostics &diag, unsigned char *drop) {
-    if (count_invalid_pdfs(p, m) == 0 && dom.count_outside(x, m) == 0) return 0;
+    if (all_valid(dom, x, p, m)) return 0;
     return mark_invalid_samples(dom, x, p, m, first, diag, drop);
 }
 

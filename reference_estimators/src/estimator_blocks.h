@@ -99,8 +99,8 @@ struct Kernel {
     // runs the pair in one loop (fused_polar_pair), or null
     FusedPairKernel fused;
     // an MIS pair of samplers that read two uniforms each, on the general path from random
-    // points: draw_uniforms
-    // writes each sampler's columns apart, sampler a's at u[2 m a ..] (fill_pairs)
+    // points: draw_uniforms writes each sampler's columns apart, sampler a's at u[2 m a ..]
+    // (UniformStream::fill_pairs)
     bool pairs_split;
     Kernel(const Integrand &f_, const Technique &t_, uint64_t n, const StreamKey &key)
         : f(f_), t(t_), ud(t_.udim(f_)), xd(f_.domain.dim), polar(polar_path(f_, t_)),
@@ -130,10 +130,10 @@ struct Kernel {
 };
 
 // The block's uniforms u[m * ud] (fill_points; Kernel::pairs_split: the two samplers' columns
-// apart, u[2 m a ..] sampler a's m x 2, UniformStream::fill_pairs), or on a polar path reading u0 alone
-// (Kernel::evens) with the stream row-aligned, the even-numbered ones alone u[m * ud / 2]:
-// each sampler's u0, sample i's of sampler a at u[i * ud / 2 + a] (fill_even: half the
-// generator's work, which drjit's tracer leaves out too).  Returns, where it drew the evens
+// apart, u[2 m a ..] sampler a's m x 2, UniformStream::fill_pairs), or on a polar path reading
+// u0 alone (Kernel::evens) with the stream row-aligned, the even-numbered ones alone
+// u[m * ud / 2]: each sampler's u0, sample i's of sampler a at u[i * ud / 2 + a] (fill_even:
+// half the generator's work, which drjit's tracer leaves out too).  Returns, where it drew the evens
 // alone, where the stream stood before them (UniformStream::rewind draws them all again).
 inline std::optional<LaneGenerator> draw_uniforms(const Kernel &k, UniformStream &stream, uint64_t first, size_t m,
                                            double *u) {

@@ -29,7 +29,7 @@ size_t count_invalid_pdfs(const double *p, size_t n) {
 
 bool Sampler::sample_valid(const double *u, double *x, double *p, size_t n) const {
     sample(u, x, p, n);
-    return count_invalid_pdfs(p, n) == 0 && domain.count_outside(x, n) == 0;
+    return all_valid(domain, x, p, n);
 }
 
 size_t Sampler::sample_polar(const double *, size_t, double *, double *, size_t) const {
@@ -129,7 +129,7 @@ class UniformBox final : public Pointwise<UniformBox> {
         const double a0 = domain.lo[0], b0 = domain.hi[0], a1 = domain.lo[1], b1 = domain.hi[1], q = inv_measure_;
         simd::map2(x, p, n, [=](auto s, auto t) {
             using D = decltype(s);
-            return (s >= a0) & (s <= b0) & (t >= a1) & (t <= b1) ? D{} + q : D{};
+            return in_rectangle(s, t, a0, b0, a1, b1) ? D{} + q : D{};
         });
     }
 

@@ -81,6 +81,11 @@ RE_INLINE auto valid_pdf(V p) { return (p > 0.0) & (p <= std::numeric_limits<dou
 
 // How many of the pdf values p[0..n) are not valid_pdf, in vector lanes.
 size_t count_invalid_pdfs(const double *p, size_t n);
+// The estimators' screening of sampled points: whether every point of x (n points) lies in
+// `dom` and every pdf value of p is valid_pdf.
+inline bool all_valid(const Domain &dom, const double *x, const double *p, size_t n) {
+    return count_invalid_pdfs(p, n) == 0 && dom.count_outside(x, n) == 0;
+}
 
 // Registry: names, parameter names with defaults, and what each sampler is.
 struct SamplerInfo {

@@ -28,10 +28,10 @@ namespace re {
 // of all rows laid out together (a halving search there needs a gather a step: 1.2x slower on
 // Zen 4).  The column's two CDF ends are kept on the way by masked blends (two gathers after
 // the count were slower), so a point's bins and entries cost no dependent loads, where
-// sample_many's scalar count and entry loads held a point at its latency.  The cells' densities are gathered.  The
-// conditional and the cell are those of the row searched, where PiecewiseConstant2D's passes
-// take the row the point landed in: the same on [0, 1], whose bins all hold doubles below
-// 2^50 bins.
+// sample_many's scalar count and entry loads held a point at its latency.  The cells'
+// densities are gathered.  The conditional and the cell are those of the row searched, where
+// PiecewiseConstant2D's passes take the row the point landed in: the same on [0, 1], whose
+// bins all hold doubles below 2^50 bins.
 // The rows, the columns and the points are three passes over a sub-block of points: in one
 // loop, a vector's chain of dependent steps (row search, column count, two divisions) was
 // longer than the out-of-order window could hide behind the next vector's.
@@ -142,12 +142,11 @@ class SmallTable2D {
                 const size_t i = start + j;
                 const f64v pv = gather(cell_pdf, row * row_width + col);
                 if (invalid) {
-                    const auto ok = (xv >= x_lo) & (xv <= x_hi) & (y >= y_lo) & (y <= y_hi) & valid_pdf(pv);
+                    const auto ok = in_rectangle(xv, y, x_lo, x_hi, y_lo, y_hi) & valid_pdf(pv);
                     rejected += ok ? i64v{} : i64v{} + 1;
                 }
                 simd::store(p + i, pv);
-                simd::store(x + 2 * i, __builtin_shufflevector(xv, y, 0, 8, 1, 9, 2, 10, 3, 11));
-                simd::store(x + 2 * i + W, __builtin_shufflevector(xv, y, 4, 12, 5, 13, 6, 14, 7, 15));
+                simd::interleave(x + 2 * i, xv, y);
             }
         }
         if (invalid)

@@ -84,8 +84,7 @@ class PiecewiseConstant2D final : public Pointwise<PiecewiseConstant2D> {
         size_t invalid = 0;
         const size_t vectors = small_->sample(marginal_, conditional_, cell_pdf_.data(), u, x, p, n, &invalid);
         sample_from(vectors, u, x, p, n);
-        return invalid == 0 && count_invalid_pdfs(p + vectors, n - vectors) == 0 &&
-               domain.count_outside(x + 2 * vectors, n - vectors) == 0;
+        return invalid == 0 && all_valid(domain, x + 2 * vectors, p + vectors, n - vectors);
     }
     std::string kernel() const override { return small_ ? "small table in vector lanes" : "batch loop"; }
     double sample_one(const double *u, double *x) const {
