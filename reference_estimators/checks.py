@@ -33,6 +33,16 @@ def _check_domain(kind: str) -> int:
     return CHECK_DOMAINS.index(kind)
 
 
+def _domain_points_arg(kind: str, x: Any) -> tuple[int, np.ndarray]:
+    """(the domain's code, x as float64 in C order): (N, 1) points on the interval and half
+    line as (N,); another shape goes on as it is, for the core to refuse by name."""
+    code = _check_domain(kind)
+    a = np.ascontiguousarray(x, dtype=np.float64)
+    if CHECK_DOMAINS[code] in ("interval", "half_line") and a.ndim == 2 and a.shape[1] == 1:
+        a = a.reshape(-1)
+    return code, a
+
+
 def domain_params(kind: str, x: Any, lo: float = 0.0, hi: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """(s, inside): the equal-measure parameters s (N, k) in [0, 1]^k of points x on the sampler
     check's domain ``kind`` (harness.samplers.domains states the maps; [lo, hi] the interval's
@@ -40,10 +50,7 @@ def domain_params(kind: str, x: Any, lo: float = 0.0, hi: float = 1.0) -> tuple[
     squared norm, z >= -1e-12 on the hemisphere; r^2 <= 1 + 1e-12 on the disk).  x: (N,) or
     (N, 1) on the interval and half line, (N, 2) on the square and disk, (N, 3) unit vectors
     on the hemisphere and sphere.  One pass in C++ with the GIL released."""
-    code = _check_domain(kind)
-    a = np.ascontiguousarray(x, dtype=np.float64)
-    if CHECK_DOMAINS[code] in ("interval", "half_line") and a.ndim == 2 and a.shape[1] == 1:
-        a = a.reshape(-1)    # (N, 1) as (N,); another shape is refused by the core, named
+    code, a = _domain_points_arg(kind, x)
     return _core.domain_params(code, float(lo), float(hi), a)
 
 
@@ -58,10 +65,7 @@ def dithered_domain_params(kind: str, x: Any, u: Any = None, lo: float = 0.0, hi
     the pass, so that no array of them is written out either."""
     if (u is None) == (stream is None):
         raise ValueError("give the uniforms 'u' or a 'stream' (seed, case_id), one of them")
-    code = _check_domain(kind)
-    a = np.ascontiguousarray(x, dtype=np.float64)
-    if CHECK_DOMAINS[code] in ("interval", "half_line") and a.ndim == 2 and a.shape[1] == 1:
-        a = a.reshape(-1)    # (N, 1) as (N,); another shape is refused by the core, named
+    code, a = _domain_points_arg(kind, x)
     if stream is not None:
         return _core.streamed_dithered_domain_params(code, float(lo), float(hi), a, *stream_arg(stream))
     w = np.ascontiguousarray(u, dtype=np.float64)
