@@ -15,7 +15,8 @@ from .arguments import stream_arg
 
 __all__ = [
     "CHECK_DOMAINS", "domain_params", "dithered_domain_params", "domain_points", "cubature_nodes",
-    "cubature_points", "cubature_sums", "split_points", "BoxRefinement",
+    "cubature_points", "cubature_sums", "split_points", "BoxRefinement", "uncut_parents", "grouped_agreement",
+    "LeafQuarters",
     "cubature_moment_sums", "grid_histogram", "rosenblatt",
     "piecewise_linear_lookup", "transform_statistics", "cramer_von_mises_sum", "pdf_summary",
     "all_float32", "dither_float32", "finite_rows", "pdf_mismatches", "float64_rows", "float32_columns",
@@ -186,6 +187,42 @@ def split_points(lo: Any, hi: Any, breaks: Any) -> np.ndarray:
 #: along each axis (axis-major, (2 k B, k)), ``step(parts, last)`` with their integrals
 #: (2 k B, m) -> whether boxes remain, and at the end ``result()`` -> (integrals, errors) (N, m).
 BoxRefinement = _core.BoxRefinement
+
+
+def uncut_parents(hi: Any, group: Any, parent_hi: Any) -> int:
+    """How many parent boxes (G, k) are not cut along every axis by their boxes: parent g is
+    cut along an axis where a box i with group[i] == g ends below it there (hi[i] <
+    parent_hi[g]).  One pass in C++ (harness.samplers.cubature.grouped_integrals)."""
+    return int(_core.uncut_parents(np.ascontiguousarray(hi, dtype=np.float64),
+                                   np.ascontiguousarray(group, dtype=np.int64).reshape(-1),
+                                   np.ascontiguousarray(parent_hi, dtype=np.float64)))
+
+
+def grouped_agreement(own: Any, parent: Any, group: Any, tol: Any,
+                      floor: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """grouped_integrals' judgement (harness.samplers.cubature): the rule's integrals ``own``
+    (B, m) over boxes that tile parents with integrals ``parent`` (G, m), box i in parent
+    group[i], tolerances ``tol`` (B,).  A parent agrees where every column of |the sum of its
+    boxes' - its own| is finite and column 0 is at most the sum of its boxes' tolerances, or
+    ``floor`` times |its own|.  (value (B, m): own; error (B, m): for the boxes of agreeing
+    parents the parent's change times the box's share of their tolerance, else 0; rest (R,)
+    int64: the other boxes' rows, ascending.)  numpy's order of operations (bincount's sums),
+    the same bits, in one pass in C++."""
+    return _core.grouped_agreement(np.ascontiguousarray(own, dtype=np.float64),
+                                   np.ascontiguousarray(parent, dtype=np.float64),
+                                   np.ascontiguousarray(group, dtype=np.int64).reshape(-1),
+                                   np.ascontiguousarray(tol, dtype=np.float64).reshape(-1), float(floor))
+
+
+#: The boxes of the sampler check's CDF tables (harness.samplers.cdf_tables.tabulate):
+#: ``LeafQuarters(strip, a, b, pieces, used, strip_tol, axis, k)`` for leaves [a, b) (L,) along
+#: ``axis`` of strips ``strip`` (L,) int64, the strips' pieces across (S, P, 2), their non-empty
+#: counts ``used`` (S,) int64 and tolerances ``strip_tol`` (S,); ``lo``, ``hi`` (rows, k),
+#: ``tol`` (rows,) and ``group`` (rows,) int64 the boxes to integrate (each leaf's quarters
+#: times its pieces, halved across on the square), ``parent_lo``, ``parent_hi`` (G, k) their
+#: parents (each leaf's pieces), ``boxes`` the quarter boxes integrated, and ``sums(v, e)`` ->
+#: (quarter masses (L, 4), summed errors (L,)) from the boxes' integrals and errors (rows, m).
+LeafQuarters = _core.LeafQuarters
 
 
 def cubature_sums(lo: Any, hi: Any, values: Any, weights: Any, scale: float = 1.0) -> np.ndarray:

@@ -19,7 +19,7 @@ import numpy as np
 
 import reference_estimators as rest
 
-from harness.samplers.cubature import grouped_integrals, halves, split_points, tensor_rule
+from harness.samplers.cubature import grouped_integrals, split_points, tensor_rule
 
 __all__ = ["AxisCdf", "Breaks", "tabulate"]
 
@@ -134,58 +134,31 @@ def tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: n
     def quarters(strip: np.ndarray, a: np.ndarray, b: np.ndarray, strip_tol: np.ndarray):
         """(L, 4) quarter integrals of leaves, their (L,) summed cubature error, and the
         number of (non-empty) boxes integrated."""
-        edges = a[:, None] + (b - a)[:, None] * np.arange(5)[None, :] / 4      # (L, 5)
-        qa, qb = edges[:, :4].reshape(-1), edges[:, 1:].reshape(-1)           # (4L,)
-        g = np.repeat(strip, 4)
-        # a box's share of the strip's tolerance by its length along the axis, never below a
-        # 1/4096 leaf's: deep leaves at a singularity or step would otherwise drive the cubature
-        # to its depth limit for error it cannot reach (what error remains is summed and carried)
-        tol = np.repeat(strip_tol[g] * np.maximum(qb - qa, 1 / 4096) / used[g], npiece)
-        lo, hi = np.empty((qa.size * npiece, k)), np.empty((qa.size * npiece, k))
-        lo[:, axis], hi[:, axis] = np.repeat(qa, npiece), np.repeat(qb, npiece)
-        if k == 2:
-            lo[:, 1 - axis], hi[:, 1 - axis] = pieces[g, :, 0].reshape(-1), pieces[g, :, 1].reshape(-1)
+        # each leaf's piece judged by its rule against those of its four quarters, each halved
+        # across (grouped_integrals: the children must cut the parent along every axis, or a
+        # density that varies only across would agree unresolved): 9 rules where each
+        # quarter's own halves took 20.  A box's share of the strip's tolerance goes by its
+        # length along the axis, never below a 1/4096 leaf's: deep leaves at a singularity or
+        # step would otherwise drive the cubature to its depth limit for error it cannot reach
+        # (what error remains is summed and carried).  The padding pieces of _cut_at_steps are
+        # empty, and not integrated.  The boxes, and their integrals summed back into quarters,
+        # in the core (numpy's passes had cost a tilted lobe's tabulation a tenth of its time)
+        boxes = rest.LeafQuarters(strip, a, b, pieces, used, strip_tol, axis, k)
         budget = min(_MAX_EVALS, max(_MAX_TABLE_EVALS - counted.evals, 0))
-        val, err = np.zeros(lo.shape[0]), np.zeros(lo.shape[0])
-        full = np.all(hi > lo, axis=1)          # the padding pieces of _cut_at_steps are empty
         # the bare change of a box's last split as its error (extrapolate=False): a singular
         # end's leaves are halved again here, down to _MIN_WIDTH, and the stop at a useless
         # bound sums these errors over every level as the effort's measure; the extrapolated
         # tails (about 6 times the change at a pole) summed so made the pole strips of
         # uniform_theta_sphere and the disk's centre hopeless at the first level, with bounds
         # of 0.02 in place of 2e-5.  The kept leaves' own understatement is at most
-        # r / (1 - r) times their boxes' tails (2.4 at x^-1/2), far below the bound there
-        # each leaf's piece judged by its rule against those of its four quarters, each halved
-        # across (grouped_integrals: the children must cut the parent along every axis, or a
-        # density that varies only across would agree unresolved): 9 rules where each
-        # quarter's own halves took 20
-        nleaf, nfull = a.size, int(full.sum())
-        group = np.repeat(np.arange(nleaf), 4 * npiece) * npiece + np.tile(np.arange(npiece), 4 * nleaf)
-        group = group[full]
-        # the parents present, ascending, and each box's index among them: np.unique(group,
-        # return_inverse=True) without its sort (a tenth of a GGX lobe's tabulation)
-        present = np.zeros(nleaf * npiece, dtype=bool)
-        present[group] = True
-        parents, group = np.flatnonzero(present), (np.cumsum(present) - 1)[group]
-        plo, phi = np.empty((nleaf * npiece, k)), np.empty((nleaf * npiece, k))
-        plo[:, axis], phi[:, axis] = np.repeat(a, npiece), np.repeat(b, npiece)
-        if k == 2:
-            plo[:, 1 - axis] = pieces[strip, :, 0].reshape(-1)
-            phi[:, 1 - axis] = pieces[strip, :, 1].reshape(-1)
-        clo, chi, ctol, cgroup = lo[full], hi[full], tol[full], group
-        if k == 2:      # rows 2i, 2i + 1: the halves across of box i
-            clo, chi = halves(clo, chi, 1 - axis, (clo[:, 1 - axis] + chi[:, 1 - axis]) / 2)
-            ctol, cgroup = np.repeat(ctol / 2, 2), np.repeat(cgroup, 2)
-        v, e = grouped_integrals(counted, clo, chi, cgroup, plo[parents], phi[parents], ctol,
-                                 max_depth=16 if k == 1 else 8, max_evals=budget, floor=floor,
+        # r / (1 - r) times their boxes' tails (2.4 at x^-1/2), far below the bound there.
+        # A box whose integral is not finite (a pdf infinite at a node) counts as mass 0 with
+        # error 1: unknown mass, the bound becomes the whole strip
+        v, e = grouped_integrals(counted, boxes.lo, boxes.hi, boxes.group, boxes.parent_lo, boxes.parent_hi,
+                                 boxes.tol, max_depth=16 if k == 1 else 8, max_evals=budget, floor=floor,
                                  extrapolate=False, breaks=breaks)
-        if k == 2:
-            v, e = v.reshape(nfull, 2, -1).sum(axis=1), e.reshape(nfull, 2, -1).sum(axis=1)
-        bad = ~(np.isfinite(v[:, 0]) & np.isfinite(e[:, 0]))   # a pdf infinite at a node
-        val[full] = np.where(bad, 0.0, v[:, 0])
-        err[full] = np.where(bad, 1.0, e[:, 0])   # unknown mass: the bound becomes the whole strip
-        return (np.maximum(val, 0).reshape(-1, 4, npiece).sum(axis=2),
-                err.reshape(-1, 4 * npiece).sum(axis=1), nfull)
+        qs, errs = boxes.sums(v, e)
+        return qs, errs, boxes.boxes
 
     # a first pass finds the strips' masses: at half the refinement's tolerance (below) for
     # the masses expected, where they are known, else at a tolerance relative to the boxes' measure

@@ -1,6 +1,7 @@
-// Bindings of the sampler check's cubature kernels (check_cubature.h, check_refine.h): the tensor
-// rule's nodes and domain points on boxes, the split points at declared breaks, the adaptive
-// refinement's bookkeeping (BoxRefinement) and the rule's weighted sums.  Arrays are validated
+// Bindings of the sampler check's cubature kernels (check_cubature.h, check_refine.h,
+// check_quarters.h): the tensor rule's nodes and domain points on boxes, the split points at
+// declared breaks, the adaptive refinement's bookkeeping (BoxRefinement), the grouped
+// cubature's and the CDF tables' (grouped_agreement, LeafQuarters) and the rule's weighted sums.  Arrays are validated
 // here (shapes, sorted breaks), so no call can read out of bounds.
 #include <nanobind/stl/vector.h>
 
@@ -8,6 +9,7 @@
 #include <vector>
 
 #include "bind_common.h"
+#include "check_quarters.h"
 #include "check_refine.h"
 #include "checks.h"
 
@@ -23,6 +25,31 @@ size_t check_boxes(const InArray &lo, const InArray &hi) {
         (lo.shape(1) != 1 && lo.shape(1) != 2))
         throw nb::value_error("'lo' and 'hi' must both have shape (M, 1) or (M, 2)");
     return lo.shape(1);
+}
+
+using IndexArray = nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+
+// A new int64 numpy array (n,) holding `values`.
+nb::ndarray<nb::numpy, int64_t> index_array(const std::vector<int64_t> &values) {
+    nb::capsule owner;
+    int64_t *out = output_buffer<int64_t>(values.size(), owner);
+    std::copy(values.begin(), values.end(), out);
+    return nb::ndarray<nb::numpy, int64_t>(out, {values.size()}, owner);
+}
+
+// A new float64 numpy array (values / cols, cols) holding `values`; (values,) when cols == 0.
+OutArray rows_array(const std::vector<double> &values, size_t cols) {
+    double *out;
+    OutArray a = new_array(values.size() / std::max<size_t>(cols, 1), cols, &out);
+    std::copy(values.begin(), values.end(), out);
+    return a;
+}
+
+// Every group index in [0, groups).
+void check_groups(const IndexArray &group, size_t groups) {
+    for (size_t i = 0; i < group.size(); ++i)
+        if (group.data()[i] < 0 || size_t(group.data()[i]) >= groups)
+            throw nb::value_error("'group' must hold parent indices in [0, parents)");
 }
 
 }  // namespace
@@ -123,6 +150,69 @@ void bind_cubature(nb::module_ &m) {
             r.result(value, error);
             return nb::make_tuple(a, b);
         }, "(integrals, errors) (N, m): each box's finished parts summed in the order they finished.");
+    m.def("uncut_parents", [](InArray hi, IndexArray group, InArray parent_hi) {
+        const size_t k = check_boxes(hi, hi);
+        if (group.size() != hi.shape(0) || parent_hi.ndim() != 2 || parent_hi.shape(1) != k)
+            throw nb::value_error("'group' must be (B,) for the boxes 'hi' (B, k), and 'parent_hi' (G, k)");
+        check_groups(group, parent_hi.shape(0));
+        nb::gil_scoped_release r;
+        return uncut_parents(hi.data(), group.data(), group.size(), k, parent_hi.data(), parent_hi.shape(0));
+    }, "hi"_a, "group"_a, "parent_hi"_a,
+       "How many parents are not cut along every axis by their boxes (a box ends below its parent's end).");
+    m.def("grouped_agreement", [](InArray own, InArray parent, IndexArray group, InArray tol, double floor) {
+        if (own.ndim() != 2 || parent.ndim() != 2 || own.shape(1) != parent.shape(1) || own.shape(1) == 0 ||
+            group.size() != own.shape(0) || tol.size() != own.shape(0))
+            throw nb::value_error("'own' must be (B, m), 'parent' (G, m), 'group' and 'tol' (B,)");
+        const size_t boxes = own.shape(0), m = own.shape(1);
+        check_groups(group, parent.shape(0));
+        double *value, *error;
+        OutArray va = new_array(boxes, m, &value), ea = new_array(boxes, m, &error);
+        std::vector<int64_t> rest;
+        {
+            nb::gil_scoped_release r;
+            grouped_agreement(own.data(), parent.data(), group.data(), tol.data(), boxes, parent.shape(0), m, floor,
+                              value, error, rest);
+        }
+        return nb::make_tuple(va, ea, index_array(rest));
+    }, "own"_a, "parent"_a, "group"_a, "tol"_a, "floor"_a,
+       "(value, error, rest): the boxes of parents whose rule agrees with their boxes' sum take their own "
+       "integrals, the parent's change shared by tolerance as error; `rest` the other boxes' rows.");
+    nb::class_<LeafQuarters>(m, "LeafQuarters",
+        "The boxes of the CDF tables' leaf quarters (harness/samplers/cdf_tables.py) and their integrals "
+        "summed back into quarter masses (sums).")
+        .def("__init__", [](LeafQuarters *self, IndexArray strip, InArray a, InArray b, InArray pieces,
+                            IndexArray used, InArray strip_tol, size_t axis, size_t k) {
+            if ((k != 1 && k != 2) || axis >= k) throw nb::value_error("'k' must be 1 or 2 and 'axis' below it");
+            if (a.ndim() != 1 || b.ndim() != 1 || a.size() != strip.size() || b.size() != strip.size())
+                throw nb::value_error("'strip', 'a' and 'b' must be (L,) each");
+            if (pieces.ndim() != 3 || pieces.shape(2) != 2 || pieces.shape(1) == 0 || used.size() != pieces.shape(0) ||
+                strip_tol.ndim() != 1 || strip_tol.size() != pieces.shape(0))
+                throw nb::value_error("'pieces' must be (S, P, 2) with P >= 1, 'used' and 'strip_tol' (S,)");
+            check_groups(strip, pieces.shape(0));
+            for (size_t g = 0; g < used.size(); ++g)
+                if (used.data()[g] < 1) throw nb::value_error("'used' must count at least one piece per strip");
+            new (self) LeafQuarters(strip.data(), a.data(), b.data(), strip.size(), pieces.data(), pieces.shape(1),
+                                    used.data(), strip_tol.data(), axis, k);
+        }, "strip"_a, "a"_a, "b"_a, "pieces"_a, "used"_a, "strip_tol"_a, "axis"_a, "k"_a)
+        .def_prop_ro("lo", [](const LeafQuarters &q) { return rows_array(q.lo(), q.k()); }, nb::rv_policy::move)
+        .def_prop_ro("hi", [](const LeafQuarters &q) { return rows_array(q.hi(), q.k()); }, nb::rv_policy::move)
+        .def_prop_ro("tol", [](const LeafQuarters &q) { return rows_array(q.tol(), 0); }, nb::rv_policy::move)
+        .def_prop_ro("group", [](const LeafQuarters &q) { return index_array(q.group()); }, nb::rv_policy::move)
+        .def_prop_ro("parent_lo", [](const LeafQuarters &q) { return rows_array(q.parent_lo(), q.k()); }, nb::rv_policy::move)
+        .def_prop_ro("parent_hi", [](const LeafQuarters &q) { return rows_array(q.parent_hi(), q.k()); }, nb::rv_policy::move)
+        .def_prop_ro("boxes", &LeafQuarters::full_boxes, "the non-empty boxes (l, j, p) integrated")
+        .def("sums", [](const LeafQuarters &q, InArray v, InArray e) {
+            if (v.ndim() != 2 || e.ndim() != 2 || v.shape(0) != q.rows() || e.shape(0) != q.rows() ||
+                v.shape(1) != e.shape(1) || v.shape(1) == 0)
+                throw nb::value_error("'v' and 'e' must be the integrals and errors (rows, m) over the boxes");
+            double *qs, *errs;
+            OutArray qa = new_array(q.leaves(), 4, &qs), ea = new_array(q.leaves(), 0, &errs);
+            {
+                nb::gil_scoped_release r;
+                q.sums(v.data(), e.data(), v.shape(1), qs, errs);
+            }
+            return nb::make_tuple(qa, ea);
+        }, "v"_a, "e"_a, "(qs (L, 4), errs (L,)): each leaf's quarter masses and its boxes' summed errors.");
     m.def("cubature_sums", [](InArray lo, InArray hi, InArray values, InArray weights, double scale) {
         const size_t k = check_boxes(lo, hi), boxes = lo.shape(0), per = weights.size();
         const size_t cols = values.ndim() == 2 ? values.shape(1) : 1;

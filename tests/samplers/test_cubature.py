@@ -139,11 +139,19 @@ def test_split_points_in_the_core_are_the_numpy_searches():
         split_points(np.zeros(2), np.ones(2), np.array([0.5, 0.25]))
 
 
+def _halves(lo, hi, axis, cut):
+    """Each box split in two along ``axis`` at ``cut`` (B,): rows 2i, 2i + 1 the parts of box i."""
+    clo, chi = np.repeat(lo, 2, axis=0), np.repeat(hi, 2, axis=0)
+    chi[0::2, axis] = cut
+    clo[1::2, axis] = cut
+    return clo, chi
+
+
 def _reference_box_integrals(q, lo, hi, tol, *, max_depth=24, max_evals=40_000_000, floor=0.0,
                              extrapolate=True, breaks=None):
     """box_integrals as numpy arrays level by level (the algorithm the core's BoxRefinement
     runs): each box against its best split's halves, converged or halved along that axis."""
-    from harness.samplers.cubature import _GL_W, _GL_X, halves, tensor_rule
+    from harness.samplers.cubature import _GL_W, _GL_X, tensor_rule
 
     def rule(a, b):
         w = _GL_W if a.shape[1] == 1 else np.outer(_GL_W, _GL_W).reshape(-1)
@@ -169,7 +177,7 @@ def _reference_box_integrals(q, lo, hi, tol, *, max_depth=24, max_evals=40_000_0
         splits = []
         for axis in range(k):
             cut = _reference_split_points(lo[:, axis], hi[:, axis], None if breaks is None else breaks[axis])
-            clo, chi = halves(lo, hi, axis, cut)
+            clo, chi = _halves(lo, hi, axis, cut)
             parts = rule(clo, chi).reshape(-1, 2, whole.shape[1])
             mid = (lo[:, axis] + hi[:, axis]) / 2
             first = np.where(cut == mid, 0.5, (cut - lo[:, axis]) / (hi[:, axis] - lo[:, axis]))
@@ -243,3 +251,46 @@ def test_box_integrals_refinement_in_the_core_is_its_numpy_definition_bit_for_bi
     for a, b in zip(want, got):
         np.testing.assert_array_equal(a.view(np.uint64), b.view(np.uint64))
     assert bad or np.all(np.isfinite(got[0]))
+
+
+def _reference_agreement(own, parent, group, tol, floor):
+    """grouped_integrals' judgement in numpy (what the core's grouped_agreement does): the
+    boxes' sums per parent by bincount, the change, agreement, the shared errors."""
+    ngroup = parent.shape[0]
+    sums = np.stack([np.bincount(group, own[:, j], minlength=ngroup) for j in range(own.shape[1])], axis=1)
+    change = np.abs(sums - parent)
+    group_tol = np.bincount(group, tol, minlength=ngroup)
+    with np.errstate(invalid="ignore"):
+        agreed = (np.all(np.isfinite(change), axis=1)
+                  & (change[:, 0] <= np.maximum(group_tol, floor * np.abs(parent[:, 0]))))
+    taken = agreed[group]
+    value, error = own.copy(), np.zeros_like(own)
+    share = tol / np.maximum(group_tol[group], 1e-300)
+    error[taken] = change[group[taken]] * share[taken, None]
+    return value, error, np.flatnonzero(~taken)
+
+
+@pytest.mark.parametrize("columns", [1, 3])
+@pytest.mark.parametrize("floor", [0.0, 1e-3])
+def test_grouped_agreement_in_the_core_is_its_numpy_definition_bit_for_bit(columns, floor):
+    """Parents agreeing within the tolerance, within q's rounding floor only, by a hair either
+    side, with NaN or infinite integrals in a box or the parent, a zero tolerance, parents
+    without boxes; boxes in any order of their parents."""
+    from reference_estimators import grouped_agreement
+
+    rng = np.random.default_rng(11)
+    for _ in range(20):
+        nparent = int(rng.integers(1, 60))
+        group = rng.integers(0, nparent, int(rng.integers(1, 400)))
+        own = rng.random((group.size, columns)) * 10.0 ** rng.integers(-8, 2)
+        parent = np.stack([np.bincount(group, own[:, j], minlength=nparent) for j in range(columns)], axis=1)
+        parent *= 1 + rng.choice([0.0, 1e-12, 1e-6, 1e-3, -1e-3], parent.shape)
+        tol = rng.choice([0.0, 1e-9, 1e-6, 1e-4], group.size) * rng.random(group.size)
+        own[rng.random(own.shape) < 0.01] = rng.choice([np.nan, np.inf, -np.inf])
+        parent[rng.random(parent.shape) < 0.02] = np.nan
+        want = _reference_agreement(own, parent, group, tol, floor)
+        got = grouped_agreement(own, parent, group, tol, floor)
+        for a, b in zip(want, got):
+            np.testing.assert_array_equal(np.asarray(a).view(np.uint64), np.asarray(b).view(np.uint64))
+    with pytest.raises(ValueError, match="parent indices"):
+        grouped_agreement(np.ones((2, 1)), np.ones((1, 1)), np.array([0, 1]), np.ones(2), 0.0)

@@ -502,3 +502,84 @@ def test_the_quarters_bound_is_tighter_than_the_leafs_on_smooth_densities(k):
         assert bound <= min(leaf, qs.max())
         if width == 0.01:
             assert bound <= 0.27 * leaf
+
+
+def _reference_quarters(strip, a, b, pieces, used, strip_tol, axis, k):
+    """tabulate's quarter boxes in numpy (what the core's LeafQuarters builds): (lo, hi, tol,
+    group, parent_lo, parent_hi, full)."""
+    npiece = pieces.shape[1]
+    edges = a[:, None] + (b - a)[:, None] * np.arange(5)[None, :] / 4
+    qa, qb = edges[:, :4].reshape(-1), edges[:, 1:].reshape(-1)
+    g = np.repeat(strip, 4)
+    tol = np.repeat(strip_tol[g] * np.maximum(qb - qa, 1 / 4096) / used[g], npiece)
+    lo, hi = np.empty((qa.size * npiece, k)), np.empty((qa.size * npiece, k))
+    lo[:, axis], hi[:, axis] = np.repeat(qa, npiece), np.repeat(qb, npiece)
+    if k == 2:
+        lo[:, 1 - axis], hi[:, 1 - axis] = pieces[g, :, 0].reshape(-1), pieces[g, :, 1].reshape(-1)
+    full = np.all(hi > lo, axis=1)
+    nleaf = a.size
+    group = (np.repeat(np.arange(nleaf), 4 * npiece) * npiece + np.tile(np.arange(npiece), 4 * nleaf))[full]
+    present = np.zeros(nleaf * npiece, dtype=bool)
+    present[group] = True
+    parents, group = np.flatnonzero(present), (np.cumsum(present) - 1)[group]
+    plo, phi = np.empty((nleaf * npiece, k)), np.empty((nleaf * npiece, k))
+    plo[:, axis], phi[:, axis] = np.repeat(a, npiece), np.repeat(b, npiece)
+    if k == 2:
+        plo[:, 1 - axis], phi[:, 1 - axis] = pieces[strip, :, 0].reshape(-1), pieces[strip, :, 1].reshape(-1)
+    clo, chi, ctol, cgroup = lo[full], hi[full], tol[full], group
+    if k == 2:
+        cut = (clo[:, 1 - axis] + chi[:, 1 - axis]) / 2
+        clo, chi = np.repeat(clo, 2, axis=0), np.repeat(chi, 2, axis=0)
+        chi[0::2, 1 - axis], clo[1::2, 1 - axis] = cut, cut
+        ctol, cgroup = np.repeat(ctol / 2, 2), np.repeat(cgroup, 2)
+    return clo, chi, ctol, cgroup, plo[parents], phi[parents], full
+
+
+def _reference_quarter_sums(v, e, full, npiece, k):
+    """The boxes' integrals and errors summed back into quarter masses and leaf errors, in numpy."""
+    nfull = int(full.sum())
+    if k == 2:
+        v, e = v.reshape(nfull, 2, v.shape[1]).sum(axis=1), e.reshape(nfull, 2, e.shape[1]).sum(axis=1)
+    val, err = np.zeros(full.size), np.zeros(full.size)
+    bad = ~(np.isfinite(v[:, 0]) & np.isfinite(e[:, 0]))
+    val[full] = np.where(bad, 0.0, v[:, 0])
+    err[full] = np.where(bad, 1.0, e[:, 0])
+    return np.maximum(val, 0).reshape(-1, 4, npiece).sum(axis=2), err.reshape(-1, 4 * npiece).sum(axis=1)
+
+
+@pytest.mark.parametrize("k, axis", [(1, 0), (2, 0), (2, 1)])
+@pytest.mark.parametrize("npiece", [1, 5, 12, 32, 40])
+def test_leaf_quarters_in_the_core_are_the_numpy_boxes_and_sums_bit_for_bit(k, axis, npiece):
+    """The quarter boxes of leaves of any width (down to _MIN_WIDTH and ulps, where quarters
+    collapse), pieces padded with empty ones, and their integrals folded back (halves summed,
+    NaN and infinite ones as mass 0 with error 1, negative ones as 0, np.sum's pairwise order
+    over up to 160 boxes a leaf) as tabulate's numpy code did."""
+    rng = np.random.default_rng(5 + npiece)
+    npiece = npiece if k == 2 else 1
+    for _ in range(10):
+        nstrip = int(rng.integers(1, 6))
+        cuts = np.sort(rng.random((nstrip, npiece + 1)), axis=1)
+        cuts[:, 0], cuts[:, -1] = 0.0, 1.0
+        padding = int(rng.integers(0, npiece))
+        if padding:
+            cuts[:, -padding:] = 1.0     # empty pieces at the end, as _cut_at_steps pads
+        pieces = np.stack([cuts[:, :-1], cuts[:, 1:]], axis=2) if k == 2 else np.zeros((nstrip, 1, 2))
+        used = np.maximum(np.sum(pieces[:, :, 1] > pieces[:, :, 0], axis=1), 1)
+        nleaf = int(rng.integers(1, 50))
+        strip = np.sort(rng.integers(0, nstrip, nleaf))
+        a = rng.random(nleaf)
+        b = np.minimum(a + rng.choice([2.0**-30, 1e-17, 1e-3, 0.25], nleaf), 1.0)
+        strip_tol = rng.random(nstrip) * 1e-6
+        want = _reference_quarters(strip, a, b, pieces, used, strip_tol, axis, k)
+        boxes = rest.LeafQuarters(strip, a, b, pieces, used, strip_tol, axis, k)
+        got = (boxes.lo, boxes.hi, boxes.tol, boxes.group, boxes.parent_lo, boxes.parent_hi)
+        for x, y in zip(want, got):
+            np.testing.assert_array_equal(np.asarray(x).view(np.uint64), np.asarray(y).view(np.uint64))
+        assert boxes.boxes == int(want[-1].sum())
+        rows = want[0].shape[0]
+        v = rng.normal(size=(rows, 2)) * 10.0 ** rng.integers(-12, 0, (rows, 1))
+        e = np.abs(rng.normal(size=(rows, 2))) * 1e-9
+        v[rng.random(rows) < 0.03, 0] = rng.choice([np.nan, np.inf])
+        e[rng.random(rows) < 0.03, 0] = np.nan
+        for x, y in zip(_reference_quarter_sums(v, e, want[-1], npiece, k), boxes.sums(v, e)):
+            np.testing.assert_array_equal(x.view(np.uint64), y.view(np.uint64))

@@ -1,0 +1,219 @@
+// The bookkeeping of the sampler check's grouped cubature (harness/samplers/cubature.py,
+// grouped_integrals) and of its CDF tables' leaves (harness/samplers/cdf_tables.py, tabulate's
+// quarters): which boxes a leaf's quarters are, which boxes' rules agree with their parent's,
+// and the boxes' integrals summed back into each leaf's quarter masses.  The integrals need the
+// user's pdf, so Python calls it between these steps.  Each step does what the numpy code it
+// replaces did, in its order of operations (bincount's sums in row order, sum's pairwise
+// summation): the same bits.  That code's forty array passes a level, each with temporaries of
+// up to a million boxes, had cost a tilted microfacet lobe's check a quarter of its own time.
+#pragma once
+
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "check_refine.h"
+
+namespace re {
+
+// numpy's sum of n contiguous doubles (its pairwise summation: the order of operations of
+// np.sum along a contiguous axis, which the values must match bit for bit): plain from 0.0
+// below 8 values, eight interleaved partial sums up to 128, halves (cut at a multiple of 8)
+// beyond.
+inline double numpy_sum(const double *a, size_t n) {
+    if (n < 8) {
+        double s = 0.0;
+        for (size_t i = 0; i < n; ++i) s += a[i];
+        return s;
+    }
+    if (n <= 128) {
+        double r[8];
+        for (size_t j = 0; j < 8; ++j) r[j] = a[j];
+        size_t i = 8;
+        for (; i < n - n % 8; i += 8)
+            for (size_t j = 0; j < 8; ++j) r[j] += a[i + j];
+        double s = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]));
+        for (; i < n; ++i) s += a[i];
+        return s;
+    }
+    size_t half = n / 2;
+    half -= half % 8;
+    return numpy_sum(a, half) + numpy_sum(a + half, n - half);
+}
+
+// How many of `parents` parent boxes are not cut along every axis by their boxes: parent g is
+// cut along an axis where one of the boxes i with group[i] == g ends below the parent's end
+// (hi[i] < parent_hi[g]; k coordinates each).  group[i] must lie in [0, parents).
+inline size_t uncut_parents(const double *hi, const int64_t *group, size_t boxes, size_t k, const double *parent_hi,
+                            size_t parents) {
+    std::vector<unsigned char> cut(parents, 0);   // bit `axis`: cut along it
+    for (size_t i = 0; i < boxes; ++i) {
+        const size_t g = size_t(group[i]);
+        for (size_t axis = 0; axis < k; ++axis)
+            if (hi[i * k + axis] < parent_hi[g * k + axis]) cut[g] |= (unsigned char)(1u << axis);
+    }
+    const unsigned char all = (unsigned char)((1u << k) - 1);
+    size_t uncut = 0;
+    for (unsigned char c : cut) uncut += c != all;
+    return uncut;
+}
+
+// grouped_integrals' judgement of boxes against their parents: own (boxes, m) the rule's
+// integrals over the boxes, parent (parents, m) over the parents, group[i] box i's parent, tol
+// (boxes) each box's tolerance.  A parent agrees where every column of |sum of its boxes' -
+// its own| is finite and column 0 is within the sum of its boxes' tolerances or `floor` times
+// |its own|; the boxes of an agreeing parent take their own integrals (value, a copy of own)
+// with the parent's change shared by tolerance as their error; the others' rows go to `rest`,
+// in order (their value own's, their error 0: box_integrals' to fill).
+inline void grouped_agreement(const double *own, const double *parent, const int64_t *group, const double *tol,
+                              size_t boxes, size_t parents, size_t m, double floor, double *value, double *error,
+                              std::vector<int64_t> &rest) {
+    std::vector<double> change(parents * m, 0.0), group_tol(parents, 0.0);
+    for (size_t i = 0; i < boxes; ++i) {   // np.bincount's sums: from 0, in row order
+        const size_t g = size_t(group[i]);
+        for (size_t c = 0; c < m; ++c) change[g * m + c] += own[i * m + c];
+        group_tol[g] += tol[i];
+    }
+    std::vector<unsigned char> agreed(parents);
+    for (size_t g = 0; g < parents; ++g) {
+        bool finite = true;
+        for (size_t c = 0; c < m; ++c) {
+            const double d = std::fabs(change[g * m + c] - parent[g * m + c]);
+            change[g * m + c] = d;
+            finite &= std::isfinite(d);
+        }
+        agreed[g] = finite && change[g * m] <= nan_max(group_tol[g], floor * std::fabs(parent[g * m]));
+    }
+    for (size_t i = 0; i < boxes; ++i) {
+        const size_t g = size_t(group[i]);
+        for (size_t c = 0; c < m; ++c) value[i * m + c] = own[i * m + c];
+        if (!agreed[g]) {
+            for (size_t c = 0; c < m; ++c) error[i * m + c] = 0.0;
+            rest.push_back(int64_t(i));
+            continue;
+        }
+        const double share = tol[i] / nan_max(group_tol[g], 1e-300);
+        for (size_t c = 0; c < m; ++c) error[i * m + c] = change[g * m + c] * share;
+    }
+}
+
+// The boxes of tabulate's quarters: leaf l of strip strip[l] spans [a[l], b[l]) along `axis`
+// and is cut into four quarters there, edges a + ((b - a) j) / 4; on the square (k == 2) each
+// quarter is cut across into the strip's pieces pieces[strip, p] = (lo, hi) (strips x npiece
+// of them, empty ones padding: hi <= lo), and each such box into halves across at its middle.
+// A box (l, j, p) is integrated where it is not empty, its tolerance the strip's
+// strip_tol[strip] times max(quarter width, 1/4096) over used[strip] (the strip's non-empty
+// pieces), shared equally by its halves; its parent is leaf l's piece p, [a, b) along the axis
+// (the parents present, in order).  sums() folds the boxes' integrals back into each leaf's
+// four quarter masses (those not finite: mass 0, error 1) and the sum of its boxes' errors.
+class LeafQuarters {
+  public:
+    LeafQuarters(const int64_t *strip, const double *a, const double *b, size_t leaves, const double *pieces,
+                 size_t npiece, const int64_t *used, const double *strip_tol, size_t axis, size_t k)
+        : leaves_(leaves), npiece_(npiece), k_(k), full_(4 * leaves * npiece) {
+        const size_t P = npiece;
+        std::vector<int64_t> parent_of(P);   // leaf l's piece p: its parent's index, or -1
+        for (size_t l = 0; l < leaves; ++l) {
+            const size_t g = size_t(strip[l]);
+            const double width = b[l] - a[l];
+            double qa[4], qb[4];
+            for (size_t j = 0; j < 4; ++j) {
+                qa[j] = a[l] + width * double(j) / 4;
+                qb[j] = a[l] + width * double(j + 1) / 4;
+            }
+            // the parents present (a piece with a box integrated), numbered in (leaf, piece) order
+            for (size_t p = 0; p < P; ++p) {
+                const double *piece = pieces + 2 * (g * P + p);
+                bool any = false;
+                for (size_t j = 0; j < 4; ++j) {
+                    const bool full = qb[j] > qa[j] && (k == 1 || piece[1] > piece[0]);
+                    full_[(l * 4 + j) * P + p] = full;
+                    any |= full;
+                }
+                parent_of[p] = any ? int64_t(parents()) : -1;
+                if (any) box_into(parent_lo_, parent_hi_, axis, a[l], b[l], piece[0], piece[1]);
+            }
+            for (size_t j = 0; j < 4; ++j) {
+                const double tol = strip_tol[g] * nan_max(qb[j] - qa[j], 1.0 / 4096) / double(used[g]);
+                for (size_t p = 0; p < P; ++p) {
+                    if (!full_[(l * 4 + j) * P + p]) continue;
+                    const double *piece = pieces + 2 * (g * P + p);
+                    if (k == 1) {
+                        box_into(lo_, hi_, axis, qa[j], qb[j], 0.0, 0.0);
+                        tol_.push_back(tol);
+                        group_.push_back(parent_of[p]);
+                        continue;
+                    }
+                    const double cut = (piece[0] + piece[1]) / 2;
+                    box_into(lo_, hi_, axis, qa[j], qb[j], piece[0], cut);
+                    box_into(lo_, hi_, axis, qa[j], qb[j], cut, piece[1]);
+                    tol_.insert(tol_.end(), 2, tol / 2);
+                    group_.insert(group_.end(), 2, parent_of[p]);
+                }
+            }
+        }
+    }
+
+    size_t k() const { return k_; }
+    size_t rows() const { return tol_.size(); }         // the boxes to integrate (halves on the square)
+    size_t parents() const { return parent_lo_.size() / k_; }
+    size_t full_boxes() const { return k_ == 2 ? rows() / 2 : rows(); }
+    size_t leaves() const { return leaves_; }
+    const std::vector<double> &lo() const { return lo_; }
+    const std::vector<double> &hi() const { return hi_; }
+    const std::vector<double> &tol() const { return tol_; }
+    const std::vector<int64_t> &group() const { return group_; }
+    const std::vector<double> &parent_lo() const { return parent_lo_; }
+    const std::vector<double> &parent_hi() const { return parent_hi_; }
+
+    // From the integrals v and errors e (rows() x m, column 0 used) over the boxes: each leaf's
+    // quarter masses qs (leaves x 4: its non-empty boxes' integrals, halves summed, those below
+    // 0 as 0) and errs (leaves: its boxes' errors summed), np.sum's pairwise order over each
+    // leaf's 4 npiece boxes, empty ones 0.
+    void sums(const double *v, const double *e, size_t m, double *qs, double *errs) const {
+        const size_t per = 4 * npiece_;
+        std::vector<double> val(per), err(per);
+        size_t row = 0;
+        for (size_t l = 0; l < leaves_; ++l) {
+            for (size_t i = 0; i < per; ++i) {
+                double v0 = 0.0, e0 = 0.0;
+                if (full_[l * per + i]) {
+                    if (k_ == 2) {
+                        v0 = 0.0 + v[row * m] + v[(row + 1) * m];
+                        e0 = 0.0 + e[row * m] + e[(row + 1) * m];
+                        row += 2;
+                    } else {
+                        v0 = v[row * m], e0 = e[row * m];
+                        row += 1;
+                    }
+                    const bool bad = !(std::isfinite(v0) && std::isfinite(e0));
+                    v0 = bad ? 0.0 : v0;
+                    e0 = bad ? 1.0 : e0;
+                }
+                val[i] = v0 > 0 ? v0 : 0.0;   // np.maximum(val, 0), -0.0 to 0.0 as numpy's
+                err[i] = e0;
+            }
+            for (size_t j = 0; j < 4; ++j) qs[4 * l + j] = numpy_sum(val.data() + j * npiece_, npiece_);
+            errs[l] = numpy_sum(err.data(), per);
+        }
+    }
+
+  private:
+    // Appends the box with coordinate [x0, x1) along `axis` and [y0, y1) across (k == 2).
+    void box_into(std::vector<double> &lo, std::vector<double> &hi, size_t axis, double x0, double x1, double y0,
+                  double y1) const {
+        const size_t at = lo.size();
+        lo.resize(at + k_);
+        hi.resize(at + k_);
+        lo[at + axis] = x0, hi[at + axis] = x1;
+        if (k_ == 2) lo[at + 1 - axis] = y0, hi[at + 1 - axis] = y1;
+    }
+
+    size_t leaves_, npiece_, k_;
+    std::vector<unsigned char> full_;   // (l, j, p): integrated
+    std::vector<double> lo_, hi_, tol_, parent_lo_, parent_hi_;
+    std::vector<int64_t> group_;
+};
+
+}  // namespace re
