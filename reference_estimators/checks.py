@@ -217,10 +217,11 @@ def grouped_agreement(own: Any, parent: Any, group: Any, tol: Any,
 #: The boxes of the sampler check's CDF tables (harness.samplers.cdf_tables.tabulate):
 #: ``LeafQuarters(strip, a, b, pieces, used, strip_tol, axis, k)`` for leaves [a, b) (L,) along
 #: ``axis`` of strips ``strip`` (L,) int64, the strips' pieces across (S, P, 2), their non-empty
-#: counts ``used`` (S,) int64 and tolerances ``strip_tol`` (S,); ``lo``, ``hi`` (rows, k),
-#: ``tol`` (rows,) and ``group`` (rows,) int64 the boxes to integrate (each leaf's quarters
-#: times its pieces, halved across on the square), ``parent_lo``, ``parent_hi`` (G, k) their
-#: parents (each leaf's pieces), ``boxes`` the quarter boxes integrated, and ``sums(v, e)`` ->
+#: counts ``used`` (S,) int64 and tolerances ``strip_tol`` (S,); ``boxes()`` -> (lo, hi, group,
+#: parent_lo, parent_hi, tol), the boxes to integrate (rows, k) (each leaf's quarters times its
+#: non-empty pieces, halved across on the square), their parents' indices (rows,) int64, the
+#: parents (G, k) (each leaf's pieces) and the boxes' tolerances (rows,), as
+#: grouped_integrals takes them; ``count`` the quarter boxes integrated; ``sums(v, e)`` ->
 #: (quarter masses (L, 4), summed errors (L,)) from the boxes' integrals and errors (rows, m).
 LeafQuarters = _core.LeafQuarters
 

@@ -154,11 +154,10 @@ def tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: n
         # r / (1 - r) times their boxes' tails (2.4 at x^-1/2), far below the bound there.
         # A box whose integral is not finite (a pdf infinite at a node) counts as mass 0 with
         # error 1: unknown mass, the bound becomes the whole strip
-        v, e = grouped_integrals(counted, boxes.lo, boxes.hi, boxes.group, boxes.parent_lo, boxes.parent_hi,
-                                 boxes.tol, max_depth=16 if k == 1 else 8, max_evals=budget, floor=floor,
-                                 extrapolate=False, breaks=breaks)
+        v, e = grouped_integrals(counted, *boxes.boxes(), max_depth=16 if k == 1 else 8, max_evals=budget,
+                                 floor=floor, extrapolate=False, breaks=breaks)
         qs, errs = boxes.sums(v, e)
-        return qs, errs, boxes.boxes
+        return qs, errs, boxes.count
 
     # a first pass finds the strips' masses: at half the refinement's tolerance (below) for
     # the masses expected, where they are known, else at a tolerance relative to the boxes' measure

@@ -37,14 +37,6 @@ nb::ndarray<nb::numpy, int64_t> index_array(const std::vector<int64_t> &values) 
     return nb::ndarray<nb::numpy, int64_t>(out, {values.size()}, owner);
 }
 
-// A new float64 numpy array (values / cols, cols) holding `values`; (values,) when cols == 0.
-OutArray rows_array(const std::vector<double> &values, size_t cols) {
-    double *out;
-    OutArray a = new_array(values.size() / std::max<size_t>(cols, 1), cols, &out);
-    std::copy(values.begin(), values.end(), out);
-    return a;
-}
-
 // Every group index in [0, groups).
 void check_groups(const IndexArray &group, size_t groups) {
     for (size_t i = 0; i < group.size(); ++i)
@@ -191,16 +183,25 @@ void bind_cubature(nb::module_ &m) {
             check_groups(strip, pieces.shape(0));
             for (size_t g = 0; g < used.size(); ++g)
                 if (used.data()[g] < 1) throw nb::value_error("'used' must count at least one piece per strip");
-            new (self) LeafQuarters(strip.data(), a.data(), b.data(), strip.size(), pieces.data(), pieces.shape(1),
-                                    used.data(), strip_tol.data(), axis, k);
+            new (self) LeafQuarters(strip.data(), a.data(), b.data(), strip.size(), pieces.data(), pieces.shape(0),
+                                    pieces.shape(1), used.data(), strip_tol.data(), axis, k);
         }, "strip"_a, "a"_a, "b"_a, "pieces"_a, "used"_a, "strip_tol"_a, "axis"_a, "k"_a)
-        .def_prop_ro("lo", [](const LeafQuarters &q) { return rows_array(q.lo(), q.k()); }, nb::rv_policy::move)
-        .def_prop_ro("hi", [](const LeafQuarters &q) { return rows_array(q.hi(), q.k()); }, nb::rv_policy::move)
-        .def_prop_ro("tol", [](const LeafQuarters &q) { return rows_array(q.tol(), 0); }, nb::rv_policy::move)
-        .def_prop_ro("group", [](const LeafQuarters &q) { return index_array(q.group()); }, nb::rv_policy::move)
-        .def_prop_ro("parent_lo", [](const LeafQuarters &q) { return rows_array(q.parent_lo(), q.k()); }, nb::rv_policy::move)
-        .def_prop_ro("parent_hi", [](const LeafQuarters &q) { return rows_array(q.parent_hi(), q.k()); }, nb::rv_policy::move)
-        .def_prop_ro("boxes", &LeafQuarters::full_boxes, "the non-empty boxes (l, j, p) integrated")
+        .def("boxes", [](const LeafQuarters &q) {
+            const size_t k = q.k(), rows = q.rows(), parents = q.parents();
+            double *lo, *hi, *tol, *plo, *phi;
+            OutArray la = new_array(rows, k, &lo), ha = new_array(rows, k, &hi), ta = new_array(rows, 0, &tol);
+            OutArray pla = new_array(parents, k, &plo), pha = new_array(parents, k, &phi);
+            nb::capsule owner;
+            int64_t *group = output_buffer<int64_t>(rows, owner);
+            nb::ndarray<nb::numpy, int64_t> ga(group, {rows}, owner);
+            {
+                nb::gil_scoped_release r;
+                q.boxes(lo, hi, tol, group, plo, phi);
+            }
+            return nb::make_tuple(la, ha, ga, pla, pha, ta);
+        }, "(lo, hi, group, parent_lo, parent_hi, tol): the boxes to integrate (rows, k), their parents' indices "
+           "(rows,) int64, the parents (G, k) and the boxes' tolerances (rows,), as grouped_integrals takes them.")
+        .def_prop_ro("count", &LeafQuarters::full_boxes, "the non-empty boxes (l, j, p) integrated")
         .def("sums", [](const LeafQuarters &q, InArray v, InArray e) {
             if (v.ndim() != 2 || e.ndim() != 2 || v.shape(0) != q.rows() || e.shape(0) != q.rows() ||
                 v.shape(1) != e.shape(1) || v.shape(1) == 0)

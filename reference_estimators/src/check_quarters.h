@@ -105,67 +105,82 @@ inline void grouped_agreement(const double *own, const double *parent, const int
 // A box (l, j, p) is integrated where it is not empty, its tolerance the strip's
 // strip_tol[strip] times max(quarter width, 1/4096) over used[strip] (the strip's non-empty
 // pieces), shared equally by its halves; its parent is leaf l's piece p, [a, b) along the axis
-// (the parents present, in order).  sums() folds the boxes' integrals back into each leaf's
-// four quarter masses (those not finite: mass 0, error 1) and the sum of its boxes' errors.
+// (the parents present, in order).  The constructor lays them out (which boxes, how many),
+// boxes() writes them into the caller's arrays (one pass, no reallocation: vectors grown a box
+// at a time and copied out had cost more than the numpy code), sums() folds the boxes'
+// integrals back into each leaf's four quarter masses (those not finite: mass 0, error 1) and
+// the sum of its boxes' errors.  The leaves and pieces are copied (a few thousand: small
+// beside the boxes).
 class LeafQuarters {
   public:
     LeafQuarters(const int64_t *strip, const double *a, const double *b, size_t leaves, const double *pieces,
-                 size_t npiece, const int64_t *used, const double *strip_tol, size_t axis, size_t k)
-        : leaves_(leaves), npiece_(npiece), k_(k), full_(4 * leaves * npiece) {
-        const size_t P = npiece;
-        std::vector<int64_t> parent_of(P);   // leaf l's piece p: its parent's index, or -1
+                 size_t strips, size_t npiece, const int64_t *used, const double *strip_tol, size_t axis, size_t k)
+        : strip_(strip, strip + leaves), a_(a, a + leaves), b_(b, b + leaves), leaves_(leaves), npiece_(npiece),
+          axis_(axis), k_(k), full_(4 * leaves * npiece), parent_of_(leaves * npiece, -1) {
+        pieces_.assign(pieces, pieces + 2 * strips * npiece);
+        used_.assign(used, used + strips);
+        strip_tol_.assign(strip_tol, strip_tol + strips);
         for (size_t l = 0; l < leaves; ++l) {
-            const size_t g = size_t(strip[l]);
-            const double width = b[l] - a[l];
             double qa[4], qb[4];
-            for (size_t j = 0; j < 4; ++j) {
-                qa[j] = a[l] + width * double(j) / 4;
-                qb[j] = a[l] + width * double(j + 1) / 4;
-            }
+            quarter_edges(l, qa, qb);
             // the parents present (a piece with a box integrated), numbered in (leaf, piece) order
-            for (size_t p = 0; p < P; ++p) {
-                const double *piece = pieces + 2 * (g * P + p);
+            for (size_t p = 0; p < npiece; ++p) {
+                const double *piece = piece_of(l, p);
                 bool any = false;
                 for (size_t j = 0; j < 4; ++j) {
                     const bool full = qb[j] > qa[j] && (k == 1 || piece[1] > piece[0]);
-                    full_[(l * 4 + j) * P + p] = full;
+                    full_[(l * 4 + j) * npiece + p] = full;
+                    full_boxes_ += full;
                     any |= full;
                 }
-                parent_of[p] = any ? int64_t(parents()) : -1;
-                if (any) box_into(parent_lo_, parent_hi_, axis, a[l], b[l], piece[0], piece[1]);
-            }
-            for (size_t j = 0; j < 4; ++j) {
-                const double tol = strip_tol[g] * nan_max(qb[j] - qa[j], 1.0 / 4096) / double(used[g]);
-                for (size_t p = 0; p < P; ++p) {
-                    if (!full_[(l * 4 + j) * P + p]) continue;
-                    const double *piece = pieces + 2 * (g * P + p);
-                    if (k == 1) {
-                        box_into(lo_, hi_, axis, qa[j], qb[j], 0.0, 0.0);
-                        tol_.push_back(tol);
-                        group_.push_back(parent_of[p]);
-                        continue;
-                    }
-                    const double cut = (piece[0] + piece[1]) / 2;
-                    box_into(lo_, hi_, axis, qa[j], qb[j], piece[0], cut);
-                    box_into(lo_, hi_, axis, qa[j], qb[j], cut, piece[1]);
-                    tol_.insert(tol_.end(), 2, tol / 2);
-                    group_.insert(group_.end(), 2, parent_of[p]);
-                }
+                if (any) parent_of_[l * npiece + p] = int64_t(parents_++);
             }
         }
     }
 
     size_t k() const { return k_; }
-    size_t rows() const { return tol_.size(); }         // the boxes to integrate (halves on the square)
-    size_t parents() const { return parent_lo_.size() / k_; }
-    size_t full_boxes() const { return k_ == 2 ? rows() / 2 : rows(); }
+    size_t full_boxes() const { return full_boxes_; }                 // the boxes (l, j, p) integrated
+    size_t rows() const { return k_ == 2 ? 2 * full_boxes_ : full_boxes_; }   // halves on the square
+    size_t parents() const { return parents_; }
     size_t leaves() const { return leaves_; }
-    const std::vector<double> &lo() const { return lo_; }
-    const std::vector<double> &hi() const { return hi_; }
-    const std::vector<double> &tol() const { return tol_; }
-    const std::vector<int64_t> &group() const { return group_; }
-    const std::vector<double> &parent_lo() const { return parent_lo_; }
-    const std::vector<double> &parent_hi() const { return parent_hi_; }
+
+    // The boxes to integrate, lo and hi (rows() x k), tol and group (rows()), and their parents,
+    // parent_lo and parent_hi (parents() x k).
+    void boxes(double *lo, double *hi, double *tol, int64_t *group, double *parent_lo, double *parent_hi) const {
+        const size_t P = npiece_;
+        for (size_t l = 0; l < leaves_; ++l) {
+            const size_t g = size_t(strip_[l]);
+            double qa[4], qb[4];
+            quarter_edges(l, qa, qb);
+            for (size_t p = 0; p < P; ++p) {
+                const int64_t parent = parent_of_[l * P + p];
+                if (parent >= 0)
+                    write_box(parent_lo, parent_hi, size_t(parent), a_[l], b_[l], piece_of(l, p)[0], piece_of(l, p)[1]);
+            }
+            for (size_t j = 0; j < 4; ++j) {
+                const double t = strip_tol_[g] * nan_max(qb[j] - qa[j], 1.0 / 4096) / double(used_[g]);
+                for (size_t p = 0; p < P; ++p) {
+                    if (!full_[(l * 4 + j) * P + p]) continue;
+                    const double *piece = piece_of(l, p);
+                    const int64_t parent = parent_of_[l * P + p];
+                    if (k_ == 1) {
+                        write_box(lo, hi, 0, qa[j], qb[j], 0.0, 0.0);
+                        lo += 1, hi += 1;
+                        *tol++ = t;
+                        *group++ = parent;
+                        continue;
+                    }
+                    const double cut = (piece[0] + piece[1]) / 2;
+                    write_box(lo, hi, 0, qa[j], qb[j], piece[0], cut);
+                    write_box(lo, hi, 1, qa[j], qb[j], cut, piece[1]);
+                    lo += 4, hi += 4;
+                    tol[0] = tol[1] = t / 2;
+                    group[0] = group[1] = parent;
+                    tol += 2, group += 2;
+                }
+            }
+        }
+    }
 
     // From the integrals v and errors e (rows() x m, column 0 used) over the boxes: each leaf's
     // quarter masses qs (leaves x 4: its non-empty boxes' integrals, halves summed, those below
@@ -200,20 +215,29 @@ class LeafQuarters {
     }
 
   private:
-    // Appends the box with coordinate [x0, x1) along `axis` and [y0, y1) across (k == 2).
-    void box_into(std::vector<double> &lo, std::vector<double> &hi, size_t axis, double x0, double x1, double y0,
-                  double y1) const {
-        const size_t at = lo.size();
-        lo.resize(at + k_);
-        hi.resize(at + k_);
-        lo[at + axis] = x0, hi[at + axis] = x1;
-        if (k_ == 2) lo[at + 1 - axis] = y0, hi[at + 1 - axis] = y1;
+    // Leaf l's quarters [qa[j], qb[j]): numpy's a + ((b - a) j) / 4.
+    void quarter_edges(size_t l, double *qa, double *qb) const {
+        const double width = b_[l] - a_[l];
+        for (size_t j = 0; j < 4; ++j) {
+            qa[j] = a_[l] + width * double(j) / 4;
+            qb[j] = a_[l] + width * double(j + 1) / 4;
+        }
     }
 
-    size_t leaves_, npiece_, k_;
+    const double *piece_of(size_t l, size_t p) const { return &pieces_[2 * (size_t(strip_[l]) * npiece_ + p)]; }
+
+    // Row `row` of lo, hi (k each): [x0, x1) along the axis, [y0, y1) across (k == 2).
+    void write_box(double *lo, double *hi, size_t row, double x0, double x1, double y0, double y1) const {
+        double *l = lo + row * k_, *h = hi + row * k_;
+        l[axis_] = x0, h[axis_] = x1;
+        if (k_ == 2) l[1 - axis_] = y0, h[1 - axis_] = y1;
+    }
+
+    std::vector<int64_t> strip_, used_;           // (leaves), (strips)
+    std::vector<double> a_, b_, pieces_, strip_tol_;  // (leaves), (leaves), (strips x npiece x 2), (strips)
+    size_t leaves_, npiece_, axis_, k_, full_boxes_ = 0, parents_ = 0;
     std::vector<unsigned char> full_;   // (l, j, p): integrated
-    std::vector<double> lo_, hi_, tol_, parent_lo_, parent_hi_;
-    std::vector<int64_t> group_;
+    std::vector<int64_t> parent_of_;    // (l, p): the parent's index among those present, or -1
 };
 
 }  // namespace re

@@ -572,10 +572,10 @@ def test_leaf_quarters_in_the_core_are_the_numpy_boxes_and_sums_bit_for_bit(k, a
         strip_tol = rng.random(nstrip) * 1e-6
         want = _reference_quarters(strip, a, b, pieces, used, strip_tol, axis, k)
         boxes = rest.LeafQuarters(strip, a, b, pieces, used, strip_tol, axis, k)
-        got = (boxes.lo, boxes.hi, boxes.tol, boxes.group, boxes.parent_lo, boxes.parent_hi)
-        for x, y in zip(want, got):
+        lo, hi, group, parent_lo, parent_hi, tol = boxes.boxes()
+        for x, y in zip(want, (lo, hi, tol, group, parent_lo, parent_hi)):
             np.testing.assert_array_equal(np.asarray(x).view(np.uint64), np.asarray(y).view(np.uint64))
-        assert boxes.boxes == int(want[-1].sum())
+        assert boxes.count == int(want[-1].sum())
         rows = want[0].shape[0]
         v = rng.normal(size=(rows, 2)) * 10.0 ** rng.integers(-12, 0, (rows, 1))
         e = np.abs(rng.normal(size=(rows, 2))) * 1e-9
