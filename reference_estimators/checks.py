@@ -21,7 +21,7 @@ __all__ = [
     "piecewise_linear_lookup", "transform_statistics", "cramer_von_mises_sum", "pdf_summary",
     "all_float32", "dither_float32", "finite_rows", "pdf_mismatches", "float64_rows", "float32_columns",
     "take_rows", "nan_rows",
-    "float32_unit_rows", "cap_to_world",
+    "float32_unit_rows", "cap_to_world", "cap_to_hemisphere", "cap_density", "RowLookup",
 ]
 
 #: The sampling domains of the sampler check, in the order the core numbers them.
@@ -95,6 +95,37 @@ def cap_to_world(h: Any, axis: Any, t: Any, b: Any, cos_alpha: float, scale: flo
     a = np.ascontiguousarray(h, dtype=np.float64).reshape(-1, 3)
     frame = [np.ascontiguousarray(v, dtype=np.float64).reshape(-1) for v in (axis, t, b)]
     return _core.cap_to_world(a, *frame, float(cos_alpha), float(scale))
+
+
+def cap_to_hemisphere(d: Any, axis: Any, t: Any, b: Any, cos_alpha: float, scale: float,
+                      rim_slack: float) -> np.ndarray:
+    """Points (N, 3) of the hemisphere of world directions d (N, 3) through the equal-area map
+    of the cap {d : <d, axis> >= cos_alpha} (frame t, b, axis orthonormal, scale = 1 -
+    cos_alpha), the inverse of :func:`cap_to_world`: d normalised, c = <d, axis> (moved onto
+    cos_alpha where it is below it by at most ``rim_slack``: float32 rounding of the rim),
+    z = (c - cos_alpha) / scale and the azimuth about the axis kept (its cosine and sine as
+    <d, t> / rho and <d, b> / rho, rho their norm; the axis at azimuth 0), radius sqrt(max(0,
+    1 - z^2)).  NaN and zero rows give NaN rows.  In C++ on all threads, vectorised
+    (harness.adapters.mitsuba.cap.Cap.to_hemisphere)."""
+    a = np.ascontiguousarray(d, dtype=np.float64).reshape(-1, 3)
+    frame = [np.ascontiguousarray(v, dtype=np.float64).reshape(-1) for v in (axis, t, b)]
+    return _core.cap_to_hemisphere(a, *frame, float(cos_alpha), float(scale), float(rim_slack))
+
+
+def cap_density(h: Any, p: Any, scale: float) -> np.ndarray:
+    """(N,): the world pdf values p (N,) rounded to float32 times ``scale`` in float32,
+    widened (numpy's float32 product), at the hemisphere points h (N, 3) that are finite with
+    z >= 0, else 0: the density of the Mitsuba adapter's cap map
+    (harness.adapters.mitsuba.cap.CapView.pdf) in one pass in C++."""
+    a = np.ascontiguousarray(h, dtype=np.float64).reshape(-1, 3)
+    return _core.cap_density(a, np.ascontiguousarray(p, dtype=np.float64).reshape(-1), float(scale))
+
+
+#: ``RowLookup(x)`` over rows x (N, k), k = 1 to 3 (read in place, kept alive by the lookup):
+#: ``find(q)`` -> (M,) int64, for each row of q (M, k) the first row of x equal to it value for
+#: value (numpy's ==: 0.0 equals -0.0, NaN equals nothing), or -1.  A hash table built in one
+#: pass in C++ (the Mitsuba adapter's CapView looks a few points up among a million drawn).
+RowLookup = _core.RowLookup
 
 
 def float32_unit_rows(x: Any, slack: float) -> tuple[np.ndarray, np.ndarray]:

@@ -185,6 +185,56 @@ void bind_checks(nb::module_ &m) {
     }, "h"_a, "axis"_a, "t"_a, "b"_a, "cos_alpha"_a, "scale"_a,
        "World directions (N, 3) of hemisphere points h (N, 3) through the equal-area map of the cap about `axis` "
        "(frame t, b, axis) with cosine `cos_alpha`, scale = 1 - cos_alpha.");
+    m.def("cap_to_hemisphere", [](InArray d, InArray axis, InArray t, InArray b, double cos_alpha, double scale,
+                                  double rim_slack) {
+        const size_t n = check_points(d, 3, "d");
+        if (axis.size() != 3 || t.size() != 3 || b.size() != 3)
+            throw nb::value_error("'axis', 't' and 'b' must be 3-vectors");
+        double *out;
+        OutArray ha = new_array(n, 3, &out);
+        {
+            nb::gil_scoped_release g;
+            // each row from that row alone: chunks on all threads
+            for_chunks(n, kCubatureChunk, [&](size_t, size_t a, size_t e, int) {
+                cap_to_hemisphere(d.data(), a, e, axis.data(), t.data(), b.data(), cos_alpha, scale, rim_slack, out);
+            });
+        }
+        return ha;
+    }, "d"_a, "axis"_a, "t"_a, "b"_a, "cos_alpha"_a, "scale"_a, "rim_slack"_a,
+       "Hemisphere points (N, 3) of world directions d (N, 3) through the equal-area map of the cap about `axis` "
+       "(frame t, b, axis) with cosine `cos_alpha`, scale = 1 - cos_alpha; within rim_slack below the rim: on it.");
+    m.def("cap_density", [](InArray h, InArray p, double scale) {
+        const size_t n = check_points(h, 3, "h");
+        if (p.ndim() != 1 || p.size() != n) throw nb::value_error("'p' must hold one value per row of 'h'");
+        double *out;
+        OutArray oa = new_array(n, 0, &out);
+        {
+            nb::gil_scoped_release g;
+            for_chunks(n, kCubatureChunk, [&](size_t, size_t a, size_t e, int) {
+                cap_density(h.data(), p.data(), a, e, scale, out);
+            });
+        }
+        return oa;
+    }, "h"_a, "p"_a, "scale"_a, "(N,): float32(p) * float32(scale), widened, where the row of h (N, 3) is finite "
+       "with h_z >= 0, else 0.");
+    struct RowsLookup {   // the rows kept alive beside the lookup that reads them
+        InArray rows;
+        RowLookup lookup;
+    };
+    nb::class_<RowsLookup>(m, "RowLookup", "Which of the rows x (N, k), k <= 3, equals a given row (numpy's ==).")
+        .def("__init__", [](RowsLookup *self, InArray x) {
+            if (x.ndim() != 2 || x.shape(1) < 1 || x.shape(1) > 3) throw nb::value_error("'x' must have shape (N, k), k 1 to 3");
+            if (x.shape(0) >= size_t(0xffffffffu)) throw nb::value_error("'x' must have fewer than 2^32 - 1 rows");
+            new (self) RowsLookup{x, RowLookup(x.data(), x.shape(0), x.shape(1))};
+        }, "x"_a)
+        .def("find", [](const RowsLookup &r, InArray q) {
+            if (q.ndim() != 2 || q.shape(1) != r.rows.shape(1)) throw nb::value_error("'q' must have the rows' width");
+            const size_t m = q.shape(0), k = q.shape(1);
+            nb::capsule owner;
+            int64_t *out = output_buffer<int64_t>(m, owner);
+            for (size_t i = 0; i < m; ++i) out[i] = r.lookup.find(q.data() + i * k);
+            return nb::ndarray<nb::numpy, int64_t>(out, {m}, owner);
+        }, "q"_a, "(M,) int64: for each row of q the first equal row of x, or -1.");
     m.def("float32_unit_rows", [](InArray x, double slack) {
         const size_t n = check_points(x, 3, "x");
         nb::capsule owner;

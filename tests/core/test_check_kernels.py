@@ -319,6 +319,85 @@ def test_cap_to_world_matches_the_numpy_map_at_poles_horizons_and_nan():
         rest.cap_to_world(h, axis[:2], t, b, 0.8, 0.2)
 
 
+def cap_to_hemisphere_reference(d, axis, t, b, cos_alpha, scale, rim_slack):
+    """Cap.to_hemisphere in numpy, with trigonometry (the map the core's kernel computes by ratios)."""
+    with np.errstate(all="ignore"):
+        u = d / np.linalg.norm(d, axis=1, keepdims=True)
+        c = u @ axis
+        c = np.where((c < cos_alpha) & (c >= cos_alpha - rim_slack), cos_alpha, c)
+        z = (c - cos_alpha) / scale
+        phi = np.arctan2(u @ b, u @ t)
+        r = np.sqrt(np.maximum(0.0, 1 - z * z))
+    return np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
+
+
+def test_cap_to_hemisphere_is_the_numpy_map_and_inverts_cap_to_world():
+    """Random directions (not normalised), the axis itself (azimuth 0), directions just inside,
+    on and just below the rim (within the slack: onto the horizon; beyond it: below), below the
+    cap, NaN and zero rows; vector lanes and the scalar tail alike."""
+    rng = np.random.default_rng(15)
+    axis = np.array([0.3, -0.2, 1.0]) / np.linalg.norm([0.3, -0.2, 1.0])
+    t = np.cross([1.0, 0.0, 0.0], axis)
+    t /= np.linalg.norm(t)
+    b = np.cross(axis, t)
+    cos_alpha, scale, slack = 0.8, 0.2, 2e-7
+    d = rng.normal(size=(N, 3)) * rng.uniform(0.5, 2.0, (N, 1))
+    rim = np.sqrt(1 - cos_alpha**2)
+    d[:8] = [axis, 3 * axis, cos_alpha * axis + rim * t, (cos_alpha - 1e-7) * axis + rim * t,
+             (cos_alpha - 1e-6) * axis + rim * t, -axis, [np.nan, 0, 1], [0, 0, 0]]
+    got = rest.cap_to_hemisphere(d, axis, t, b, cos_alpha, scale, slack)
+    ref = cap_to_hemisphere_reference(d, axis, t, b, cos_alpha, scale, slack)
+    # within 1e-6 of the axis the azimuth is rounding noise, the two maps' alike: there both
+    # points lie within the small circle of radius r about the pole
+    radius = np.hypot(ref[:, 0], ref[:, 1])
+    near = (radius < 1e-6) & (ref[:, 2] > 0.5)
+    np.testing.assert_allclose(got[~near], ref[~near], rtol=0, atol=1e-13)
+    assert np.all(np.abs(got[near] - ref[near]) <= 2 * radius[near, None] + 1e-15)
+    assert np.array_equal(np.isnan(got), np.isnan(ref)) and np.isnan(got[6:8]).all()
+    assert got[0, :2].tolist() == [0.0, 0.0] and got[0, 2] == pytest.approx(1.0, abs=1e-15)   # the axis
+    assert got[3, 2] == 0.0 and got[4, 2] < 0      # within the rim's slack: on the horizon; beyond: below
+    frame = (axis, t, b, cos_alpha, scale)
+    for start in (1, 3, 7):
+        assert np.array_equal(rest.cap_to_hemisphere(d[start:], *frame, slack), got[start:], equal_nan=True)
+    h = rng.normal(size=(N, 3))
+    h[:, 2] = np.abs(h[:, 2])
+    h /= np.linalg.norm(h, axis=1, keepdims=True)
+    back = rest.cap_to_hemisphere(rest.cap_to_world(h, *frame), *frame, slack)
+    np.testing.assert_allclose(back, h, rtol=0, atol=1e-12)
+
+
+def test_cap_density_is_numpys_float32_product_where_the_point_is_on_the_hemisphere():
+    rng = np.random.default_rng(16)
+    h = rng.normal(size=(N, 3))
+    h[:5] = [[0, 0, 0.0], [0, 0, -0.0], [0, 0, -1e-300], [np.inf, 0, 1], [np.nan, 0, 1]]
+    p = rng.random(N) * 10.0 ** rng.integers(-40, 40, N)
+    p[5:9] = [np.nan, np.inf, -1.0, 1e300]
+    with np.errstate(over="ignore"):     # 1e300 and beyond float32's range: inf, as numpy rounds
+        want = np.where(np.all(np.isfinite(h), axis=1) & (h[:, 2] >= 0),
+                        (p.astype(np.float32) * np.float32(0.3)).astype(float), 0.0)
+    np.testing.assert_array_equal(rest.cap_density(h, p, 0.3).view(np.uint64), want.view(np.uint64))
+
+
+def test_row_lookup_finds_the_first_equal_row_as_numpy_compares():
+    """Duplicated rows (the first is found), zeros of either sign alike, NaN rows matching
+    nothing, rows absent, every width 1 to 3; a brute-force search as the reference."""
+    rng = np.random.default_rng(17)
+    for k in (1, 2, 3):
+        x = rng.integers(-3, 4, size=(2000, k)).astype(float) / 2     # many duplicates
+        x[::97] = np.nan
+        x[5] = -0.0
+        lookup = rest.RowLookup(x)
+        q = np.concatenate([x[rng.integers(0, 2000, 300)], rng.normal(size=(50, k)), np.zeros((1, k)),
+                            np.full((1, k), np.nan)])
+        with np.errstate(invalid="ignore"):
+            equal = np.all(q[:, None, :] == x[None, :, :], axis=2)
+        want = np.where(equal.any(axis=1), np.argmax(equal, axis=1), -1)
+        np.testing.assert_array_equal(lookup.find(q), want)
+    assert rest.RowLookup(np.empty((0, 3))).find(np.zeros((2, 3))).tolist() == [-1, -1]
+    with pytest.raises(ValueError, match="width"):
+        rest.RowLookup(np.zeros((4, 3))).find(np.zeros((1, 2)))
+
+
 def test_finite_rows_match_numpy():
     rng = np.random.default_rng(13)
     for shape in ((N, 3), (N, 2), (N,), (N, 2, 2), (0, 3)):
