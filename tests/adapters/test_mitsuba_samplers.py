@@ -77,6 +77,40 @@ def test_check_sampler_takes_failed_samples_as_the_mitsuba_check_does():
     assert a.passed and b.passed and a.tests.equals(b.tests)
 
 
+def test_a_check_runs_with_the_samplers_drjit_threads_and_restores_them():
+    """A diffuse BSDF's check runs its kernels on one drjit worker (check_threads), an area
+    light's on drjit's own count; the count before is restored after, also when the check
+    raises; a sampler of the user's own (no check_threads) leaves it alone."""
+    import drjit as dr
+
+    seen = []
+
+    class Recorded(ms.BSDFSampler):
+        def pdf(self, x):
+            seen.append(dr.thread_count())
+            return super().pdf(x)
+
+    before = dr.thread_count()
+    s = Recorded({"type": "diffuse"}, wi=(0.0, 0.0, 1.0))
+    assert checks.check_mitsuba_sampler(s, sample_count=20_000, seed=0).passed
+    assert set(seen) == {1} and dr.thread_count() == before
+
+    class Failing(Recorded):
+        def pdf(self, x):
+            raise RuntimeError("planted")
+
+    with pytest.raises(Exception, match="planted"):
+        checks.check_mitsuba_sampler(Failing({"type": "diffuse"}, wi=(0.0, 0.0, 1.0)), sample_count=20_000)
+    assert dr.thread_count() == before
+    seen.clear()
+    capped = _Capped(0.1)
+    capped.pdf = lambda x: (seen.append(dr.thread_count()), _Capped.pdf(capped, x))[1]
+    checks.check_mitsuba_sampler(capped, sample_count=20_000, seed=0)
+    assert set(seen) == {before}
+    from harness.adapters.mitsuba import emitters as em
+    assert ms.area_emitter_sampler(em.sphere_light([1.0, 2.0, 3.0]), ref=(0, 0, 0)).check_threads is None
+
+
 @pytest.mark.slow
 def test_failure_aware_check_false_alarms_stay_rare():
     # 20 seeds of a correct defective sampler at alpha = 0.01: more than 3 rejections would

@@ -51,7 +51,7 @@ from scipy import stats
 import reference_estimators as rest
 
 from harness.adapters.mitsuba.cap import CapView
-from harness.adapters.mitsuba.runtime import is_jit
+from harness.adapters.mitsuba.runtime import is_jit, jit_threads
 from harness.samplers.check import SAMPLE_CASE, check_with_missing
 from harness.samplers.domains import Domain
 from harness.samplers.reported import reported_pdf_failure, rounding_spread
@@ -80,11 +80,20 @@ def check_mitsuba_sampler(sampler: Any, *, sample_count: int = 1_000_000, seed: 
     an envmap's, let the cubature cut at its texel lines.
     A sampler with a ``cap`` (an area light) is tested statistically in the cap's map
     (``CapView``) and its reported pdf on the same draw's world directions.
+    The check runs with drjit's worker threads set to the sampler's ``check_threads``
+    (:class:`~harness.adapters.mitsuba.batch.MitsubaSampler`; one for most plugins), holding
+    Mitsuba's variant lock (:func:`~harness.adapters.mitsuba.runtime.jit_threads`).
     """
     if _scalar_variant(sampler):
         raise ValueError("check_mitsuba_sampler needs a JIT variant ('llvm_ad_rgb'): the cubature evaluates "
                          "the pdf at ~10^7 points, per-sample Python calls of the "
                          f"{sampler.variant!r} variant would take hours")
+    with jit_threads(getattr(sampler, "check_threads", None)):
+        return _checked(sampler, sample_count, seed, alpha)
+
+
+def _checked(sampler: Any, sample_count: int, seed: int, alpha: float) -> SamplerCheck:
+    """check_mitsuba_sampler's checks, drjit's threads set."""
     cap = getattr(sampler, "cap", None)
     with_pdf = getattr(sampler, "sample_with_pdf", None)
     if cap is None:

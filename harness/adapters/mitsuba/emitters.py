@@ -239,6 +239,7 @@ class AreaEmitterSampler(MitsubaSampler):
     kind = "emitter"
     udim = 2
     domain = "sphere"
+    check_threads = None   # its pdf traces a ray a direction: every drjit worker (MitsubaSampler)
     sample_outputs = ("x", "weight", "pdf", "dist", "cos")
 
     def __init__(self, shape: dict[str, Any], *, ref: Sequence[float] = (0.0, 0.0, 0.0),

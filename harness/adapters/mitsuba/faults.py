@@ -44,6 +44,7 @@ class Mutant:
         self.pole, self.breaks = getattr(base, "pole", "z"), getattr(self.pdf_from, "breaks", None)
         self.variant, self.kind = base.variant, base.kind
         self.cap = getattr(base, "cap", None)   # an area light's: the chi-square runs in its map
+        self.check_threads = getattr(base, "check_threads", None)   # drjit's workers in a check
 
     def sample(self, u: np.ndarray) -> np.ndarray:
         return self.base.sample(u)

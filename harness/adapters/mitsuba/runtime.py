@@ -7,6 +7,11 @@ libLLVM-19 (``/usr/lib/<triplet>/libLLVM-19.so``, the version this project is te
 it runs when this module is imported, and every Mitsuba adapter module imports this
 one before it imports drjit or Mitsuba (they do so lazily, inside functions).
 
+Threads.  drjit's LLVM kernels run on its own worker threads (nanothread), one per CPU, which
+spin for milliseconds after each kernel before they sleep.  :func:`jit_threads` sets their
+number for a while (a sampler check's, which calls short kernels every few hundred
+microseconds between its own batch calls, and so ran beside spinning workers throughout).
+
 Variants.  ``mi.set_variant`` is process-global, so every public call of an adapter takes
 :data:`VARIANT_LOCK`, sets its variant and uses Mitsuba objects built for that variant only.
 JIT variants (llvm_ad_*, cuda_ad_*) run a batch as one kernel; scalar variants loop over
@@ -22,8 +27,8 @@ import threading
 from collections.abc import Iterator
 from typing import Any
 
-__all__ = ["LIBLLVM_PATTERNS", "VARIANT_LOCK", "activate", "check_variant", "is_jit", "use_libllvm",
-           "using_variant"]
+__all__ = ["LIBLLVM_PATTERNS", "VARIANT_LOCK", "activate", "check_variant", "is_jit", "jit_threads",
+           "use_libllvm", "using_variant"]
 
 #: Where Debian (and Ubuntu) install libLLVM 19, in the order tried.
 LIBLLVM_PATTERNS = ("/usr/lib/*/libLLVM-19.so", "/usr/lib/*/libLLVM.so.19*")
@@ -63,6 +68,27 @@ def using_variant(variant: str) -> Iterator[Any]:
     ``mitsuba`` module with ``variant`` set."""
     with VARIANT_LOCK:
         yield activate(variant)
+
+
+@contextlib.contextmanager
+def jit_threads(count: int | None) -> Iterator[None]:
+    """Inside, drjit runs its JIT kernels on ``count`` worker threads (``dr.set_thread_count``;
+    None: as they are), the count before restored after; :data:`VARIANT_LOCK` is held
+    throughout (the count is process-global, like the variant)."""
+    with VARIANT_LOCK:
+        if count is None:
+            yield
+            return
+        import drjit as dr
+
+        before = dr.thread_count()
+        if count != before:
+            dr.set_thread_count(count)
+        try:
+            yield
+        finally:
+            if count != before:
+                dr.set_thread_count(before)
 
 
 def is_jit(variant: str) -> bool:
