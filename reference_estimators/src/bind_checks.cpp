@@ -76,6 +76,22 @@ struct BoundTransform {
     const PiecewiseLinearTable *conditional_table() const { return conditional ? conditional->table.get() : nullptr; }
 };
 
+// The rows x (N, 3) through one of the cap's maps (cap_to_world, cap_to_hemisphere):
+// map(a, e, out) writes rows a .. e - 1 of the result, chunks on all threads (each row from
+// that row alone), the frame (axis, t, b) checked first.
+template <class Map>
+OutArray cap_rows(const InArray &x, const char *arg, const InArray &axis, const InArray &t, const InArray &b,
+                  Map map) {
+    const size_t n = check_points(x, 3, arg);
+    if (axis.size() != 3 || t.size() != 3 || b.size() != 3)
+        throw nb::value_error("'axis', 't' and 'b' must be 3-vectors");
+    double *out;
+    OutArray rows = new_array(n, 3, &out);
+    nb::gil_scoped_release g;
+    for_chunks(n, kCubatureChunk, [&](size_t, size_t a, size_t e, int) { map(a, e, out); });
+    return rows;
+}
+
 // The rows of x (N,) or (N, k), k >= 1, with one `keep` flag per row: N.
 size_t check_rows(const InArray &x, const BoolArray &keep) {
     if (x.ndim() < 1 || x.ndim() > 2 || (x.ndim() == 2 && x.shape(1) == 0) || keep.size() != x.shape(0))
@@ -169,37 +185,17 @@ void bind_checks(nb::module_ &m) {
         return xa;
     }, "kind"_a, "lo"_a, "hi"_a, "s"_a, "Points x(s) (N,) or (N, point_dim) of parameters s (N, k) on domain `kind`.");
     m.def("cap_to_world", [](InArray h, InArray axis, InArray t, InArray b, double cos_alpha, double scale) {
-        const size_t n = check_points(h, 3, "h");
-        if (axis.size() != 3 || t.size() != 3 || b.size() != 3)
-            throw nb::value_error("'axis', 't' and 'b' must be 3-vectors");
-        double *out;
-        OutArray wa = new_array(n, 3, &out);
-        {
-            nb::gil_scoped_release g;
-            // each row from that row alone: chunks on all threads
-            for_chunks(n, kCubatureChunk, [&](size_t, size_t a, size_t e, int) {
-                cap_to_world(h.data(), a, e, axis.data(), t.data(), b.data(), cos_alpha, scale, out);
-            });
-        }
-        return wa;
+        return cap_rows(h, "h", axis, t, b, [&](size_t a, size_t e, double *out) {
+            cap_to_world(h.data(), a, e, axis.data(), t.data(), b.data(), cos_alpha, scale, out);
+        });
     }, "h"_a, "axis"_a, "t"_a, "b"_a, "cos_alpha"_a, "scale"_a,
        "World directions (N, 3) of hemisphere points h (N, 3) through the equal-area map of the cap about `axis` "
        "(frame t, b, axis) with cosine `cos_alpha`, scale = 1 - cos_alpha.");
     m.def("cap_to_hemisphere", [](InArray d, InArray axis, InArray t, InArray b, double cos_alpha, double scale,
                                   double rim_slack) {
-        const size_t n = check_points(d, 3, "d");
-        if (axis.size() != 3 || t.size() != 3 || b.size() != 3)
-            throw nb::value_error("'axis', 't' and 'b' must be 3-vectors");
-        double *out;
-        OutArray ha = new_array(n, 3, &out);
-        {
-            nb::gil_scoped_release g;
-            // each row from that row alone: chunks on all threads
-            for_chunks(n, kCubatureChunk, [&](size_t, size_t a, size_t e, int) {
-                cap_to_hemisphere(d.data(), a, e, axis.data(), t.data(), b.data(), cos_alpha, scale, rim_slack, out);
-            });
-        }
-        return ha;
+        return cap_rows(d, "d", axis, t, b, [&](size_t a, size_t e, double *out) {
+            cap_to_hemisphere(d.data(), a, e, axis.data(), t.data(), b.data(), cos_alpha, scale, rim_slack, out);
+        });
     }, "d"_a, "axis"_a, "t"_a, "b"_a, "cos_alpha"_a, "scale"_a, "rim_slack"_a,
        "Hemisphere points (N, 3) of world directions d (N, 3) through the equal-area map of the cap about `axis` "
        "(frame t, b, axis) with cosine `cos_alpha`, scale = 1 - cos_alpha; within rim_slack below the rim: on it.");
