@@ -220,12 +220,20 @@ def split_points(lo: Any, hi: Any, breaks: Any) -> np.ndarray:
 BoxRefinement = _core.BoxRefinement
 
 
+def _indices(x: Any, name: str) -> np.ndarray:
+    """x as contiguous int64 (N,); a ValueError naming ``name`` unless its values are integers
+    (a float index would be truncated)."""
+    a = np.asarray(x)
+    if a.size and not np.issubdtype(a.dtype, np.integer):
+        raise ValueError(f"'{name}' must hold integer indices, got dtype {a.dtype}")
+    return np.ascontiguousarray(a, dtype=np.int64).reshape(-1)
+
+
 def uncut_parents(hi: Any, group: Any, parent_hi: Any) -> int:
     """How many parent boxes (G, k) are not cut along every axis by their boxes: parent g is
     cut along an axis where a box i with group[i] == g ends below it there (hi[i] <
     parent_hi[g]).  One pass in C++ (harness.samplers.cubature.grouped_integrals)."""
-    return int(_core.uncut_parents(np.ascontiguousarray(hi, dtype=np.float64),
-                                   np.ascontiguousarray(group, dtype=np.int64).reshape(-1),
+    return int(_core.uncut_parents(np.ascontiguousarray(hi, dtype=np.float64), _indices(group, "group"),
                                    np.ascontiguousarray(parent_hi, dtype=np.float64)))
 
 
@@ -241,19 +249,20 @@ def grouped_agreement(own: Any, parent: Any, group: Any, tol: Any,
     the same bits, in one pass in C++."""
     return _core.grouped_agreement(np.ascontiguousarray(own, dtype=np.float64),
                                    np.ascontiguousarray(parent, dtype=np.float64),
-                                   np.ascontiguousarray(group, dtype=np.int64).reshape(-1),
+                                   _indices(group, "group"),
                                    np.ascontiguousarray(tol, dtype=np.float64).reshape(-1), float(floor))
 
 
 #: The boxes of the sampler check's CDF tables (harness.samplers.cdf_tables.tabulate):
 #: ``LeafQuarters(strip, a, b, pieces, used, strip_tol, axis, k)`` for leaves [a, b) (L,) along
-#: ``axis`` of strips ``strip`` (L,) int64, the strips' pieces across (S, P, 2), their non-empty
-#: counts ``used`` (S,) int64 and tolerances ``strip_tol`` (S,); ``boxes()`` -> (lo, hi, group,
-#: parent_lo, parent_hi, tol), the boxes to integrate (rows, k) (each leaf's quarters times its
-#: non-empty pieces, halved across on the square), their parents' indices (rows,) int64, the
-#: parents (G, k) (each leaf's pieces) and the boxes' tolerances (rows,), as
-#: grouped_integrals takes them; ``count`` the quarter boxes integrated; ``sums(v, e)`` ->
-#: (quarter masses (L, 4), summed errors (L,)) from the boxes' integrals and errors (rows, m).
+#: ``axis`` of strips ``strip`` (L,), the strips' pieces across (S, P, 2), their non-empty
+#: counts ``used`` (S,) (both int64 arrays: other types are refused, not converted) and
+#: tolerances ``strip_tol`` (S,); ``boxes()`` -> (lo, hi, group, parent_lo, parent_hi, tol), the
+#: boxes to integrate (rows, k) (each leaf's quarters times its non-empty pieces, halved across
+#: on the square), their parents' indices (rows,) int64, the parents (G, k) (each leaf's
+#: pieces) and the boxes' tolerances (rows,), as grouped_integrals takes them; ``count`` the
+#: quarter boxes integrated; ``sums(v, e)`` -> (quarter masses (L, 4), summed errors (L,)) from
+#: the boxes' integrals and errors (rows, m).
 LeafQuarters = _core.LeafQuarters
 
 

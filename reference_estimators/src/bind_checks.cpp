@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <memory>
+#include <utility>
 
 #include "bind_common.h"
 #include "check_rows.h"
@@ -221,14 +222,21 @@ void bind_checks(nb::module_ &m) {
         .def("__init__", [](RowsLookup *self, InArray x) {
             if (x.ndim() != 2 || x.shape(1) < 1 || x.shape(1) > 3) throw nb::value_error("'x' must have shape (N, k), k 1 to 3");
             if (x.shape(0) >= size_t(0xffffffffu)) throw nb::value_error("'x' must have fewer than 2^32 - 1 rows");
-            new (self) RowsLookup{x, RowLookup(x.data(), x.shape(0), x.shape(1))};
+            RowLookup lookup = [&] {
+                nb::gil_scoped_release r;
+                return RowLookup(x.data(), x.shape(0), x.shape(1));
+            }();
+            new (self) RowsLookup{x, std::move(lookup)};
         }, "x"_a)
         .def("find", [](const RowsLookup &r, InArray q) {
             if (q.ndim() != 2 || q.shape(1) != r.rows.shape(1)) throw nb::value_error("'q' must have the rows' width");
             const size_t m = q.shape(0), k = q.shape(1);
             nb::capsule owner;
             int64_t *out = output_buffer<int64_t>(m, owner);
-            for (size_t i = 0; i < m; ++i) out[i] = r.lookup.find(q.data() + i * k);
+            {
+                nb::gil_scoped_release g;
+                for (size_t i = 0; i < m; ++i) out[i] = r.lookup.find(q.data() + i * k);
+            }
             return nb::ndarray<nb::numpy, int64_t>(out, {m}, owner);
         }, "q"_a, "(M,) int64: for each row of q the first equal row of x, or -1.");
     m.def("float32_unit_rows", [](InArray x, double slack) {

@@ -6,6 +6,7 @@
 #include <nanobind/stl/vector.h>
 
 #include <algorithm>
+#include <string>
 #include <vector>
 
 #include "bind_common.h"
@@ -27,8 +28,6 @@ size_t check_boxes(const InArray &lo, const InArray &hi) {
     return lo.shape(1);
 }
 
-using IndexArray = nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
-
 // A new int64 numpy array (n,) holding `values`.
 nb::ndarray<nb::numpy, int64_t> index_array(const std::vector<int64_t> &values) {
     nb::capsule owner;
@@ -37,11 +36,12 @@ nb::ndarray<nb::numpy, int64_t> index_array(const std::vector<int64_t> &values) 
     return nb::ndarray<nb::numpy, int64_t>(out, {values.size()}, owner);
 }
 
-// Every group index in [0, groups).
-void check_groups(const IndexArray &group, size_t groups) {
-    for (size_t i = 0; i < group.size(); ++i)
-        if (group.data()[i] < 0 || size_t(group.data()[i]) >= groups)
-            throw nb::value_error("'group' must hold parent indices in [0, parents)");
+// Every index of `index` (the argument `arg`) in [0, count): the `what` it indexes.
+void check_indices(const I64Array &index, size_t count, const char *arg, const char *what) {
+    for (size_t i = 0; i < index.size(); ++i)
+        if (index.data()[i] < 0 || size_t(index.data()[i]) >= count)
+            throw nb::value_error((std::string("'") + arg + "' must hold " + what + " indices in [0, " +
+                                   std::to_string(count) + ")").c_str());
 }
 
 }  // namespace
@@ -142,21 +142,23 @@ void bind_cubature(nb::module_ &m) {
             r.result(value, error);
             return nb::make_tuple(a, b);
         }, "(integrals, errors) (N, m): each box's finished parts summed in the order they finished.");
-    m.def("uncut_parents", [](InArray hi, IndexArray group, InArray parent_hi) {
-        const size_t k = check_boxes(hi, hi);
+    m.def("uncut_parents", [](InArray hi, I64Array group, InArray parent_hi) {
+        if (hi.ndim() != 2 || (hi.shape(1) != 1 && hi.shape(1) != 2))
+            throw nb::value_error("'hi' must have shape (B, 1) or (B, 2)");
+        const size_t k = hi.shape(1);
         if (group.size() != hi.shape(0) || parent_hi.ndim() != 2 || parent_hi.shape(1) != k)
             throw nb::value_error("'group' must be (B,) for the boxes 'hi' (B, k), and 'parent_hi' (G, k)");
-        check_groups(group, parent_hi.shape(0));
+        check_indices(group, parent_hi.shape(0), "group", "parent");
         nb::gil_scoped_release r;
         return uncut_parents(hi.data(), group.data(), group.size(), k, parent_hi.data(), parent_hi.shape(0));
-    }, "hi"_a, "group"_a, "parent_hi"_a,
+    }, "hi"_a, "group"_a.noconvert(), "parent_hi"_a,
        "How many parents are not cut along every axis by their boxes (a box ends below its parent's end).");
-    m.def("grouped_agreement", [](InArray own, InArray parent, IndexArray group, InArray tol, double floor) {
+    m.def("grouped_agreement", [](InArray own, InArray parent, I64Array group, InArray tol, double floor) {
         if (own.ndim() != 2 || parent.ndim() != 2 || own.shape(1) != parent.shape(1) || own.shape(1) == 0 ||
             group.size() != own.shape(0) || tol.size() != own.shape(0))
             throw nb::value_error("'own' must be (B, m), 'parent' (G, m), 'group' and 'tol' (B,)");
         const size_t boxes = own.shape(0), m = own.shape(1);
-        check_groups(group, parent.shape(0));
+        check_indices(group, parent.shape(0), "group", "parent");
         double *value, *error;
         OutArray va = new_array(boxes, m, &value), ea = new_array(boxes, m, &error);
         std::vector<int64_t> rest;
@@ -166,26 +168,27 @@ void bind_cubature(nb::module_ &m) {
                               value, error, rest);
         }
         return nb::make_tuple(va, ea, index_array(rest));
-    }, "own"_a, "parent"_a, "group"_a, "tol"_a, "floor"_a,
+    }, "own"_a, "parent"_a, "group"_a.noconvert(), "tol"_a, "floor"_a,
        "(value, error, rest): the boxes of parents whose rule agrees with their boxes' sum take their own "
        "integrals, the parent's change shared by tolerance as error; `rest` the other boxes' rows.");
     nb::class_<LeafQuarters>(m, "LeafQuarters",
         "The boxes of the CDF tables' leaf quarters (harness/samplers/cdf_tables.py) and their integrals "
         "summed back into quarter masses (sums).")
-        .def("__init__", [](LeafQuarters *self, IndexArray strip, InArray a, InArray b, InArray pieces,
-                            IndexArray used, InArray strip_tol, size_t axis, size_t k) {
+        .def("__init__", [](LeafQuarters *self, I64Array strip, InArray a, InArray b, InArray pieces,
+                            I64Array used, InArray strip_tol, size_t axis, size_t k) {
             if ((k != 1 && k != 2) || axis >= k) throw nb::value_error("'k' must be 1 or 2 and 'axis' below it");
             if (a.ndim() != 1 || b.ndim() != 1 || a.size() != strip.size() || b.size() != strip.size())
                 throw nb::value_error("'strip', 'a' and 'b' must be (L,) each");
             if (pieces.ndim() != 3 || pieces.shape(2) != 2 || pieces.shape(1) == 0 || used.size() != pieces.shape(0) ||
                 strip_tol.ndim() != 1 || strip_tol.size() != pieces.shape(0))
                 throw nb::value_error("'pieces' must be (S, P, 2) with P >= 1, 'used' and 'strip_tol' (S,)");
-            check_groups(strip, pieces.shape(0));
+            check_indices(strip, pieces.shape(0), "strip", "strip (of 'pieces')");
             for (size_t g = 0; g < used.size(); ++g)
                 if (used.data()[g] < 1) throw nb::value_error("'used' must count at least one piece per strip");
+            nb::gil_scoped_release r;
             new (self) LeafQuarters(strip.data(), a.data(), b.data(), strip.size(), pieces.data(), pieces.shape(0),
                                     pieces.shape(1), used.data(), strip_tol.data(), axis, k);
-        }, "strip"_a, "a"_a, "b"_a, "pieces"_a, "used"_a, "strip_tol"_a, "axis"_a, "k"_a)
+        }, "strip"_a.noconvert(), "a"_a, "b"_a, "pieces"_a, "used"_a.noconvert(), "strip_tol"_a, "axis"_a, "k"_a)
         .def("boxes", [](const LeafQuarters &q) {
             const size_t k = q.k(), rows = q.rows(), parents = q.parents();
             double *lo, *hi, *tol, *plo, *phi;

@@ -548,14 +548,14 @@ def _reference_quarter_sums(v, e, full, npiece, k):
 
 
 @pytest.mark.parametrize("k, axis", [(1, 0), (2, 0), (2, 1)])
-@pytest.mark.parametrize("npiece", [1, 5, 12, 32, 40])
+@pytest.mark.parametrize("npiece", [1, 3, 5, 12, 32, 40, 160])
 def test_leaf_quarters_in_the_core_are_the_numpy_boxes_and_sums_bit_for_bit(k, axis, npiece):
     """The quarter boxes of leaves of any width (down to _MIN_WIDTH and ulps, where quarters
     collapse), pieces padded with empty ones, and their integrals folded back (halves summed,
-    NaN and infinite ones as mass 0 with error 1, negative ones as 0, np.sum's pairwise order
-    over up to 160 boxes a leaf) as tabulate's numpy code did."""
+    NaN and infinite ones as mass 0 with error 1, negative ones as 0, errors of -0.0, np.sum's
+    pairwise order over up to 640 boxes a leaf, its recursion past 128 included) as tabulate's
+    numpy code did.  On an interval (k = 1) the pieces are not read, only counted."""
     rng = np.random.default_rng(5 + npiece)
-    npiece = npiece if k == 2 else 1
     for _ in range(10):
         nstrip = int(rng.integers(1, 6))
         cuts = np.sort(rng.random((nstrip, npiece + 1)), axis=1)
@@ -563,7 +563,7 @@ def test_leaf_quarters_in_the_core_are_the_numpy_boxes_and_sums_bit_for_bit(k, a
         padding = int(rng.integers(0, npiece))
         if padding:
             cuts[:, -padding:] = 1.0     # empty pieces at the end, as _cut_at_steps pads
-        pieces = np.stack([cuts[:, :-1], cuts[:, 1:]], axis=2) if k == 2 else np.zeros((nstrip, 1, 2))
+        pieces = np.stack([cuts[:, :-1], cuts[:, 1:]], axis=2) if k == 2 else np.zeros((nstrip, npiece, 2))
         used = np.maximum(np.sum(pieces[:, :, 1] > pieces[:, :, 0], axis=1), 1)
         nleaf = int(rng.integers(1, 50))
         strip = np.sort(rng.integers(0, nstrip, nleaf))
@@ -581,5 +581,10 @@ def test_leaf_quarters_in_the_core_are_the_numpy_boxes_and_sums_bit_for_bit(k, a
         e = np.abs(rng.normal(size=(rows, 2))) * 1e-9
         v[rng.random(rows) < 0.03, 0] = rng.choice([np.nan, np.inf])
         e[rng.random(rows) < 0.03, 0] = np.nan
-        for x, y in zip(_reference_quarter_sums(v, e, want[-1], npiece, k), boxes.sums(v, e)):
-            np.testing.assert_array_equal(x.view(np.uint64), y.view(np.uint64))
+        for errors in (e, np.full_like(e, -0.0)):
+            for x, y in zip(_reference_quarter_sums(v, errors, want[-1], npiece, k), boxes.sums(v, errors)):
+                np.testing.assert_array_equal(x.view(np.uint64), y.view(np.uint64))
+    with pytest.raises(ValueError, match="'strip' must hold strip"):
+        rest.LeafQuarters(np.array([nstrip]), a[:1], b[:1], pieces, used, strip_tol, axis, k)
+    with pytest.raises(TypeError):      # indices of another type are refused, not truncated
+        rest.LeafQuarters(np.zeros(1), a[:1], b[:1], pieces, used, strip_tol, axis, k)

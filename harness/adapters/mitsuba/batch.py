@@ -196,10 +196,12 @@ class MitsubaSampler:
     distributions, environment maps): the check calls some 300 short kernels between its own
     batch calls, and drjit's idle workers spin after each, so its own work, its Python and the
     kernels' launches ran beside them throughout.  On the 2-CPU machine of 2026-12-05 one
-    worker took the median check of those plugins from 0.19 to 0.15 s (its own work 0.10 to
-    0.085 s, a diffuse BSDF's 0.052 to 0.042 s, 29 of 122 plugins' within 50 ms, 8 before)
-    where drjit's kernels alone run slower; an area light, whose pdf traces a ray a direction,
-    keeps every worker (1.5 s with two, 1.8 s with one)."""
+    worker took the median check of those 110 plugins from 0.170 to 0.149 s (its own work
+    0.100 to 0.081 s, a diffuse BSDF's 0.053 to 0.042 s; 29 plugins' own work within 50 ms,
+    8 before: benchmarks/check_time_split.py --all), though drjit's kernels alone run slower
+    on one; an area light, whose pdf traces a ray a direction, keeps every worker (1.5 s a
+    check with two, 1.8 s with one).  A check holds Mitsuba's variant lock throughout, so
+    concurrent Mitsuba calls of other threads wait for it."""
 
     kind = "mitsuba"
     udim = 2
