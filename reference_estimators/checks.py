@@ -16,7 +16,7 @@ from .arguments import stream_arg
 __all__ = [
     "CHECK_DOMAINS", "domain_params", "dithered_domain_params", "domain_points", "cubature_nodes",
     "cubature_points", "cubature_sums", "split_points", "BoxRefinement", "uncut_parents", "grouped_agreement",
-    "LeafQuarters",
+    "leaf_quarters",
     "cubature_moment_sums", "grid_histogram", "rosenblatt",
     "piecewise_linear_lookup", "transform_statistics", "cramer_von_mises_sum", "pdf_summary",
     "all_float32", "dither_float32", "finite_rows", "pdf_mismatches", "float64_rows", "float32_columns",
@@ -253,17 +253,22 @@ def grouped_agreement(own: Any, parent: Any, group: Any, tol: Any,
                                    np.ascontiguousarray(tol, dtype=np.float64).reshape(-1), float(floor))
 
 
-#: The boxes of the sampler check's CDF tables (harness.samplers.cdf_tables.tabulate):
-#: ``LeafQuarters(strip, a, b, pieces, used, strip_tol, axis, k)`` for leaves [a, b) (L,) along
-#: ``axis`` of strips ``strip`` (L,), the strips' pieces across (S, P, 2), their non-empty
-#: counts ``used`` (S,) (both int64 arrays: other types are refused, not converted) and
-#: tolerances ``strip_tol`` (S,); ``boxes()`` -> (lo, hi, group, parent_lo, parent_hi, tol), the
-#: boxes to integrate (rows, k) (each leaf's quarters times its non-empty pieces, halved across
-#: on the square), their parents' indices (rows,) int64, the parents (G, k) (each leaf's
-#: pieces) and the boxes' tolerances (rows,), as grouped_integrals takes them; ``count`` the
-#: quarter boxes integrated; ``sums(v, e)`` -> (quarter masses (L, 4), summed errors (L,)) from
-#: the boxes' integrals and errors (rows, m).
-LeafQuarters = _core.LeafQuarters
+def leaf_quarters(strip: Any, a: Any, b: Any, pieces: Any, used: Any, strip_tol: Any, axis: int,
+                  k: int) -> Any:
+    """The boxes of the sampler check's CDF tables (harness.samplers.cdf_tables.tabulate), a
+    core ``LeafQuarters``: for leaves [a, b) (L,) along ``axis`` of strips ``strip`` (L,)
+    (integer indices into ``pieces``), the strips' pieces across (S, P, 2), their non-empty
+    counts ``used`` (S,) (integers, at least 1) and tolerances ``strip_tol`` (S,) on the
+    k-dimensional parameter space.  Its ``boxes()`` -> (lo, hi, group, parent_lo, parent_hi,
+    tol): the boxes to integrate (rows, k) (each leaf's quarters times its non-empty pieces,
+    halved across on the square), their parents' indices (rows,) int64, the parents (G, k)
+    (each leaf's pieces) and the boxes' tolerances (rows,), as grouped_integrals takes them;
+    ``count``: the quarter boxes integrated; ``sums(v, e)`` -> (quarter masses (L, 4), summed
+    errors (L,)) from the boxes' integrals and errors (rows, m).  ValueError for indices that
+    are not integers or out of range."""
+    f64 = [np.ascontiguousarray(v, dtype=np.float64) for v in (a, b, pieces, strip_tol)]
+    return _core.LeafQuarters(_indices(strip, "strip"), f64[0].reshape(-1), f64[1].reshape(-1), f64[2],
+                              _indices(used, "used"), f64[3].reshape(-1), int(axis), int(k))
 
 
 def cubature_sums(lo: Any, hi: Any, values: Any, weights: Any, scale: float = 1.0) -> np.ndarray:

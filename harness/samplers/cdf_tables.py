@@ -143,7 +143,7 @@ def tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: n
         # (what error remains is summed and carried).  The padding pieces of _cut_at_steps are
         # empty, and not integrated.  The boxes, and their integrals summed back into quarters,
         # in the core (numpy's passes had cost a tilted lobe's tabulation a tenth of its time)
-        boxes = rest.LeafQuarters(strip, a, b, pieces, used, strip_tol, axis, k)
+        boxes = rest.leaf_quarters(strip, a, b, pieces, used, strip_tol, axis, k)
         budget = min(_MAX_EVALS, max(_MAX_TABLE_EVALS - counted.evals, 0))
         # the bare change of a box's last split as its error (extrapolate=False): a singular
         # end's leaves are halved again here, down to _MIN_WIDTH, and the stop at a useless

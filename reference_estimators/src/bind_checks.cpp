@@ -88,8 +88,10 @@ OutArray cap_rows(const InArray &x, const char *arg, const InArray &axis, const 
         throw nb::value_error("'axis', 't' and 'b' must be 3-vectors");
     double *out;
     OutArray rows = new_array(n, 3, &out);
-    nb::gil_scoped_release g;
-    for_chunks(n, kCubatureChunk, [&](size_t, size_t a, size_t e, int) { map(a, e, out); });
+    {
+        nb::gil_scoped_release g;
+        for_chunks(n, kCubatureChunk, [&](size_t, size_t a, size_t e, int) { map(a, e, out); });
+    }
     return rows;
 }
 

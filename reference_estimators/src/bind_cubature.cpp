@@ -6,7 +6,6 @@
 #include <nanobind/stl/vector.h>
 
 #include <algorithm>
-#include <string>
 #include <vector>
 
 #include "bind_common.h"
@@ -34,14 +33,6 @@ nb::ndarray<nb::numpy, int64_t> index_array(const std::vector<int64_t> &values) 
     int64_t *out = output_buffer<int64_t>(values.size(), owner);
     std::copy(values.begin(), values.end(), out);
     return nb::ndarray<nb::numpy, int64_t>(out, {values.size()}, owner);
-}
-
-// Every index of `index` (the argument `arg`) in [0, count): the `what` it indexes.
-void check_indices(const I64Array &index, size_t count, const char *arg, const char *what) {
-    for (size_t i = 0; i < index.size(); ++i)
-        if (index.data()[i] < 0 || size_t(index.data()[i]) >= count)
-            throw nb::value_error((std::string("'") + arg + "' must hold " + what + " indices in [0, " +
-                                   std::to_string(count) + ")").c_str());
 }
 
 }  // namespace
@@ -148,8 +139,7 @@ void bind_cubature(nb::module_ &m) {
         const size_t k = hi.shape(1);
         if (group.size() != hi.shape(0) || parent_hi.ndim() != 2 || parent_hi.shape(1) != k)
             throw nb::value_error("'group' must be (B,) for the boxes 'hi' (B, k), and 'parent_hi' (G, k)");
-        check_indices(group, parent_hi.shape(0), "group", "parent");
-        nb::gil_scoped_release r;
+        nb::gil_scoped_release r;   // the kernel checks each index as it reads it
         return uncut_parents(hi.data(), group.data(), group.size(), k, parent_hi.data(), parent_hi.shape(0));
     }, "hi"_a, "group"_a.noconvert(), "parent_hi"_a,
        "How many parents are not cut along every axis by their boxes (a box ends below its parent's end).");
@@ -158,7 +148,6 @@ void bind_cubature(nb::module_ &m) {
             group.size() != own.shape(0) || tol.size() != own.shape(0))
             throw nb::value_error("'own' must be (B, m), 'parent' (G, m), 'group' and 'tol' (B,)");
         const size_t boxes = own.shape(0), m = own.shape(1);
-        check_indices(group, parent.shape(0), "group", "parent");
         double *value, *error;
         OutArray va = new_array(boxes, m, &value), ea = new_array(boxes, m, &error);
         std::vector<int64_t> rest;
@@ -182,10 +171,7 @@ void bind_cubature(nb::module_ &m) {
             if (pieces.ndim() != 3 || pieces.shape(2) != 2 || pieces.shape(1) == 0 || used.size() != pieces.shape(0) ||
                 strip_tol.ndim() != 1 || strip_tol.size() != pieces.shape(0))
                 throw nb::value_error("'pieces' must be (S, P, 2) with P >= 1, 'used' and 'strip_tol' (S,)");
-            check_indices(strip, pieces.shape(0), "strip", "strip (of 'pieces')");
-            for (size_t g = 0; g < used.size(); ++g)
-                if (used.data()[g] < 1) throw nb::value_error("'used' must count at least one piece per strip");
-            nb::gil_scoped_release r;
+            nb::gil_scoped_release r;   // the indices are checked on the constructor's copies
             new (self) LeafQuarters(strip.data(), a.data(), b.data(), strip.size(), pieces.data(), pieces.shape(0),
                                     pieces.shape(1), used.data(), strip_tol.data(), axis, k);
         }, "strip"_a.noconvert(), "a"_a, "b"_a, "pieces"_a, "used"_a.noconvert(), "strip_tol"_a, "axis"_a, "k"_a)

@@ -12,6 +12,8 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <stdexcept>
+#include <string>
 #include <vector>
 
 #include "check_refine.h"
@@ -45,14 +47,25 @@ inline double pairwise_sum(const double *a, size_t n) {
 // the pairwise sum, so that a sum of -0.0s is 0.0 as numpy's.
 inline double numpy_sum(const double *a, size_t n) { return 0.0 + pairwise_sum(a, n); }
 
+// index[i] as an index below `count`, read once; std::invalid_argument (a ValueError in Python)
+// naming `what` if it is not.  The kernels check each index where they read it: an array
+// checked first and read later could have been changed by another thread in between.
+inline size_t checked_index(const int64_t *index, size_t i, size_t count, const char *what) {
+    const int64_t v = index[i];
+    if (v < 0 || uint64_t(v) >= count)
+        throw std::invalid_argument(std::string(what) + " index " + std::to_string(v) + " outside [0, " +
+                                    std::to_string(count) + ")");
+    return size_t(v);
+}
+
 // How many of `parents` parent boxes are not cut along every axis by their boxes: parent g is
 // cut along an axis where one of the boxes i with group[i] == g ends below the parent's end
-// (hi[i] < parent_hi[g]; k coordinates each).  group[i] must lie in [0, parents).
+// (hi[i] < parent_hi[g]; k coordinates each).  An index outside [0, parents) throws.
 inline size_t uncut_parents(const double *hi, const int64_t *group, size_t boxes, size_t k, const double *parent_hi,
                             size_t parents) {
     std::vector<unsigned char> cut(parents, 0);   // bit `axis`: cut along it
     for (size_t i = 0; i < boxes; ++i) {
-        const size_t g = size_t(group[i]);
+        const size_t g = checked_index(group, i, parents, "a parent");
         for (size_t axis = 0; axis < k; ++axis)
             if (hi[i * k + axis] < parent_hi[g * k + axis]) cut[g] |= (unsigned char)(1u << axis);
     }
@@ -68,13 +81,16 @@ inline size_t uncut_parents(const double *hi, const int64_t *group, size_t boxes
 // its own| is finite and column 0 is within the sum of its boxes' tolerances or `floor` times
 // |its own|; the boxes of an agreeing parent take their own integrals (value, a copy of own)
 // with the parent's change shared by tolerance as their error; the others' rows go to `rest`,
-// in order (their value own's, their error 0: box_integrals' to fill).
+// in order (their value own's, their error 0: box_integrals' to fill).  An index outside
+// [0, parents) throws.
 inline void grouped_agreement(const double *own, const double *parent, const int64_t *group, const double *tol,
                               size_t boxes, size_t parents, size_t m, double floor, double *value, double *error,
                               std::vector<int64_t> &rest) {
     std::vector<double> change(parents * m, 0.0), group_tol(parents, 0.0);
+    std::vector<size_t> owner(boxes);   // group read (and checked) once
+    for (size_t i = 0; i < boxes; ++i) owner[i] = checked_index(group, i, parents, "a parent");
     for (size_t i = 0; i < boxes; ++i) {   // np.bincount's sums: from 0, in row order
-        const size_t g = size_t(group[i]);
+        const size_t g = owner[i];
         for (size_t c = 0; c < m; ++c) change[g * m + c] += own[i * m + c];
         group_tol[g] += tol[i];
     }
@@ -89,7 +105,7 @@ inline void grouped_agreement(const double *own, const double *parent, const int
         agreed[g] = finite && change[g * m] <= nan_max(group_tol[g], floor * std::fabs(parent[g * m]));
     }
     for (size_t i = 0; i < boxes; ++i) {
-        const size_t g = size_t(group[i]);
+        const size_t g = owner[i];
         for (size_t c = 0; c < m; ++c) value[i * m + c] = own[i * m + c];
         if (!agreed[g]) {
             for (size_t c = 0; c < m; ++c) error[i * m + c] = 0.0;
@@ -113,7 +129,7 @@ inline void grouped_agreement(const double *own, const double *parent, const int
 // at a time and copied out had cost more than the numpy code), sums() folds the boxes'
 // integrals back into each leaf's four quarter masses (those not finite: mass 0, error 1) and
 // the sum of its boxes' errors.  The leaves and pieces are copied (a few thousand: small
-// beside the boxes).
+// beside the boxes) and their indices checked on the copies.
 class LeafQuarters {
   public:
     LeafQuarters(const int64_t *strip, const double *a, const double *b, size_t leaves, const double *pieces,
@@ -123,6 +139,10 @@ class LeafQuarters {
         pieces_.assign(pieces, pieces + 2 * strips * npiece);
         used_.assign(used, used + strips);
         strip_tol_.assign(strip_tol, strip_tol + strips);
+        // checked on the copies (the caller's arrays could change meanwhile)
+        for (size_t l = 0; l < leaves; ++l) checked_index(strip_.data(), l, strips, "a strip (of 'pieces')");
+        for (int64_t u : used_)
+            if (u < 1) throw std::invalid_argument("'used' must count at least one piece per strip");
         for (size_t l = 0; l < leaves; ++l) {
             double qa[4], qb[4];
             quarter_edges(l, qa, qb);

@@ -292,7 +292,7 @@ def test_grouped_agreement_in_the_core_is_its_numpy_definition_bit_for_bit(colum
         got = grouped_agreement(own, parent, group, tol, floor)
         for a, b in zip(want, got):
             np.testing.assert_array_equal(np.asarray(a).view(np.uint64), np.asarray(b).view(np.uint64))
-    with pytest.raises(ValueError, match="parent indices"):
+    with pytest.raises(ValueError, match="parent index 1 outside"):
         grouped_agreement(np.ones((2, 1)), np.ones((1, 1)), np.array([0, 1]), np.ones(2), 0.0)
     with pytest.raises(ValueError, match="integer indices"):    # not truncated to parent 0
         grouped_agreement(np.ones((2, 1)), np.ones((1, 1)), np.array([0.0, 0.7]), np.ones(2), 0.0)

@@ -571,7 +571,7 @@ def test_leaf_quarters_in_the_core_are_the_numpy_boxes_and_sums_bit_for_bit(k, a
         b = np.minimum(a + rng.choice([2.0**-30, 1e-17, 1e-3, 0.25], nleaf), 1.0)
         strip_tol = rng.random(nstrip) * 1e-6
         want = _reference_quarters(strip, a, b, pieces, used, strip_tol, axis, k)
-        boxes = rest.LeafQuarters(strip, a, b, pieces, used, strip_tol, axis, k)
+        boxes = rest.leaf_quarters(strip, a, b, pieces, used, strip_tol, axis, k)
         lo, hi, group, parent_lo, parent_hi, tol = boxes.boxes()
         for x, y in zip(want, (lo, hi, tol, group, parent_lo, parent_hi)):
             np.testing.assert_array_equal(np.asarray(x).view(np.uint64), np.asarray(y).view(np.uint64))
@@ -584,7 +584,12 @@ def test_leaf_quarters_in_the_core_are_the_numpy_boxes_and_sums_bit_for_bit(k, a
         for errors in (e, np.full_like(e, -0.0)):
             for x, y in zip(_reference_quarter_sums(v, errors, want[-1], npiece, k), boxes.sums(v, errors)):
                 np.testing.assert_array_equal(x.view(np.uint64), y.view(np.uint64))
-    with pytest.raises(ValueError, match="'strip' must hold strip"):
-        rest.LeafQuarters(np.array([nstrip]), a[:1], b[:1], pieces, used, strip_tol, axis, k)
-    with pytest.raises(TypeError):      # indices of another type are refused, not truncated
-        rest.LeafQuarters(np.zeros(1), a[:1], b[:1], pieces, used, strip_tol, axis, k)
+    with pytest.raises(ValueError, match=r"a strip \(of 'pieces'\) index"):
+        rest.leaf_quarters(np.array([nstrip]), a[:1], b[:1], pieces, used, strip_tol, axis, k)
+    with pytest.raises(ValueError, match="'used' must count"):
+        rest.leaf_quarters(strip[:1], a[:1], b[:1], pieces, np.zeros_like(used), strip_tol, axis, k)
+    with pytest.raises(ValueError, match="integer indices"):      # refused, not truncated to strip 0
+        rest.leaf_quarters(np.full(1, 0.7), a[:1], b[:1], pieces, used, strip_tol, axis, k)
+    # other integer types are taken (numpy 1 on Windows counts in int32)
+    assert rest.leaf_quarters(strip.astype(np.int32), a, b, pieces, used.astype(np.int32), strip_tol, axis,
+                              k).count == boxes.count
