@@ -233,13 +233,13 @@ void bind_checks(nb::module_ &m) {
         .def("find", [](const RowsLookup &r, InArray q) {
             if (q.ndim() != 2 || q.shape(1) != r.rows.shape(1)) throw nb::value_error("'q' must have the rows' width");
             const size_t m = q.shape(0), k = q.shape(1);
-            nb::capsule owner;
-            int64_t *out = output_buffer<int64_t>(m, owner);
+            int64_t *out;
+            auto found = new_index_array(m, &out);
             {
                 nb::gil_scoped_release g;
                 for (size_t i = 0; i < m; ++i) out[i] = r.lookup.find(q.data() + i * k);
             }
-            return nb::ndarray<nb::numpy, int64_t>(out, {m}, owner);
+            return found;
         }, "q"_a, "(M,) int64: for each row of q the first equal row of x, or -1.");
     m.def("float32_unit_rows", [](InArray x, double slack) {
         const size_t n = check_points(x, 3, "x");
@@ -341,9 +341,8 @@ void bind_checks(nb::module_ &m) {
         const size_t k = t.k, n = check_params(s, k);
         double *u;
         OutArray ua = new_array(n, k, &u);
-        int64_t *g = new int64_t[n > 0 ? n : 1];
-        nb::capsule owner(g, [](void *q) noexcept { delete[] static_cast<int64_t *>(q); });
-        nb::ndarray<nb::numpy, int64_t> strip(g, {n}, owner);
+        int64_t *g;
+        auto strip = new_index_array(n, &g);
         {
             nb::gil_scoped_release r;
             rosenblatt(*t.marginal.table, t.conditional_table(), edges.data(), edges.size(), s.data(), k, n, u, g);
@@ -445,10 +444,7 @@ void bind_checks(nb::module_ &m) {
             nb::gil_scoped_release g;
             pdf_mismatches(reported.data(), p.data(), p.size(), rtol, rows);
         }
-        nb::capsule owner;
-        int64_t *out = output_buffer<int64_t>(rows.size(), owner);
-        std::copy(rows.begin(), rows.end(), out);
-        return nb::ndarray<nb::numpy, int64_t>(out, {rows.size()}, owner);
+        return index_array(rows);
     }, "reported"_a, "p"_a, "rtol"_a,
        "(M,) int64: the rows where |reported - p| > rtol |p| (or NaN), or reported is infinite or negative.");
     m.def("piecewise_linear_lookup", [](InArray lo, InArray hi, InArray start, InArray mass,

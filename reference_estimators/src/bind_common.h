@@ -8,9 +8,11 @@
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
 
+#include <algorithm>
 #include <cstdint>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "buffer_cache.h"
 #include "check_domains.h"
@@ -82,12 +84,23 @@ inline void check_uniforms(const InArray &u) {
     }
 }
 
-// A new numpy bool array of n values that owns its memory.
-inline nb::ndarray<nb::numpy, bool> new_bool_array(size_t n, bool **data) {
+// A new numpy array (n,) of T (bool, int64) that owns its memory.
+template <class T>
+nb::ndarray<nb::numpy, T> new_vector(size_t n, T **data) {
     nb::capsule owner;
-    bool *p = output_buffer<bool>(n, owner);
+    T *p = output_buffer<T>(n, owner);
     *data = p;
-    return nb::ndarray<nb::numpy, bool>(p, {n}, owner);
+    return nb::ndarray<nb::numpy, T>(p, {n}, owner);
+}
+inline nb::ndarray<nb::numpy, bool> new_bool_array(size_t n, bool **data) { return new_vector(n, data); }
+inline nb::ndarray<nb::numpy, int64_t> new_index_array(size_t n, int64_t **data) { return new_vector(n, data); }
+
+// A new int64 numpy array (n,) holding `values` (row indices a kernel collected).
+inline nb::ndarray<nb::numpy, int64_t> index_array(const std::vector<int64_t> &values) {
+    int64_t *out;
+    auto a = new_index_array(values.size(), &out);
+    std::copy(values.begin(), values.end(), out);
+    return a;
 }
 
 using I64Array = nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;

@@ -1,8 +1,9 @@
 // Bindings of the sampler check's cubature kernels (check_cubature.h, check_refine.h,
 // check_quarters.h): the tensor rule's nodes and domain points on boxes, the split points at
 // declared breaks, the adaptive refinement's bookkeeping (BoxRefinement), the grouped
-// cubature's and the CDF tables' (grouped_agreement, LeafQuarters) and the rule's weighted sums.  Arrays are validated
-// here (shapes, sorted breaks), so no call can read out of bounds.
+// cubature's and the CDF tables' (grouped_agreement, LeafQuarters) and the rule's weighted
+// sums.  Arrays are validated here (shapes, sorted breaks; indices by the kernels, where they
+// read them), so no call can read out of bounds.
 #include <nanobind/stl/vector.h>
 
 #include <algorithm>
@@ -25,14 +26,6 @@ size_t check_boxes(const InArray &lo, const InArray &hi) {
         (lo.shape(1) != 1 && lo.shape(1) != 2))
         throw nb::value_error("'lo' and 'hi' must both have shape (M, 1) or (M, 2)");
     return lo.shape(1);
-}
-
-// A new int64 numpy array (n,) holding `values`.
-nb::ndarray<nb::numpy, int64_t> index_array(const std::vector<int64_t> &values) {
-    nb::capsule owner;
-    int64_t *out = output_buffer<int64_t>(values.size(), owner);
-    std::copy(values.begin(), values.end(), out);
-    return nb::ndarray<nb::numpy, int64_t>(out, {values.size()}, owner);
 }
 
 }  // namespace
@@ -180,9 +173,8 @@ void bind_cubature(nb::module_ &m) {
             double *lo, *hi, *tol, *plo, *phi;
             OutArray la = new_array(rows, k, &lo), ha = new_array(rows, k, &hi), ta = new_array(rows, 0, &tol);
             OutArray pla = new_array(parents, k, &plo), pha = new_array(parents, k, &phi);
-            nb::capsule owner;
-            int64_t *group = output_buffer<int64_t>(rows, owner);
-            nb::ndarray<nb::numpy, int64_t> ga(group, {rows}, owner);
+            int64_t *group;
+            auto ga = new_index_array(rows, &group);
             {
                 nb::gil_scoped_release r;
                 q.boxes(lo, hi, tol, group, plo, phi);

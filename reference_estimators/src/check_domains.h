@@ -8,8 +8,8 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
-#include <type_traits>
 
+#include "check_rows.h"
 #include "fastmath.h"
 
 namespace re {
@@ -156,17 +156,9 @@ RE_INLINE void cap_point(D p0, D p1, D p2, const double *axis, const double *t, 
 
 inline void cap_to_world(const double *h, size_t a, size_t b, const double *axis, const double *t, const double *bv,
                          double cos_alpha, double scale, double *out) {
-    constexpr size_t W = simd::kWidth;
-    size_t i = a;
-    for (; i + W <= b; i += W) {
-        simd::f64v p0, p1, p2, o0, o1, o2;
-        simd::load3(h + 3 * i, p0, p1, p2);
+    simd::map3x3(h + 3 * a, out + 3 * a, b - a, [&](auto p0, auto p1, auto p2, auto &o0, auto &o1, auto &o2) {
         cap_point(p0, p1, p2, axis, t, bv, cos_alpha, scale, o0, o1, o2);
-        simd::store3(out + 3 * i, o0, o1, o2);
-    }
-    for (; i < b; ++i)
-        cap_point(h[3 * i], h[3 * i + 1], h[3 * i + 2], axis, t, bv, cos_alpha, scale, out[3 * i], out[3 * i + 1],
-                  out[3 * i + 2]);
+    });
 }
 
 // Points out (n, 3) of the hemisphere of world directions d (n, 3) through the equal-area map
@@ -197,17 +189,9 @@ RE_INLINE void cap_inverse_point(D p0, D p1, D p2, const double *axis, const dou
 
 inline void cap_to_hemisphere(const double *d, size_t a, size_t e, const double *axis, const double *t,
                               const double *bv, double cos_alpha, double scale, double rim_slack, double *out) {
-    constexpr size_t W = simd::kWidth;
-    size_t i = a;
-    for (; i + W <= e; i += W) {
-        simd::f64v p0, p1, p2, o0, o1, o2;
-        simd::load3(d + 3 * i, p0, p1, p2);
+    simd::map3x3(d + 3 * a, out + 3 * a, e - a, [&](auto p0, auto p1, auto p2, auto &o0, auto &o1, auto &o2) {
         cap_inverse_point(p0, p1, p2, axis, t, bv, cos_alpha, scale, rim_slack, o0, o1, o2);
-        simd::store3(out + 3 * i, o0, o1, o2);
-    }
-    for (; i < e; ++i)
-        cap_inverse_point(d[3 * i], d[3 * i + 1], d[3 * i + 2], axis, t, bv, cos_alpha, scale, rim_slack, out[3 * i],
-                          out[3 * i + 1], out[3 * i + 2]);
+    });
 }
 
 // Whether the double v is finite, by its exponent bits (no branch, vectorisable).
@@ -236,21 +220,20 @@ inline void cap_density(const double *h, const double *p, size_t a, size_t b, do
 // all(isfinite(x), axis=1) reduces along the short axis at 15 ns a row.  Strided rows are
 // read in place: a renderer's (3, N) components seen as (N, 3) had been copied first, 24 MB
 // of fresh pages a million directions.
-// Contiguous rows of 1 to 3 values (row == k, column == 1) are tested by their exponent bits
-// with k fixed, which the compiler vectorises (a strided loop had taken 1.8 ns a direction:
+// Contiguous rows (row == k, column == 1) are tested by their exponent bits, with k fixed
+// where it is 1 to 3 (with_row_width), which the compiler vectorises (a strided loop had taken 1.8 ns a direction:
 // an area light's pdf calls test every cubature node).
 inline void finite_rows(const double *x, size_t row, size_t column, size_t a, size_t b, size_t k, bool *ok) {
-    if (column == 1 && row == k && k >= 1 && k <= 3) {
-        auto rows = [&](auto width) {
+    if (column == 1 && row == k) {
+        with_row_width(k, [&](auto width) {
             constexpr size_t K = decltype(width)::value;
+            const size_t w = K ? K : k;
             for (size_t i = a; i < b; ++i) {
                 bool finite = true;
-                for (size_t j = 0; j < K; ++j) finite &= finite_bits(x[i * K + j]);
+                for (size_t j = 0; j < w; ++j) finite &= finite_bits(x[i * w + j]);
                 ok[i] = finite;
             }
-        };
-        k == 1 ? rows(std::integral_constant<size_t, 1>{})
-               : (k == 2 ? rows(std::integral_constant<size_t, 2>{}) : rows(std::integral_constant<size_t, 3>{}));
+        });
         return;
     }
     for (size_t i = a; i < b; ++i) {

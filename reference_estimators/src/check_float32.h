@@ -52,7 +52,7 @@ inline void float32_unit_rows(const double *x, size_t a, size_t b, size_t stride
     const double inner_lo = (1 - slack / 2) * (1 - slack / 2), inner_hi = (1 + slack / 2) * (1 + slack / 2);
     const bool fast = slack < 1;   // else 1 - slack / 2 may be <= 0: no inner interval
     constexpr size_t W = simd::kWidth;
-    typedef float f32v __attribute__((vector_size(4 * W)));
+    using simd::f32v;
     size_t i = a;
     for (; fast && i + W <= b; i += W) {
         simd::f64v u, v, w;
@@ -82,9 +82,8 @@ inline void float64_rows(const float *columns, size_t c, size_t n, size_t a, siz
     size_t i = a;
     if (c == 3) {
         constexpr size_t W = simd::kWidth;
-        typedef float f32v __attribute__((vector_size(4 * W)));
         for (; i + W <= b; i += W) {
-            f32v p[3];
+            simd::f32v p[3];
             for (size_t j = 0; j < 3; ++j) std::memcpy(&p[j], columns + j * n + i, sizeof p[j]);
             simd::store3(out + 3 * i, __builtin_convertvector(p[0], simd::f64v), __builtin_convertvector(p[1], simd::f64v),
                          __builtin_convertvector(p[2], simd::f64v));

@@ -37,6 +37,7 @@ constexpr const char *kIsa = "SSE2";
 typedef double f64v __attribute__((vector_size(8 * kWidth)));
 typedef int64_t i64v __attribute__((vector_size(8 * kWidth)));
 typedef uint64_t u64v __attribute__((vector_size(8 * kWidth)));
+typedef float f32v __attribute__((vector_size(4 * kWidth)));   // kWidth floats: f64v's lanes narrowed
 
 RE_INLINE f64v load(const double *p) { f64v v; std::memcpy(&v, p, sizeof v); return v; }
 RE_INLINE void store(double *p, f64v v) { std::memcpy(p, &v, sizeof v); }
@@ -349,6 +350,20 @@ RE_INLINE void map3(const double *x, double *y, size_t n, Fn fn) {
         store(y + i, fn(a, b, c));
     }
     for (; i < n; ++i) y[i] = fn(x[3 * i], x[3 * i + 1], x[3 * i + 2]);
+}
+
+// fn(x[3 i], x[3 i + 1], x[3 i + 2], y[3 i], y[3 i + 1], y[3 i + 2]) for i < n (n 3-vectors in,
+// n out, the outputs by reference), as map: whole vectors through load3 and store3.
+template <class Fn>
+RE_INLINE void map3x3(const double *x, double *y, size_t n, Fn fn) {
+    size_t i = 0;
+    for (; i + kWidth <= n; i += kWidth) {
+        f64v a, b, c, p, q, r;
+        load3(x + 3 * i, a, b, c);
+        fn(a, b, c, p, q, r);
+        store3(y + 3 * i, p, q, r);
+    }
+    for (; i < n; ++i) fn(x[3 * i], x[3 * i + 1], x[3 * i + 2], y[3 * i], y[3 * i + 1], y[3 * i + 2]);
 }
 
 // y[i] = fn(a[i], b[i], y[i]) for i < n, as map.
