@@ -7,14 +7,16 @@ Columns (seconds unless stated):
   mitsuba   Mitsuba's ChiSquareTest (benchmarks/mitsuba_samplers.py's mitsuba_chi2)
   ours      check_mitsuba_sampler
   sample    the plugin's sample calls within ours
-  pdf       the plugin's pdf calls within ours (every one: the CDF tables', the chi-square
-            cubature's, the drawn points', an area light's reported-pdf pass)
+  pdf       the plugin's pdf calls within ours (every one, pdf and float32_pdf: the CDF
+            tables', the chi-square cubature's, the drawn points', an area light's
+            reported-pdf pass)
   tables    the Rosenblatt transform's tabulation (Transform.build), its pdf calls included
   points    the checks on the drawn points (SamplerTest.check_points), their pdf call included
   own       ours less sample and pdf: the check's own work (cubature bookkeeping included)
   floor     a lower bound on the plugin work that sampling and the CDF tables need: the 1e6
             sample calls timed alone plus the tables' pdf evaluations at the plugin's best
-            rate (one call on the 1e6 directions it sampled, no per-call overhead).  Every
+            rate (one float32_pdf call on the 1e6 directions it sampled, as float32 columns:
+            no per-call overhead, no rounding pass).  Every
             check that tabulates the CDFs to the bound the transform tests carry pays it.
   table evals, other evals   the tables' pdf evaluations, and every other one of ours
 Ours runs drjit's kernels on the sampler's ``check_threads`` workers (one for most plugins:
@@ -42,6 +44,9 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from mitsuba_samplers import mitsuba_chi2  # noqa: E402
 from uniform_mc import best_of  # noqa: E402
 
+import reference_estimators as rest  # noqa: E402
+
+from harness.adapters.mitsuba.batch import UNIT_SLACK  # noqa: E402
 from harness.adapters.mitsuba.catalogue import catalogue  # noqa: E402
 from harness.adapters.mitsuba.checks import check_mitsuba_sampler  # noqa: E402
 from harness.adapters.mitsuba.runtime import use_libllvm  # noqa: E402
@@ -65,7 +70,9 @@ class Split:
         self.evals = {"table evals": 0, "other evals": 0}
         self.in_tables = False
 
-    def wrap(self, key: str, fn: Callable[..., Any]) -> Callable[..., Any]:
+    def wrap(self, key: str, fn: Callable[..., Any], columns: bool = False) -> Callable[..., Any]:
+        """fn timed under ``key``; a pdf's evaluations counted from its last argument's rows
+        (``columns``: its columns, float32_pdf's (3, N))."""
         @functools.wraps(fn)
         def timed(*args: Any, **kwargs: Any) -> Any:
             start = time.perf_counter()
@@ -77,8 +84,9 @@ class Split:
                 if key == "tables":
                     self.in_tables = False
                 self.seconds[key] = self.seconds.get(key, 0.0) + time.perf_counter() - start
-                if key == "pdf":   # pdf(self, x): x (N, 3)
-                    self.evals["table evals" if self.in_tables else "other evals"] += len(args[-1])
+                if key == "pdf":   # pdf(self, x): x (N, 3); float32_pdf(self, c): c (3, N)
+                    n = args[-1].shape[1] if columns else len(args[-1])
+                    self.evals["table evals" if self.in_tables else "other evals"] += n
         return timed
 
     @contextlib.contextmanager
@@ -89,6 +97,7 @@ class Split:
         cls = type(sampler)
         build = Transform.__dict__["build"].__func__
         patches = [(cls, "pdf", self.wrap("pdf", cls.pdf)),
+                   (cls, "float32_pdf", self.wrap("pdf", cls.float32_pdf, columns=True)),
                    (cls, "sample_batch", self.wrap("sample", cls.sample_batch)),   # under sample()
                    (Transform, "build", classmethod(self.wrap("tables", build))),
                    (SamplerTest, "check_points", self.wrap("points", SamplerTest.check_points))]
@@ -128,7 +137,8 @@ def measure(entry: Any, repeat: int) -> dict[str, float]:
     sample_alone = best_of(repeat, lambda: sampler.sample_batch(u))
     x = sampler.sample(u)
     x = x[np.all(np.isfinite(x), axis=1)]
-    rate = best_of(repeat, lambda: sampler.pdf(x)) / max(len(x), 1)
+    columns, _ = rest.float32_unit_rows(x, UNIT_SLACK)   # as the tables' nodes reach the plugin
+    rate = best_of(repeat, lambda: sampler.float32_pdf(columns)) / max(len(x), 1)
     row["floor"] = sample_alone + rate * row["table evals"]
     return row
 

@@ -15,8 +15,8 @@ from .arguments import stream_arg
 
 __all__ = [
     "CHECK_DOMAINS", "domain_params", "dithered_domain_params", "domain_points", "cubature_nodes",
-    "cubature_points", "cubature_sums", "split_points", "BoxRefinement", "uncut_parents", "grouped_agreement",
-    "leaf_quarters",
+    "cubature_points", "cubature_float32_directions", "cubature_sums", "split_points", "BoxRefinement",
+    "uncut_parents", "grouped_agreement", "leaf_quarters",
     "cubature_moment_sums", "grid_histogram", "rosenblatt",
     "piecewise_linear_lookup", "transform_statistics", "cramer_von_mises_sum", "pdf_summary",
     "all_float32", "dither_float32", "finite_rows", "pdf_mismatches", "float64_rows", "float32_columns",
@@ -200,6 +200,19 @@ def cubature_points(kind: str, lo: Any, hi: Any, nodes: Any,
                                  np.ascontiguousarray(nodes, dtype=np.float64).reshape(-1), order)
 
 
+def cubature_float32_directions(kind: str, lo: Any, hi: Any, nodes: Any, columns: Any = None,
+                                slack: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+    """(columns (3, N) float32, ok (N,)): float32_unit_rows(cubature_points(kind, lo, hi,
+    nodes, columns=columns), slack), the same bits, on the hemisphere or sphere: the directions
+    of the tensor rule's nodes as a float32 renderer's pdf takes them, without the (N, 3) array
+    of doubles written out and read back.  One pass in C++ on all threads."""
+    a, b = (np.ascontiguousarray(v, dtype=np.float64) for v in (lo, hi))
+    order = [] if columns is None else [int(c) for c in columns]
+    return _core.cubature_float32_directions(_check_domain(kind), a, b,
+                                             np.ascontiguousarray(nodes, dtype=np.float64).reshape(-1), order,
+                                             float(slack))
+
+
 def split_points(lo: Any, hi: Any, breaks: Any) -> np.ndarray:
     """Where each interval [lo, hi) (arrays (B,)) is split: the break of ``breaks`` (sorted
     coordinates) strictly inside it, more than 1e-9 of its width from either end, nearest its
@@ -275,9 +288,12 @@ def cubature_sums(lo: Any, hi: Any, values: Any, weights: Any, scale: float = 1.
     """(M, m) integrals of the tensor rule on the boxes [lo, hi] (M, k): the sum over each
     box's nodes, in order, of ``weights`` (g^k,) times ``values`` (M g^k,) or (M g^k, m) at
     cubature_nodes' nodes, times the box's volume, times ``scale`` (a constant factor of
-    the integrand).  One pass in C++."""
+    the integrand).  float32 values are summed as given (widened as read: the same bits as
+    their float64 copy), other values as float64.  One pass in C++."""
     a, b = (np.ascontiguousarray(v, dtype=np.float64) for v in (lo, hi))
-    return _core.cubature_sums(a, b, np.ascontiguousarray(values, dtype=np.float64),
+    v = np.asarray(values)
+    v = np.ascontiguousarray(v, dtype=np.float32 if v.dtype == np.float32 else np.float64)
+    return _core.cubature_sums(a, b, v,
                                np.ascontiguousarray(weights, dtype=np.float64).reshape(-1), float(scale))
 
 

@@ -21,14 +21,15 @@ from harness.samplers.check import (
     histogram,
 )
 from harness.samplers.cubature import cell_integrals
-from harness.samplers.domains import DOMAINS, Domain, as_domain
+from harness.samplers.domains import DOMAINS, Domain, Float32DirectionPdf, as_domain
 from harness.samplers.result import SamplerCheck
 
 if TYPE_CHECKING:
     from harness.samplers.mcmc import mcmc_crosscheck
 
-__all__ = ["DOMAINS", "SAMPLE_CASE", "Domain", "SamplerCheck", "SamplerTest", "as_domain", "cell_integrals",
-           "check_sampler", "check_with_missing", "failure_pvalue", "histogram", "mcmc_crosscheck"]
+__all__ = ["DOMAINS", "SAMPLE_CASE", "Domain", "Float32DirectionPdf", "SamplerCheck", "SamplerTest",
+           "as_domain", "cell_integrals", "check_sampler", "check_with_missing", "failure_pvalue",
+           "histogram", "mcmc_crosscheck"]
 
 
 def __getattr__(name: str) -> Any:

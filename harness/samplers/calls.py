@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from harness.samplers.domains import Domain
+from harness.samplers.domains import Domain, Float32DirectionPdf
 from harness.usercode import UserCodeError, array_result, call, callable_name
 
 __all__ = ["checked_pdf", "drawn_points"]
@@ -41,19 +41,38 @@ def drawn_points(sample: Callable[[np.ndarray], Any], u: np.ndarray,
 
 
 def checked_pdf(pdf: Callable[[np.ndarray], Any]) -> Callable[[np.ndarray], np.ndarray]:
-    """pdf, returning float64 of shape (N,) for N points; errors name it and the input."""
+    """pdf, returning float64 of shape (N,) for N points; errors name it and the input.  A
+    :class:`Float32DirectionPdf` stays one, its float32 entry checked too (its float32
+    densities kept as float32)."""
     if getattr(pdf, "_checked", False):
         return pdf
-    name = callable_name(pdf)
+    name = callable_name(pdf.pdf if isinstance(pdf, Float32DirectionPdf) else pdf)
 
     def checked(x: np.ndarray) -> np.ndarray:
-        n = x.shape[0]
-        p = call(pdf, name, x, what=f"densities of shape ({n},)")
-        a = array_result(p, None, name, f"points of shape {x.shape}")
-        if a.size != n:
-            raise UserCodeError(f"{name} returned shape {a.shape} for points of shape {x.shape}, {x.dtype}; "
-                                f"expected shape ({n},), one density per point")
-        return a.reshape(n)
+        return _densities(pdf, name, x, x.shape[0], f"points of shape {x.shape}, {x.dtype}", float)
 
     checked._checked = True
-    return checked
+    if not isinstance(pdf, Float32DirectionPdf):
+        return checked
+
+    def checked_columns(columns: np.ndarray) -> np.ndarray:
+        return _densities(pdf.float32_columns, name, columns, columns.shape[1],
+                          f"float32 direction columns of shape {columns.shape}", None)
+
+    out = Float32DirectionPdf(checked, checked_columns)
+    object.__setattr__(out, "_checked", True)
+    return out
+
+
+def _densities(fn: Callable[[np.ndarray], Any], name: str, points: np.ndarray, n: int, given: str,
+               dtype: type | None) -> np.ndarray:
+    """fn(points) as n densities (n,): float64, or (dtype None) float32 where fn returned
+    float32; a UserCodeError naming ``name`` for an exception or another count."""
+    p = call(fn, name, points, what=f"densities of shape ({n},)")
+    a = np.asarray(p) if dtype is None and isinstance(p, np.ndarray) and p.dtype == np.float32 else None
+    if a is None:
+        a = array_result(p, None, name, given)
+    if a.size != n:
+        raise UserCodeError(f"{name} returned shape {a.shape} for {given}; expected shape ({n},), "
+                            "one density per point")
+    return a.reshape(n)

@@ -75,6 +75,7 @@ class _Counted:
 
     def __init__(self, q: Callable[[np.ndarray], np.ndarray]):
         self.q, self.evals = q, 0
+        self.pdf_batch = getattr(q, "pdf_batch", None)   # q's points a call, as the cubature asks q
 
     def __call__(self, sp: np.ndarray) -> np.ndarray:
         self.evals += sp.shape[0]

@@ -65,8 +65,11 @@ class SamplerTest:
     grid, done once and reused for any number of samplers or seeds (false-alarm runs)."""
 
     def __init__(self, pdf: Callable[[np.ndarray], np.ndarray], domain: str | tuple | Domain, *,
-                 sample_count: int = 1_000_000, alpha: float = 0.01, breaks: Sequence[Any] | None = None):
+                 sample_count: int = 1_000_000, alpha: float = 0.01, breaks: Sequence[Any] | None = None,
+                 pdf_batch: int | None = None):
         self.dom = dom = as_domain(domain)
+        if pdf_batch is not None and not (isinstance(pdf_batch, (int, np.integer)) and pdf_batch >= 1):
+            raise ValueError(f"'pdf_batch' must be a positive number of points (or None), got {pdf_batch!r}")
         self.breaks = breaks = checked_breaks(breaks, dom)
         self.pdf = self.claimed_pdf = checked_pdf(pdf)   # claimed_pdf: the pdf as given (for_total keeps it)
         self.total = 1.0    # pdf = claimed_pdf / total (for_total)
@@ -84,7 +87,7 @@ class SamplerTest:
                    .reshape(-1, dom.k) + 0.5) / np.array(pre_shape)
         self.floor = floor = rounding_floor(self.pdf(dom.to_points(centres)))
 
-        density = ParamDensity(dom, self.pdf)
+        density = ParamDensity(dom, self.pdf, pdf_batch=pdf_batch)
         squares = dataclasses.replace(density, columns=lambda v: np.column_stack([v, v * v]))
 
         # the pre-pass sets only the moment test's constant c (any fixed c gives a valid test)
@@ -265,7 +268,7 @@ class SamplerTest:
 def check_sampler(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.ndarray], np.ndarray],
                   domain: str | tuple | Domain, *, sample_count: int = 1_000_000, seed: int = 0,
                   alpha: float = 0.01, udim: int | None = None, total: float | None = None,
-                  breaks: Sequence[Any] | None = None) -> SamplerCheck:
+                  breaks: Sequence[Any] | None = None, pdf_batch: int | None = None) -> SamplerCheck:
     """Test that ``sample`` draws points with the density ``pdf`` claims.
 
     ``sample`` maps canonical uniforms of shape (N, udim) (default: 1 for intervals, 2 else)
@@ -306,14 +309,20 @@ def check_sampler(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.ndarray
     mass exact to its bound (undeclared, a texel edge within 3.5 % of a box's width from its
     end or middle escapes every rule judging the box, and the mass is 1.7e-4 off, 26 times its
     bound: :func:`harness.samplers.cubature.box_integrals`).  A needless break costs time only.
+
+    ``pdf_batch``: the points the cubature passes ``pdf`` in one call (None: 65536, where a
+    numpy pdf's temporaries stay in the caches).  A renderer whose every call has a fixed cost
+    (a JIT kernel's compilation lookup and launch) wants more: Mitsuba's adapter passes 2^19
+    (:class:`harness.adapters.mitsuba.batch.MitsubaSampler`).  The integrals are the same
+    bits whatever the batch.
     """
     dom = as_domain(domain)
     n = _sample_count(sample_count)
     u, x, reported = _draw(sample, dom, n, seed, udim)
     if total is None and np.isfinite(x).all():
-        return SamplerTest(pdf, dom, sample_count=n, alpha=alpha, breaks=breaks).check_points(x, reported,
-                                                                                             seed=seed)
-    return _check_drawn(u, x, reported, pdf, dom, alpha, total, seed, breaks)
+        test = SamplerTest(pdf, dom, sample_count=n, alpha=alpha, breaks=breaks, pdf_batch=pdf_batch)
+        return test.check_points(x, reported, seed=seed)
+    return _check_drawn(u, x, reported, pdf, dom, alpha, total, seed, breaks, pdf_batch)
 
 
 def failure_pvalue(failed: int, n: int, total: float, total_err: float) -> float:
@@ -337,22 +346,24 @@ def failure_pvalue(failed: int, n: int, total: float, total_err: float) -> float
 def check_with_missing(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.ndarray], np.ndarray],
                        domain: str | tuple | Domain, *, sample_count: int = 1_000_000, seed: int = 0,
                        alpha: float = 0.01, udim: int | None = None, total: float | None = None,
-                       breaks: Sequence[Any] | None = None) -> SamplerCheck:
+                       breaks: Sequence[Any] | None = None, pdf_batch: int | None = None) -> SamplerCheck:
     """check_sampler for a sampler that may fail to produce a sample (NaN rows), whether or
     not it does this time (see the module's "Missing samples").  Deterministic failures: fewer
     than 1000 samples produced; the pdf integrating to more than 1 (by more than 1e-3 and 10
     times the cubature error), or, with ``total`` given, to other than ``total``; and
     check_sampler's own on the samples produced (outside the domain, zero/NaN/negative pdf).
     The tests table holds a "failed samples" row (the count, and its binomial p-value);
-    ``normalization`` the cubature's P and its error bound; ``breaks`` as check_sampler's."""
+    ``normalization`` the cubature's P and its error bound; ``breaks`` and ``pdf_batch`` as
+    check_sampler's."""
     dom = as_domain(domain)
     u, x, reported = _draw(sample, dom, _sample_count(sample_count), seed, udim)
-    return _check_drawn(u, x, reported, pdf, dom, alpha, total, seed, breaks)
+    return _check_drawn(u, x, reported, pdf, dom, alpha, total, seed, breaks, pdf_batch)
 
 
 def _check_drawn(u: np.ndarray, x: np.ndarray, reported: np.ndarray | None,
                  pdf: Callable[[np.ndarray], np.ndarray], dom: Domain, alpha: float,
-                 total: float | None, seed: int, breaks: Sequence[Any] | None = None) -> SamplerCheck:
+                 total: float | None, seed: int, breaks: Sequence[Any] | None = None,
+                 pdf_batch: int | None = None) -> SamplerCheck:
     """check_with_missing on points x already drawn from uniforms u (``reported``: the pdf
     values the sampler returned with them, or None)."""
     if total is not None and not (isinstance(total, (int, float)) and 0 < total <= 1):
@@ -376,7 +387,7 @@ def _check_drawn(u: np.ndarray, x: np.ndarray, reported: np.ndarray | None,
         fail = Failure("too_few_samples", int(failed.sum()), f"only {m} of {n} samples produced",
                        tuple(_u_examples(u, failed)))
         return SamplerCheck(False, 0.0, alpha, n, table, [fail], (math.nan, math.nan))
-    raw = SamplerTest(pdf, dom, sample_count=m, alpha=alpha, breaks=breaks)
+    raw = SamplerTest(pdf, dom, sample_count=m, alpha=alpha, breaks=breaks, pdf_batch=pdf_batch)
     cubature, cubature_err = raw.normalization
     failures: list[Failure] = []
     if total is not None:

@@ -42,12 +42,15 @@ _GL_X, _GL_W = np.polynomial.legendre.leggauss(4)
 _GL_X, _GL_W = (_GL_X + 1) / 2, _GL_W / 2  # on [0, 1]
 
 
-#: Nodes per call of q: a block's arrays (parameters 1 MiB, points 1.5 MiB, values) stay in
-#: the caches and in memory malloc reuses.  Blocks of 2^19 nodes (8 and 12 MiB) had the kernel
-#: zeroing fresh pages for a fifth of a tabulation's time and the block's passes missing the
-#: caches: a setup took 1.5-1.9x as long (the zoo's samplers, Mitsuba's BSDFs and envmaps,
-#: alternated in one session; 2^15 and 2^17 came close to 2^16).  The integrals do not depend
-#: on the block size: every box's nodes lie in one block.
+#: Nodes per call of q by default: a block's arrays (parameters 1 MiB, points 1.5 MiB, values,
+#: a numpy pdf's temporaries) stay in the caches and in memory malloc reuses.  Blocks of 2^19
+#: nodes (8 and 12 MiB) had the kernel zeroing fresh pages for a fifth of a tabulation's time
+#: and the block's passes missing the caches: a setup took 1.5-1.9x as long (the zoo's
+#: samplers, Mitsuba's BSDFs and envmaps, alternated in one session; 2^15 and 2^17 came close
+#: to 2^16; in 2026-12-05's rerun the zoo's 16 x 32 envmap took 0.77 s at 2^16 and 1.09 s at
+#: 2^18).  A q may ask for its own (``pdf_batch``: a renderer's, whose calls each cost a
+#: kernel launch, and whose float32 columns reuse the core's memory, wants 2^19).  The
+#: integrals do not depend on the block size: every box's nodes lie in one block.
 _BLOCK_NODES = 2**16
 
 
@@ -67,10 +70,11 @@ def tensor_rule(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.nd
 
 def _rule(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Tensor 4-point Gauss-Legendre integrals of q over boxes [lo, hi] (M, k): (M, m), in
-    blocks of _BLOCK_NODES nodes."""
+    blocks of q's ``pdf_batch`` nodes where it has one
+    (:class:`~harness.samplers.domains.ParamDensity`), else _BLOCK_NODES."""
     m, k = lo.shape
     w = _GL_W if k == 1 else np.outer(_GL_W, _GL_W).reshape(-1)
-    step = max(_BLOCK_NODES // w.size, 1)
+    step = max((getattr(q, "pdf_batch", None) or _BLOCK_NODES) // w.size, 1)
     return np.concatenate([tensor_rule(q, lo[b:b + step], hi[b:b + step], _GL_X, w)
                            for b in range(0, m, step)])
 

@@ -26,7 +26,8 @@ import numpy as np
 import reference_estimators as rest
 from reference_estimators.arguments import stream_arg
 
-__all__ = ["DOMAINS", "Domain", "MomentColumns", "ParamDensity", "as_domain", "checked_breaks"]
+__all__ = ["DOMAINS", "Domain", "Float32DirectionPdf", "MomentColumns", "ParamDensity", "as_domain",
+           "checked_breaks"]
 
 DOMAINS = ("interval", "half_line", "square", "disk", "hemisphere", "sphere")
 
@@ -75,9 +76,9 @@ class Domain:
             return 1.0 / (1.0 - s[:, 0]) ** 2
         return self._measure()
 
-    def jacobian_at_points(self, x: np.ndarray) -> np.ndarray | float:
+    def jacobian_at_points(self, x: np.ndarray | None) -> np.ndarray | float:
         """:meth:`jacobian` at the parameters of domain points x: (1 + x)^2 on the half line
-        (1 / (1 - s)^2 with s = x / (1 + x)), else |D|."""
+        (1 / (1 - s)^2 with s = x / (1 + x)), else |D| (x not read: None will do)."""
         if self.kind == "half_line":
             return (1.0 + x) ** 2
         return self._measure()
@@ -149,6 +150,33 @@ class Domain:
         return x if columns is None else x[:, columns]
 
 
+#: Directions whose length is 1 within this are rounded to float32 as given for
+#: :attr:`Float32DirectionPdf.float32_columns` (others are normalised first; the cubature's
+#: nodes are unit vectors to about 1e-16, so none is).
+FLOAT32_UNIT_SLACK = 1e-6
+
+
+@dataclass(frozen=True)
+class Float32DirectionPdf:
+    """A pdf on the hemisphere or sphere that a float32 renderer evaluates: called as any pdf
+    on float64 directions x (N, 3), and as ``float32_columns(c)`` on float32 unit directions
+    given as columns c (3, N) (rows x, y, z, each C-contiguous), returning (N,) densities,
+    float32 or float64.  The contract: ``float32_columns(c) == pdf(x)`` wherever c is x's
+    coordinates rounded to float32 (x of length 1 within :data:`FLOAT32_UNIT_SLACK`), which a
+    float32 renderer's pdf meets by rounding the directions it is given (Mitsuba's adapter:
+    ``harness.adapters.mitsuba.batch``).  The check's cubature then maps its nodes straight to
+    float32 columns (:func:`reference_estimators.cubature_float32_directions`) and sums float32
+    densities as returned: the same integrals, bit for bit, without an (N, 3) array of float64
+    directions written, read back and rounded, or a float64 copy of the densities, for each of
+    the 10-100 million nodes of a check's CDF tables."""
+
+    pdf: Callable[[np.ndarray], Any]
+    float32_columns: Callable[[np.ndarray], Any]
+
+    def __call__(self, x: np.ndarray) -> Any:
+        return self.pdf(x)
+
+
 @dataclass(frozen=True)
 class MomentColumns:
     """The columns (q, h q, h^2 q) of a density's values q, h = q / (q + c) bounded in [0, 1)
@@ -174,6 +202,7 @@ class ParamDensity:
     dom: Domain
     pdf: Callable[[np.ndarray], np.ndarray]
     columns: Callable[[np.ndarray], np.ndarray] | None = None
+    pdf_batch: int | None = None    # points a call of pdf in the cubature's rule (None: its default)
 
     def values(self, x: np.ndarray) -> np.ndarray:
         """q (or its columns) at domain points x."""
@@ -190,14 +219,26 @@ class ParamDensity:
         """(M, m) integrals of q over the parameter boxes [lo, hi] (M, k) by the tensor rule
         with points ``nodes`` per axis and ``weights`` (g^k,)
         (:func:`reference_estimators.cubature_sums`): the core maps the nodes to domain points
-        directly (:func:`reference_estimators.cubature_points`), and a constant Jacobian
-        multiplies each box's sum rather than every value (the same integrals to rounding)."""
+        directly (:func:`reference_estimators.cubature_points`; to float32 columns for a
+        :class:`Float32DirectionPdf`), and a constant Jacobian multiplies each box's sum rather
+        than every value (the same integrals to rounding)."""
         dom = self.dom
+        if isinstance(self.pdf, Float32DirectionPdf) and dom.point_dim == 3:
+            columns, ok = rest.cubature_float32_directions(dom.kind, lo, hi, nodes, dom.pole_columns,
+                                                           FLOAT32_UNIT_SLACK)
+            if ok.all():    # unit vectors all (a node's direction is; else the float64 path says why)
+                values = self.pdf.float32_columns(columns)
+                return self._integrals(lo, hi, values, dom.jacobian_at_points(None), weights)
         x = rest.cubature_points(dom.kind, lo, hi, nodes, (dom.lo, dom.hi), dom.pole_columns)
-        pdf = np.asarray(self.pdf(x), dtype=float)
-        jacobian = self.dom.jacobian_at_points(x)
+        return self._integrals(lo, hi, self.pdf(x), dom.jacobian_at_points(x), weights)
+
+    def _integrals(self, lo: np.ndarray, hi: np.ndarray, pdf: np.ndarray, jacobian: np.ndarray | float,
+                   weights: np.ndarray) -> np.ndarray:
+        """rule_integrals from the pdf's values at the nodes (float32 ones summed as given) and
+        the Jacobian there."""
         if self.columns is None and np.ndim(jacobian) == 0:
             return rest.cubature_sums(lo, hi, pdf, weights, jacobian)
+        pdf = np.asarray(pdf, dtype=float)
         if isinstance(self.columns, MomentColumns):
             return rest.cubature_moment_sums(lo, hi, pdf * jacobian, weights, self.columns.c)
         return rest.cubature_sums(lo, hi, self._columns_of(pdf * jacobian), weights)

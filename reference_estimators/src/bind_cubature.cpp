@@ -28,6 +28,41 @@ size_t check_boxes(const InArray &lo, const InArray &hi) {
     return lo.shape(1);
 }
 
+// The arguments of a call mapping the tensor rule's nodes on boxes to domain points
+// (cubature_points, cubature_float32_directions), checked: the domain, the boxes (M, k) of its
+// parameter dimension, the nodes per axis, and `columns`, a permutation of the points'
+// coordinates (coordinate columns[j] goes to column j) or empty.
+struct CubatureCall {
+    CheckDomain d;
+    double dlo, dhi;
+    const InArray &lo, &hi, &nodes;
+    size_t k, g, per, boxes;
+    int pdim;
+    Placement at;
+
+    CubatureCall(int kind, double dlo_, double dhi_, const InArray &lo_, const InArray &hi_, const InArray &nodes_,
+                 const std::vector<int> &columns)
+        : d(check_domain(kind)), dlo(dlo_), dhi(dhi_), lo(lo_), hi(hi_), nodes(nodes_), k(check_boxes(lo_, hi_)),
+          g(nodes_.size()), per(k == 1 ? g : g * g), boxes(lo_.shape(0)), pdim(domain_point_dim(d)) {
+        if (size_t(domain_param_dim(d)) != k) throw nb::value_error("the boxes' dimension is not the domain's");
+        if (columns.empty()) return;
+        std::vector<int> seen(columns);
+        std::sort(seen.begin(), seen.end());
+        bool ok = int(seen.size()) == pdim;
+        for (int j = 0; ok && j < pdim; ++j) ok = seen[size_t(j)] == j;
+        if (!ok) throw nb::value_error("'columns' must be a permutation of the points' coordinates (or empty)");
+        for (int j = 0; j < pdim; ++j) at.dest[columns[size_t(j)]] = j;
+    }
+
+    // Boxes a chunk: kCubatureChunk nodes, so that a block of the cubature runs on all threads.
+    size_t chunk() const { return std::max<size_t>(kCubatureChunk / per, 1); }
+
+    // The points of boxes a .. b - 1 into x (rows of pdim).
+    void points(size_t a, size_t b, double *x, std::vector<double> &scratch) const {
+        cubature_points(d, dlo, dhi, lo.data() + a * k, hi.data() + a * k, b - a, k, nodes.data(), g, at, x, scratch);
+    }
+};
+
 }  // namespace
 
 void bind_cubature(nb::module_ &m) {
@@ -48,36 +83,43 @@ void bind_cubature(nb::module_ &m) {
        "(M g^k, k) nodes of the tensor rule with points `nodes` per axis on the boxes [lo, hi] (M, k), box by box.");
     m.def("cubature_points", [](int kind, double dlo, double dhi, InArray lo, InArray hi, InArray nodes,
                                 std::vector<int> columns) {
-        const CheckDomain d = check_domain(kind);
-        const size_t k = check_boxes(lo, hi), g = nodes.size(), per = k == 1 ? g : g * g;
-        if (size_t(domain_param_dim(d)) != k) throw nb::value_error("the boxes' dimension is not the domain's");
-        const int pdim = domain_point_dim(d);
-        Placement at;
-        if (!columns.empty()) {
-            std::vector<int> seen(columns);
-            std::sort(seen.begin(), seen.end());
-            bool ok = int(seen.size()) == pdim;
-            for (int j = 0; ok && j < pdim; ++j) ok = seen[size_t(j)] == j;
-            if (!ok) throw nb::value_error("'columns' must be a permutation of the points' coordinates (or empty)");
-            // the result is x[:, columns]: coordinate columns[j] goes to column j
-            for (int j = 0; j < pdim; ++j) at.dest[columns[size_t(j)]] = j;
-        }
-        const size_t boxes = lo.shape(0);
+        const CubatureCall c(kind, dlo, dhi, lo, hi, nodes, columns);
         double *x;
-        OutArray xa = new_array(boxes * per, pdim == 1 ? 0 : size_t(pdim), &x);
+        OutArray xa = new_array(c.boxes * c.per, c.pdim == 1 ? 0 : size_t(c.pdim), &x);
         {
             nb::gil_scoped_release r;
             // each box's points from that box alone: chunks of boxes on all threads
-            for_chunks(boxes, std::max<size_t>(kCubatureChunk / per, 1), [&](size_t, size_t a, size_t b, int) {
+            for_chunks(c.boxes, c.chunk(), [&](size_t, size_t a, size_t b, int) {
                 thread_local std::vector<double> scratch;
-                cubature_points(d, dlo, dhi, lo.data() + a * k, hi.data() + a * k, b - a, k, nodes.data(), g, at,
-                                x + a * per * size_t(pdim), scratch);
+                c.points(a, b, x + a * c.per * size_t(c.pdim), scratch);
             });
         }
         return xa;
     }, "kind"_a, "dlo"_a, "dhi"_a, "lo"_a, "hi"_a, "nodes"_a, "columns"_a,
        "Domain points of the tensor rule's nodes on the boxes [lo, hi] (M, k): domain_points(cubature_nodes(...)), "
        "with columns[j] as coordinate j where `columns` is given (a permutation; empty: as computed).");
+    m.def("cubature_float32_directions", [](int kind, InArray lo, InArray hi, InArray nodes, std::vector<int> columns,
+                                            double slack) {
+        const CubatureCall c(kind, 0.0, 1.0, lo, hi, nodes, columns);
+        if (c.pdim != 3) throw nb::value_error("float32 directions are points of the hemisphere or sphere");
+        const size_t n = c.boxes * c.per;
+        nb::capsule owner;
+        float *cols = output_buffer<float>(3 * n, owner);   // reused memory: no page faults a call
+        nb::ndarray<nb::numpy, float> ca(cols, {size_t(3), n}, owner);
+        bool *ok;
+        auto oa = new_bool_array(n, &ok);
+        {
+            nb::gil_scoped_release r;
+            for_chunks(c.boxes, c.chunk(), [&](size_t, size_t a, size_t b, int) {
+                thread_local std::vector<double> scratch, points;
+                cubature_float32_directions(c.d, lo.data() + a * c.k, hi.data() + a * c.k, b - a, c.k, nodes.data(),
+                                            c.g, c.at, slack, n, cols + a * c.per, ok + a * c.per, scratch, points);
+            });
+        }
+        return nb::make_tuple(ca, oa);
+    }, "kind"_a, "lo"_a, "hi"_a, "nodes"_a, "columns"_a, "slack"_a,
+       "(columns (3, N) float32, ok (N,)): float32_unit_rows(cubature_points(kind, 0, 1, lo, hi, nodes, columns), "
+       "slack) on the hemisphere or sphere, the same bits, in one pass.");
     m.def("split_points", [](InArray lo, InArray hi, InArray breaks) {
         if (lo.ndim() != 1 || hi.ndim() != 1 || lo.size() != hi.size() || breaks.ndim() != 1)
             throw nb::value_error("'lo' and 'hi' must be arrays (B,) and 'breaks' (n,)");
@@ -195,7 +237,8 @@ void bind_cubature(nb::module_ &m) {
             }
             return nb::make_tuple(qa, ea);
         }, "v"_a, "e"_a, "(qs (L, 4), errs (L,)): each leaf's quarter masses and its boxes' summed errors.");
-    m.def("cubature_sums", [](InArray lo, InArray hi, InArray values, InArray weights, double scale) {
+    // values as float64, or as float32 (a float32 renderer's pdf as it returned them)
+    auto sums = [](const InArray &lo, const InArray &hi, const auto &values, const InArray &weights, double scale) {
         const size_t k = check_boxes(lo, hi), boxes = lo.shape(0), per = weights.size();
         const size_t cols = values.ndim() == 2 ? values.shape(1) : 1;
         if ((values.ndim() != 1 && values.ndim() != 2) || values.shape(0) != boxes * per)
@@ -210,9 +253,16 @@ void bind_cubature(nb::module_ &m) {
             });
         }
         return oa;
-    }, "lo"_a, "hi"_a, "values"_a, "weights"_a, "scale"_a,
-       "(M, m) integrals of the tensor rule on the boxes [lo, hi] (M, k): the weighted sum of the values "
-       "(M g^k, m) at their nodes times the volume, times `scale`.");
+    };
+    const char *sums_doc = "(M, m) integrals of the tensor rule on the boxes [lo, hi] (M, k): the weighted sum of the "
+                           "values (M g^k, m) at their nodes (float64 or float32) times the volume, times `scale`.";
+    m.def("cubature_sums", [sums](InArray lo, InArray hi, InArray values, InArray weights, double scale) {
+        return sums(lo, hi, values, weights, scale);
+    }, "lo"_a, "hi"_a, "values"_a, "weights"_a, "scale"_a, sums_doc);
+    m.def("cubature_sums", [sums](InArray lo, InArray hi, nb::ndarray<const float, nb::c_contig, nb::device::cpu> values,
+                                  InArray weights, double scale) {
+        return sums(lo, hi, values, weights, scale);
+    }, "lo"_a, "hi"_a, "values"_a, "weights"_a, "scale"_a, sums_doc);
     m.def("cubature_moment_sums", [](InArray lo, InArray hi, InArray values, InArray weights, double c) {
         const size_t k = check_boxes(lo, hi), boxes = lo.shape(0), per = weights.size();
         if (values.ndim() != 1 || values.shape(0) != boxes * per)

@@ -111,6 +111,46 @@ def test_a_check_runs_with_the_samplers_drjit_threads_and_restores_them():
     assert ms.area_emitter_sampler(em.sphere_light([1.0, 2.0, 3.0]), ref=(0, 0, 0)).check_threads is None
 
 
+def test_the_cubature_reaches_the_plugin_as_float32_columns_or_through_a_replaced_pdf():
+    """check_mitsuba_sampler integrates the plugin's pdf through float32_pdf (float32 columns,
+    2^19 directions a call: pdf_batch): the same verdict and p-values, bit for bit, as through
+    pdf; a subclass that replaces pdf alone (here 2 % too large) is integrated through its pdf,
+    and so is an instance's own pdf, so that the fault is seen as a normalisation failure."""
+    columns = []
+
+    class Counted(ms.BSDFSampler):
+        def float32_pdf(self, c):
+            columns.append(c.shape[1])
+            return super().float32_pdf(c)
+
+    spec, wi = {"type": "roughconductor", "alpha": 0.3}, (0.5, 0.0, math.sqrt(0.75))
+    fast = checks.check_mitsuba_sampler(Counted(spec, wi=wi), sample_count=N, seed=0)
+    assert columns and max(columns) == 2**19
+    s = ms.BSDFSampler(spec, wi=wi)
+    with runtime.jit_threads(1):
+        via_pdf = checks.check_with_missing(s.sample_with_pdf, s.pdf, s.domain, sample_count=N, seed=0,
+                                            udim=s.udim)
+    np.testing.assert_array_equal(fast.tests["pvalue"].to_numpy(), via_pdf.tests["pvalue"].to_numpy())
+    assert fast.passed and via_pdf.passed and fast.normalization == via_pdf.normalization
+
+    class TooLarge(ms.BSDFSampler):
+        def pdf(self, x):
+            return 1.02 * super().pdf(x)
+
+    assert checks._float32_pdf(TooLarge(spec, wi=wi)) is None
+    r = checks.check_mitsuba_sampler(TooLarge(spec, wi=wi), sample_count=N, seed=0)
+    assert not r.passed and abs(r.normalization[0] - 1.02 * fast.normalization[0]) < 1e-3
+    own = ms.BSDFSampler(spec, wi=wi)
+    own.pdf = lambda x: 1.02 * ms.BSDFSampler.pdf(own, x)
+    assert checks._float32_pdf(own) is None
+    mutant = faults.Mutant(s, "2 % too large", pdf_scale=1.02)
+    assert checks._float32_pdf(mutant) == mutant.float32_pdf
+    x = s.sample(np.random.default_rng(0).random((1000, s.udim)))
+    x = x[np.isfinite(x).all(axis=1)]
+    cols = np.ascontiguousarray(x.T, dtype=np.float32)
+    np.testing.assert_array_equal(mutant.float32_pdf(cols), mutant.pdf(cols.T.astype(float)))
+
+
 @pytest.mark.slow
 def test_failure_aware_check_false_alarms_stay_rare():
     # 20 seeds of a correct defective sampler at alpha = 0.01: more than 3 rejections would

@@ -296,3 +296,83 @@ def test_grouped_agreement_in_the_core_is_its_numpy_definition_bit_for_bit(colum
         grouped_agreement(np.ones((2, 1)), np.ones((1, 1)), np.array([0, 1]), np.ones(2), 0.0)
     with pytest.raises(ValueError, match="integer indices"):    # not truncated to parent 0
         grouped_agreement(np.ones((2, 1)), np.ones((1, 1)), np.array([0.0, 0.7]), np.ones(2), 0.0)
+
+
+# --- a float32 renderer's pdf (Float32DirectionPdf) and the pdf's batch ----------------------
+def _vmf32(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """A von Mises-Fisher lobe (kappa 20) about a tilted axis, evaluated in float32 as a float32
+    renderer would."""
+    k = np.float32(20.0)
+    axis = np.array([0.6, 0.0, 0.8], dtype=np.float32)
+    cos = x * axis[0] + y * axis[1] + z * axis[2]
+    return k / np.float32(2 * math.pi * (1 - math.exp(-40.0))) * np.exp(k * (cos - np.float32(1)))
+
+
+class _Renderer:
+    """The lobe as a float32 renderer's adapter offers it: pdf on float64 directions (rounded to
+    float32 first), float32_columns on float32 columns; the points each was called on counted."""
+
+    def __init__(self):
+        self.calls = {"pdf": [], "columns": []}
+
+    def pdf(self, x: np.ndarray) -> np.ndarray:
+        self.calls["pdf"].append(x.shape[0])
+        c = x.astype(np.float32)
+        return _vmf32(c[:, 0], c[:, 1], c[:, 2])
+
+    def float32_columns(self, c: np.ndarray) -> np.ndarray:
+        assert c.dtype == np.float32 and c.shape[0] == 3
+        self.calls["columns"].append(c.shape[1])
+        return _vmf32(c[0], c[1], c[2])
+
+
+@pytest.mark.parametrize("pole", ["z", "y"])
+def test_a_float32_direction_pdf_integrates_to_the_plain_pdfs_bits(pole):
+    """Float32DirectionPdf: the cubature's nodes reach the pdf as float32 columns (no float64
+    directions), and the base grid's integrals, their errors and the transform's tables are the
+    plain pdf's bits; a larger pdf_batch changes no bit, only how many calls it takes."""
+    from harness.samplers import Float32DirectionPdf, SamplerTest
+    from harness.samplers.domains import Domain
+
+    dom = Domain("sphere", pole=pole)
+    plain = _Renderer()
+    ref = SamplerTest(plain.pdf, dom, sample_count=100_000)
+    results = []
+    for batch in (None, 2**19):
+        r = _Renderer()
+        test = SamplerTest(Float32DirectionPdf(r.pdf, r.float32_columns), dom, sample_count=100_000,
+                           pdf_batch=batch)
+        moments = np.array(ref.h_moments), np.array(test.h_moments)
+        pairs = [(ref.mass, test.mass), (ref.err, test.err), moments]
+        for a, b in pairs:
+            np.testing.assert_array_equal(a.view(np.uint64), b.view(np.uint64))
+        for t, u in [(ref.transform.marginal, test.transform.marginal),
+                     (ref.transform.conditional, test.transform.conditional)]:
+            for field in ("lo", "hi", "start", "mass", "strip_mass"):
+                a, b = getattr(t, field), getattr(u, field)
+                np.testing.assert_array_equal(a.view(np.uint64), b.view(np.uint64))
+            assert t.error == u.error
+        # every cubature node went through the columns; pdf saw only the pre-grid's centres
+        assert sum(r.calls["columns"]) == sum(plain.calls["pdf"]) - sum(r.calls["pdf"])
+        assert r.calls["pdf"] == [32 * 64]
+        results.append(r.calls["columns"])
+    assert max(results[0]) <= 2**16 < max(results[1]) and len(results[1]) < len(results[0])
+
+
+def test_a_float32_direction_pdf_that_returns_the_wrong_count_is_named():
+    from harness.samplers import Float32DirectionPdf, SamplerTest
+    from harness.usercode import UserCodeError
+
+    r = _Renderer()
+    with pytest.raises(UserCodeError, match=r"_Renderer\.pdf returned shape \(3,\) for float32 direction "
+                                            r"columns of shape \(3, \d+\); expected shape \(\d+,\)"):
+        SamplerTest(Float32DirectionPdf(r.pdf, lambda c: r.float32_columns(c)[:3]), "sphere",
+                    sample_count=10_000)
+
+
+@pytest.mark.parametrize("batch", [0, -5, 2.5, "big"])
+def test_pdf_batch_must_be_a_positive_count(batch):
+    from harness.samplers import SamplerTest
+
+    with pytest.raises(ValueError, match="'pdf_batch' must be a positive number of points"):
+        SamplerTest(_Renderer().pdf, "sphere", sample_count=10_000, pdf_batch=batch)

@@ -53,7 +53,7 @@ import reference_estimators as rest
 from harness.adapters.mitsuba.cap import CapView
 from harness.adapters.mitsuba.runtime import is_jit, jit_threads
 from harness.samplers.check import SAMPLE_CASE, check_with_missing
-from harness.samplers.domains import Domain
+from harness.samplers.domains import Domain, Float32DirectionPdf
 from harness.samplers.reported import reported_pdf_failure, rounding_spread
 from harness.samplers.result import SamplerCheck
 from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
@@ -82,7 +82,10 @@ def check_mitsuba_sampler(sampler: Any, *, sample_count: int = 1_000_000, seed: 
     (``CapView``) and its reported pdf on the same draw's world directions.
     The check runs with drjit's worker threads set to the sampler's ``check_threads``
     (:class:`~harness.adapters.mitsuba.batch.MitsubaSampler`; one for most plugins), holding
-    Mitsuba's variant lock (:func:`~harness.adapters.mitsuba.runtime.jit_threads`).
+    Mitsuba's variant lock (:func:`~harness.adapters.mitsuba.runtime.jit_threads`).  Its
+    cubature passes the pdf the sampler's ``pdf_batch`` directions a call, and, where the
+    sampler has ``float32_pdf``, as float32 columns
+    (:class:`~harness.samplers.domains.Float32DirectionPdf`: the same integrals, bit for bit).
     """
     if _scalar_variant(sampler):
         raise ValueError("check_mitsuba_sampler needs a JIT variant ('llvm_ad_rgb'): the cubature evaluates "
@@ -92,18 +95,39 @@ def check_mitsuba_sampler(sampler: Any, *, sample_count: int = 1_000_000, seed: 
         return _checked(sampler, sample_count, seed, alpha)
 
 
+def _float32_pdf(sampler: Any) -> Any:
+    """The sampler's ``float32_pdf`` where it is its ``pdf`` by construction: defined by the
+    class that defines ``pdf`` or by a subclass of it.  A subclass or instance that replaces
+    ``pdf`` alone (a user's planted fault, a wrapper) has its pdf integrated through ``pdf``,
+    as the drawn points are evaluated; None then, and for a sampler without one."""
+    fast = getattr(sampler, "float32_pdf", None)
+    if fast is None:
+        return None
+    own = vars(sampler) if hasattr(sampler, "__dict__") else {}
+    if "pdf" in own or "float32_pdf" in own:
+        return fast if "pdf" in own and "float32_pdf" in own else None
+
+    def owner(name: str) -> type:
+        return next(c for c in type(sampler).__mro__ if name in c.__dict__)
+    return fast if issubclass(owner("float32_pdf"), owner("pdf")) else None
+
+
 def _checked(sampler: Any, sample_count: int, seed: int, alpha: float) -> SamplerCheck:
     """check_mitsuba_sampler's checks, drjit's threads set."""
     cap = getattr(sampler, "cap", None)
     with_pdf = getattr(sampler, "sample_with_pdf", None)
+    batch = getattr(sampler, "pdf_batch", None)   # the cubature's directions a pdf call
     if cap is None:
         domain = Domain(sampler.domain, pole=getattr(sampler, "pole", "z"))
-        return check_with_missing(with_pdf or sampler.sample, sampler.pdf, domain, sample_count=sample_count,
+        # the cubature's nodes go to the plugin as float32 columns where it takes them
+        float32_pdf = _float32_pdf(sampler)
+        pdf = sampler.pdf if float32_pdf is None else Float32DirectionPdf(sampler.pdf, float32_pdf)
+        return check_with_missing(with_pdf or sampler.sample, pdf, domain, sample_count=sample_count,
                                   seed=seed, alpha=alpha, udim=sampler.udim,
-                                  breaks=getattr(sampler, "breaks", None))
+                                  breaks=getattr(sampler, "breaks", None), pdf_batch=batch)
     view = CapView(sampler, cap)
     r = check_with_missing(view.sample, view.pdf, view.domain, sample_count=sample_count, seed=seed,
-                           alpha=alpha, udim=sampler.udim)
+                           alpha=alpha, udim=sampler.udim, pdf_batch=batch)
     if with_pdf is None:
         return r
     u = rest.points(r.n, sampler.udim, seed=seed, case_id=SAMPLE_CASE)

@@ -45,6 +45,7 @@ class Mutant:
         self.variant, self.kind = base.variant, base.kind
         self.cap = getattr(base, "cap", None)   # an area light's: the chi-square runs in its map
         self.check_threads = getattr(base, "check_threads", None)   # drjit's workers in a check
+        self.pdf_batch = getattr(base, "pdf_batch", None)   # the cubature's directions a pdf call
 
     def sample(self, u: np.ndarray) -> np.ndarray:
         return self.base.sample(u)
@@ -66,6 +67,11 @@ class Mutant:
 
     def pdf(self, x: np.ndarray) -> np.ndarray:
         return self.pdf_scale * self.pdf_from.pdf(x)
+
+    def float32_pdf(self, columns: np.ndarray) -> np.ndarray:
+        """``pdf`` at float32 unit directions as columns (3, N) (MitsubaSampler.float32_pdf):
+        the scale applied in float64, as ``pdf`` applies it."""
+        return self.pdf_scale * np.asarray(self.pdf_from.float32_pdf(columns), dtype=float)
 
     def eval(self, x: np.ndarray) -> np.ndarray | None:
         return self.base.eval(x)
