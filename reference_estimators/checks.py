@@ -202,10 +202,13 @@ def cubature_points(kind: str, lo: Any, hi: Any, nodes: Any,
 
 def cubature_float32_directions(kind: str, lo: Any, hi: Any, nodes: Any, columns: Any = None,
                                 slack: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
-    """(columns (3, N) float32, ok (N,)): float32_unit_rows(cubature_points(kind, lo, hi,
-    nodes, columns=columns), slack), the same bits, on the hemisphere or sphere: the directions
-    of the tensor rule's nodes as a float32 renderer's pdf takes them, without the (N, 3) array
-    of doubles written out and read back.  One pass in C++ on all threads."""
+    """(columns (3, N) float32, ok (N,)): the values of float32_unit_rows(cubature_points(kind,
+    lo, hi, nodes, columns=columns), slack), the same bits, on the hemisphere or sphere: the
+    directions of the tensor rule's nodes as a float32 renderer's pdf takes them, without an
+    (N, 3) array of doubles.  In the interleaved order: the boxes in blocks of 8 (the last may
+    be shorter), node k of box b of a block of w boxes at k w + b within the block (one node of
+    every box of a block is a vector's lanes), which :func:`cubature_sums` reads with
+    ``interleaved=True``.  One pass in C++ on all threads."""
     a, b = (np.ascontiguousarray(v, dtype=np.float64) for v in (lo, hi))
     order = [] if columns is None else [int(c) for c in columns]
     return _core.cubature_float32_directions(_check_domain(kind), a, b,
@@ -284,17 +287,20 @@ def leaf_quarters(strip: Any, a: Any, b: Any, pieces: Any, used: Any, strip_tol:
                               _indices(used, "used"), f64[3].reshape(-1), int(axis), int(k))
 
 
-def cubature_sums(lo: Any, hi: Any, values: Any, weights: Any, scale: float = 1.0) -> np.ndarray:
+def cubature_sums(lo: Any, hi: Any, values: Any, weights: Any, scale: float = 1.0,
+                  interleaved: bool = False) -> np.ndarray:
     """(M, m) integrals of the tensor rule on the boxes [lo, hi] (M, k): the sum over each
     box's nodes, in order, of ``weights`` (g^k,) times ``values`` (M g^k,) or (M g^k, m) at
     cubature_nodes' nodes, times the box's volume, times ``scale`` (a constant factor of
     the integrand).  float32 values are summed as given (widened as read: the same bits as
-    their float64 copy), other values as float64.  One pass in C++."""
+    their float64 copy), other values as float64.  ``interleaved``: one column (M g^k,) in
+    :func:`cubature_float32_directions`' order, each box's nodes summed in node order as
+    box-major ones are (the same bits).  One pass in C++."""
     a, b = (np.ascontiguousarray(v, dtype=np.float64) for v in (lo, hi))
     v = np.asarray(values)
     v = np.ascontiguousarray(v, dtype=np.float32 if v.dtype == np.float32 else np.float64)
-    return _core.cubature_sums(a, b, v,
-                               np.ascontiguousarray(weights, dtype=np.float64).reshape(-1), float(scale))
+    return _core.cubature_sums(a, b, v, np.ascontiguousarray(weights, dtype=np.float64).reshape(-1),
+                               float(scale), bool(interleaved))
 
 
 def cubature_moment_sums(lo: Any, hi: Any, values: Any, weights: Any, c: float) -> np.ndarray:

@@ -161,7 +161,8 @@ class Float32DirectionPdf:
     """A pdf on the hemisphere or sphere that a float32 renderer evaluates: called as any pdf
     on float64 directions x (N, 3), and as ``float32_columns(c)`` on float32 unit directions
     given as columns c (3, N) (rows x, y, z, each C-contiguous), returning (N,) densities,
-    float32 or float64.  The contract: ``float32_columns(c) == pdf(x)`` wherever c is x's
+    float32 or float64, one per column in its order (the cubature's own order of its nodes:
+    :func:`reference_estimators.cubature_float32_directions`).  The contract: ``float32_columns(c) == pdf(x)`` wherever c is x's
     coordinates rounded to float32 (x of length 1 within :data:`FLOAT32_UNIT_SLACK`), which a
     float32 renderer's pdf meets by rounding the directions it is given (Mitsuba's adapter:
     ``harness.adapters.mitsuba.batch``).  The check's cubature then maps its nodes straight to
@@ -223,21 +224,25 @@ class ParamDensity:
         :class:`Float32DirectionPdf`), and a constant Jacobian multiplies each box's sum rather
         than every value (the same integrals to rounding)."""
         dom = self.dom
-        if isinstance(self.pdf, Float32DirectionPdf) and dom.point_dim == 3:
+        # (a single column: the moment and square columns are made from box-major values)
+        if isinstance(self.pdf, Float32DirectionPdf) and dom.point_dim == 3 and self.columns is None:
             columns, ok = rest.cubature_float32_directions(dom.kind, lo, hi, nodes, dom.pole_columns,
                                                            FLOAT32_UNIT_SLACK)
             if ok.all():    # unit vectors all (a node's direction is; else the float64 path says why)
-                values = self.pdf.float32_columns(columns)
-                return self._integrals(lo, hi, values, dom.jacobian_at_points(None), weights)
+                values = self.pdf.float32_columns(columns)   # in the columns' interleaved order
+                jacobian = dom.jacobian_at_points(None)
+                return self._integrals(lo, hi, values, jacobian, weights, interleaved=True)
         x = rest.cubature_points(dom.kind, lo, hi, nodes, (dom.lo, dom.hi), dom.pole_columns)
         return self._integrals(lo, hi, self.pdf(x), dom.jacobian_at_points(x), weights)
 
     def _integrals(self, lo: np.ndarray, hi: np.ndarray, pdf: np.ndarray, jacobian: np.ndarray | float,
-                   weights: np.ndarray) -> np.ndarray:
+                   weights: np.ndarray, interleaved: bool = False) -> np.ndarray:
         """rule_integrals from the pdf's values at the nodes (float32 ones summed as given) and
-        the Jacobian there."""
+        the Jacobian there; ``interleaved``: the values in
+        :func:`reference_estimators.cubature_float32_directions`' order (one column, a constant
+        Jacobian)."""
         if self.columns is None and np.ndim(jacobian) == 0:
-            return rest.cubature_sums(lo, hi, pdf, weights, jacobian)
+            return rest.cubature_sums(lo, hi, pdf, weights, jacobian, interleaved=interleaved)
         pdf = np.asarray(pdf, dtype=float)
         if isinstance(self.columns, MomentColumns):
             return rest.cubature_moment_sums(lo, hi, pdf * jacobian, weights, self.columns.c)

@@ -110,7 +110,9 @@ void bind_cubature(nb::module_ &m) {
         auto oa = new_bool_array(n, &ok);
         {
             nb::gil_scoped_release r;
-            for_chunks(c.boxes, c.chunk(), [&](size_t, size_t a, size_t b, int) {
+            // chunks of whole blocks of the interleaved order, so that it is the same on any thread count
+            const size_t chunk = std::max<size_t>(c.chunk() / kInterleave * kInterleave, kInterleave);
+            for_chunks(c.boxes, chunk, [&](size_t, size_t a, size_t b, int) {
                 thread_local std::vector<double> scratch, points;
                 cubature_float32_directions(c.d, lo.data() + a * c.k, hi.data() + a * c.k, b - a, c.k, nodes.data(),
                                             c.g, c.at, slack, n, cols + a * c.per, ok + a * c.per, scratch, points);
@@ -119,7 +121,8 @@ void bind_cubature(nb::module_ &m) {
         return nb::make_tuple(ca, oa);
     }, "kind"_a, "lo"_a, "hi"_a, "nodes"_a, "columns"_a, "slack"_a,
        "(columns (3, N) float32, ok (N,)): float32_unit_rows(cubature_points(kind, 0, 1, lo, hi, nodes, columns), "
-       "slack) on the hemisphere or sphere, the same bits, in one pass.");
+       "slack) on the hemisphere or sphere, the same bits, in the interleaved order (blocks of 8 boxes, node k of "
+       "box b of a block of w at k w + b): the order cubature_sums(..., interleaved=True) reads.");
     m.def("split_points", [](InArray lo, InArray hi, InArray breaks) {
         if (lo.ndim() != 1 || hi.ndim() != 1 || lo.size() != hi.size() || breaks.ndim() != 1)
             throw nb::value_error("'lo' and 'hi' must be arrays (B,) and 'breaks' (n,)");
@@ -237,32 +240,46 @@ void bind_cubature(nb::module_ &m) {
             }
             return nb::make_tuple(qa, ea);
         }, "v"_a, "e"_a, "(qs (L, 4), errs (L,)): each leaf's quarter masses and its boxes' summed errors.");
-    // values as float64, or as float32 (a float32 renderer's pdf as it returned them)
-    auto sums = [](const InArray &lo, const InArray &hi, const auto &values, const InArray &weights, double scale) {
+    // values as float64, or as float32 (a float32 renderer's pdf as it returned them); box-major,
+    // or (one column) in cubature_float32_directions' interleaved order
+    auto sums = [](const InArray &lo, const InArray &hi, const auto &values, const InArray &weights, double scale,
+                   bool interleaved) {
         const size_t k = check_boxes(lo, hi), boxes = lo.shape(0), per = weights.size();
         const size_t cols = values.ndim() == 2 ? values.shape(1) : 1;
         if ((values.ndim() != 1 && values.ndim() != 2) || values.shape(0) != boxes * per)
             throw nb::value_error("'values' must have one row per node: shape (M g^k,) or (M g^k, m)");
+        if (interleaved && values.ndim() != 1) throw nb::value_error("interleaved 'values' must be one column (M g^k,)");
         double *out;
         OutArray oa = new_array(boxes, cols, &out);
         {
             nb::gil_scoped_release r;
-            for_chunks(boxes, std::max<size_t>(kCheckChunk / per, 1), [&](size_t, size_t a, size_t b, int) {
-                cubature_sums(lo.data() + a * k, hi.data() + a * k, b - a, k, values.data() + a * per * cols, cols,
-                              weights.data(), per, scale, out + a * cols);
-            });
+            const size_t chunk = std::max<size_t>(kCheckChunk / per, 1);
+            if (interleaved) {   // chunks of whole blocks of the order
+                for_chunks(boxes, std::max<size_t>(chunk / kInterleave * kInterleave, kInterleave),
+                           [&](size_t, size_t a, size_t b, int) {
+                    cubature_sums_interleaved(lo.data() + a * k, hi.data() + a * k, b - a, k, values.data() + a * per,
+                                              weights.data(), per, scale, out + a);
+                });
+            } else {
+                for_chunks(boxes, chunk, [&](size_t, size_t a, size_t b, int) {
+                    cubature_sums(lo.data() + a * k, hi.data() + a * k, b - a, k, values.data() + a * per * cols, cols,
+                                  weights.data(), per, scale, out + a * cols);
+                });
+            }
         }
         return oa;
     };
     const char *sums_doc = "(M, m) integrals of the tensor rule on the boxes [lo, hi] (M, k): the weighted sum of the "
-                           "values (M g^k, m) at their nodes (float64 or float32) times the volume, times `scale`.";
-    m.def("cubature_sums", [sums](InArray lo, InArray hi, InArray values, InArray weights, double scale) {
-        return sums(lo, hi, values, weights, scale);
-    }, "lo"_a, "hi"_a, "values"_a, "weights"_a, "scale"_a, sums_doc);
+                           "values (M g^k, m) at their nodes (float64 or float32; with `interleaved` one column in "
+                           "cubature_float32_directions' order) times the volume, times `scale`.";
+    m.def("cubature_sums", [sums](InArray lo, InArray hi, InArray values, InArray weights, double scale,
+                                  bool interleaved) {
+        return sums(lo, hi, values, weights, scale, interleaved);
+    }, "lo"_a, "hi"_a, "values"_a, "weights"_a, "scale"_a, "interleaved"_a, sums_doc);
     m.def("cubature_sums", [sums](InArray lo, InArray hi, nb::ndarray<const float, nb::c_contig, nb::device::cpu> values,
-                                  InArray weights, double scale) {
-        return sums(lo, hi, values, weights, scale);
-    }, "lo"_a, "hi"_a, "values"_a, "weights"_a, "scale"_a, sums_doc);
+                                  InArray weights, double scale, bool interleaved) {
+        return sums(lo, hi, values, weights, scale, interleaved);
+    }, "lo"_a, "hi"_a, "values"_a, "weights"_a, "scale"_a, "interleaved"_a, sums_doc);
     m.def("cubature_moment_sums", [](InArray lo, InArray hi, InArray values, InArray weights, double c) {
         const size_t k = check_boxes(lo, hi), boxes = lo.shape(0), per = weights.size();
         if (values.ndim() != 1 || values.shape(0) != boxes * per)

@@ -207,39 +207,61 @@ def test_cubature_points_are_the_domain_points_of_the_nodes(kind, g):
             rest.cubature_points(kind, lo, hi, nodes, ends, [0, 0, 1][: ref.shape[1]])
 
 
+def interleaved(values, boxes, per):
+    """Box-major node values (..., boxes per) in cubature_float32_directions' order: blocks of 8
+    boxes (the last shorter), node k of box b of a block of w at k w + b."""
+    out = np.empty_like(values)
+    for m0 in range(0, boxes, 8):
+        w = min(8, boxes - m0)
+        block = values[..., m0 * per:(m0 + w) * per]
+        out[..., m0 * per:(m0 + w) * per] = block.reshape(block.shape[:-1] + (w, per)).swapaxes(-1, -2) \
+            .reshape(block.shape)
+    return out
+
+
 @pytest.mark.parametrize("kind", ["hemisphere", "sphere"])
 @pytest.mark.parametrize("g", [4, 3, 9])
 def test_cubature_float32_directions_are_the_rounded_cubature_points(kind, g):
     """The nodes' directions as float32 columns in one pass: float32_unit_rows of
-    cubature_points' rows, bit for bit, with the pole's permutation and with a slack so small
-    that every row goes through the normalising path; other domains refused."""
+    cubature_points' rows, bit for bit, in the interleaved order (blocks of 8 boxes, a short
+    one last), with the pole's permutation and with a slack so small that every row goes
+    through the normalising path; other domains refused."""
     lo, hi = random_boxes(2, 40_001 // g**2 | 1, np.random.default_rng(15))
     lo[:3], hi[:3] = 0.0, 1.0        # whole-domain boxes: nodes near both poles
+    assert lo.shape[0] % 8
     nodes = np.sort(np.random.default_rng(g).random(g)) if g != 4 else GL_X
     for columns in (None, [2, 0, 1]):
         for slack in (1e-6, 1e-18):
-            want = rest.float32_unit_rows(rest.cubature_points(kind, lo, hi, nodes, columns=columns), slack)
+            points = rest.cubature_points(kind, lo, hi, nodes, columns=columns)
+            cols, ok = rest.float32_unit_rows(points, slack)
             got = rest.cubature_float32_directions(kind, lo, hi, nodes, columns, slack)
             assert got[0].dtype == np.float32 and got[0].shape == (3, lo.shape[0] * g * g)
             assert all(c.flags.c_contiguous for c in got[0])
-            np.testing.assert_array_equal(got[0].view(np.uint32), want[0].view(np.uint32))
-            np.testing.assert_array_equal(got[1], want[1])
+            want = interleaved(cols, lo.shape[0], g * g)
+            np.testing.assert_array_equal(got[0].view(np.uint32), want.view(np.uint32))
+            np.testing.assert_array_equal(got[1], interleaved(ok, lo.shape[0], g * g))
     with pytest.raises(ValueError, match="hemisphere or sphere"):
         rest.cubature_float32_directions("disk", lo, hi, nodes)
     with pytest.raises(ValueError, match="permutation"):
         rest.cubature_float32_directions(kind, lo, hi, nodes, [0, 0, 1])
 
 
-def test_cubature_sums_of_float32_values_are_those_of_their_float64_copy():
-    """A float32 renderer's pdf values summed as returned: widened as read, the same bits."""
+@pytest.mark.parametrize("boxes", [5_003, 8, 3])
+def test_cubature_sums_of_float32_or_interleaved_values_are_those_of_the_float64_box_major_ones(boxes):
+    """A float32 renderer's pdf values summed as returned (widened as read) and in the
+    interleaved order: the same bits as the float64 copy in box-major order."""
     rng = np.random.default_rng(16)
-    lo, hi = random_boxes(2, 5_003, rng)
+    lo, hi = random_boxes(2, boxes, rng)
     w = np.outer(GL_W, GL_W).reshape(-1)
     v = rng.lognormal(0, 3, lo.shape[0] * w.size).astype(np.float32)
-    v[[3, 40]] = [np.inf, np.nan]
-    got = rest.cubature_sums(lo, hi, v, w, 4 * math.pi)
+    v[[0, 40 % v.size]] = [np.inf, np.nan]
     want = rest.cubature_sums(lo, hi, v.astype(np.float64), w, 4 * math.pi)
-    np.testing.assert_array_equal(got.view(np.uint64), want.view(np.uint64))
+    for values, order in [(v, False), (interleaved(v, boxes, w.size), True),
+                          (interleaved(v, boxes, w.size).astype(np.float64), True)]:
+        got = rest.cubature_sums(lo, hi, values, w, 4 * math.pi, interleaved=order)
+        np.testing.assert_array_equal(got.view(np.uint64), want.view(np.uint64))
+    with pytest.raises(ValueError, match="one column"):
+        rest.cubature_sums(lo, hi, np.ones((v.size, 2)), w, interleaved=True)
 
 
 @pytest.mark.parametrize("k, cols", [(1, 0), (2, 0), (2, 3)])
