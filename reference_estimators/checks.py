@@ -15,7 +15,9 @@ from .arguments import stream_arg
 
 __all__ = [
     "CHECK_DOMAINS", "domain_params", "dithered_domain_params", "domain_points", "cubature_nodes",
-    "cubature_points", "cubature_float32_directions", "cubature_sums", "split_points", "BoxRefinement",
+    "cubature_points", "cubature_float32_directions", "cubature_cap_float32_directions", "interleaved_order",
+    "cubature_sums",
+    "split_points", "BoxRefinement",
     "uncut_parents", "grouped_agreement", "leaf_quarters",
     "cubature_moment_sums", "grid_histogram", "rosenblatt",
     "piecewise_linear_lookup", "transform_statistics", "cramer_von_mises_sum", "pdf_summary",
@@ -214,6 +216,31 @@ def cubature_float32_directions(kind: str, lo: Any, hi: Any, nodes: Any, columns
     return _core.cubature_float32_directions(_check_domain(kind), a, b,
                                              np.ascontiguousarray(nodes, dtype=np.float64).reshape(-1), order,
                                              float(slack))
+
+
+def interleaved_order(boxes: int, per: int) -> np.ndarray:
+    """(boxes per,) int64: the box-major index (node k of box b at b per + k) of the node at
+    each position of :func:`cubature_float32_directions`' interleaved order (blocks of 8
+    boxes, the last shorter, node k of box b of a block of w at k w + b), so that
+    ``box_major[..., interleaved_order(M, per)]`` is those values in that order."""
+    idx = np.arange(boxes * per, dtype=np.int64).reshape(boxes, per)
+    full = boxes // 8 * 8
+    head = idx[:full].reshape(-1, 8, per).transpose(0, 2, 1).reshape(-1)
+    return np.concatenate([head, idx[full:].T.reshape(-1)])
+
+
+def cubature_cap_float32_directions(lo: Any, hi: Any, nodes: Any, axis: Any, t: Any, b: Any, cos_alpha: float,
+                                    scale: float, slack: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+    """(columns (3, N) float32, ok (N,)): the values of float32_unit_rows(cap_to_world(
+    cubature_points("hemisphere", lo, hi, nodes), axis, t, b, cos_alpha, scale), slack), the
+    same bits, in :func:`cubature_float32_directions`' interleaved order: the world directions
+    an area light's pdf is evaluated at for the tensor rule's nodes on boxes of its cap's map,
+    as the float32 renderer takes them, in one pass in C++ on all threads."""
+    lo_, hi_ = (np.ascontiguousarray(v, dtype=np.float64) for v in (lo, hi))
+    frame = [np.ascontiguousarray(v, dtype=np.float64).reshape(-1) for v in (axis, t, b)]
+    g = np.ascontiguousarray(nodes, dtype=np.float64).reshape(-1)
+    return _core.cubature_cap_float32_directions(lo_, hi_, g, *frame, float(cos_alpha), float(scale),
+                                                 float(slack))
 
 
 def split_points(lo: Any, hi: Any, breaks: Any) -> np.ndarray:

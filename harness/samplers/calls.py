@@ -59,7 +59,7 @@ def checked_pdf(pdf: Callable[[np.ndarray], Any]) -> Callable[[np.ndarray], np.n
         return _densities(pdf.float32_columns, name, columns, columns.shape[1],
                           f"float32 direction columns of shape {columns.shape}", None)
 
-    out = Float32DirectionPdf(checked, checked_columns)
+    out = Float32DirectionPdf(checked, checked_columns, pdf.directions)
     object.__setattr__(out, "_checked", True)
     return out
 

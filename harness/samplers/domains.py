@@ -162,17 +162,27 @@ class Float32DirectionPdf:
     on float64 directions x (N, 3), and as ``float32_columns(c)`` on float32 unit directions
     given as columns c (3, N) (rows x, y, z, each C-contiguous), returning (N,) densities,
     float32 or float64, one per column in its order (the cubature's own order of its nodes:
-    :func:`reference_estimators.cubature_float32_directions`).  The contract: ``float32_columns(c) == pdf(x)`` wherever c is x's
-    coordinates rounded to float32 (x of length 1 within :data:`FLOAT32_UNIT_SLACK`), which a
-    float32 renderer's pdf meets by rounding the directions it is given (Mitsuba's adapter:
-    ``harness.adapters.mitsuba.batch``).  The check's cubature then maps its nodes straight to
+    :func:`reference_estimators.cubature_float32_directions`).  The contract:
+    ``float32_columns(c) == pdf(x)`` wherever c is x's coordinates rounded to float32 (x of
+    length 1 within :data:`FLOAT32_UNIT_SLACK`), which a float32 renderer's pdf meets by
+    rounding the directions it is given (Mitsuba's adapter: ``harness.adapters.mitsuba.batch``).
+    The check's cubature then maps its nodes straight to
     float32 columns (:func:`reference_estimators.cubature_float32_directions`) and sums float32
     densities as returned: the same integrals, bit for bit, without an (N, 3) array of float64
     directions written, read back and rounded, or a float64 copy of the densities, for each of
-    the 10-100 million nodes of a check's CDF tables."""
+    the 10-100 million nodes of a check's CDF tables.
+
+    ``directions``: where the pdf's domain points are not the renderer's directions (an area
+    light seen through its cap's equal-area map, ``harness.adapters.mitsuba.cap.CapView``),
+    ``directions(lo, hi, nodes)`` gives the float32 columns ``float32_columns`` takes for the
+    tensor rule's nodes on parameter boxes [lo, hi] (M, 2), and a per-node ok (N,), in
+    :func:`reference_estimators.cubature_float32_directions`' order, or None to decline the
+    call (``pdf`` then gets the nodes' float64 points); None: the domain's own directions."""
 
     pdf: Callable[[np.ndarray], Any]
     float32_columns: Callable[[np.ndarray], Any]
+    directions: Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray] | None] | None \
+        = None
 
     def __call__(self, x: np.ndarray) -> Any:
         return self.pdf(x)
@@ -226,9 +236,11 @@ class ParamDensity:
         dom = self.dom
         # (a single column: the moment and square columns are made from box-major values)
         if isinstance(self.pdf, Float32DirectionPdf) and dom.point_dim == 3 and self.columns is None:
-            columns, ok = rest.cubature_float32_directions(dom.kind, lo, hi, nodes, dom.pole_columns,
-                                                           FLOAT32_UNIT_SLACK)
-            if ok.all():    # unit vectors all (a node's direction is; else the float64 path says why)
+            directions = self.pdf.directions
+            columns, ok = (rest.cubature_float32_directions(dom.kind, lo, hi, nodes, dom.pole_columns,
+                                                            FLOAT32_UNIT_SLACK)
+                           if directions is None else directions(lo, hi, nodes) or (None, None))
+            if ok is not None and ok.all():   # unit vectors all (nodes' are; else the float64 path says why)
                 values = self.pdf.float32_columns(columns)   # in the columns' interleaved order
                 jacobian = dom.jacobian_at_points(None)
                 return self._integrals(lo, hi, values, jacobian, weights, interleaved=True)

@@ -63,6 +63,25 @@ struct CubatureCall {
     }
 };
 
+// (columns (3, N) float32, ok (N,)) of the N = boxes x per nodes, filled by
+// fill(a, b, N, columns, ok) for boxes a .. b - 1 in chunks of whole blocks of the interleaved
+// order (kInterleave), so that the order is the same on any number of threads, on all threads.
+template <class Fill>
+nb::tuple float32_directions(size_t boxes, size_t per, size_t chunk, Fill fill) {
+    const size_t n = boxes * per;
+    nb::capsule owner;
+    float *cols = output_buffer<float>(3 * n, owner);   // reused memory: no page faults a call
+    nb::ndarray<nb::numpy, float> ca(cols, {size_t(3), n}, owner);
+    bool *ok;
+    auto oa = new_bool_array(n, &ok);
+    {
+        nb::gil_scoped_release r;
+        for_chunks(boxes, std::max<size_t>(chunk / kInterleave * kInterleave, kInterleave),
+                   [&](size_t, size_t a, size_t b, int) { fill(a, b, n, cols, ok); });
+    }
+    return nb::make_tuple(ca, oa);
+}
+
 }  // namespace
 
 void bind_cubature(nb::module_ &m) {
@@ -102,27 +121,29 @@ void bind_cubature(nb::module_ &m) {
                                             double slack) {
         const CubatureCall c(kind, 0.0, 1.0, lo, hi, nodes, columns);
         if (c.pdim != 3) throw nb::value_error("float32 directions are points of the hemisphere or sphere");
-        const size_t n = c.boxes * c.per;
-        nb::capsule owner;
-        float *cols = output_buffer<float>(3 * n, owner);   // reused memory: no page faults a call
-        nb::ndarray<nb::numpy, float> ca(cols, {size_t(3), n}, owner);
-        bool *ok;
-        auto oa = new_bool_array(n, &ok);
-        {
-            nb::gil_scoped_release r;
-            // chunks of whole blocks of the interleaved order, so that it is the same on any thread count
-            const size_t chunk = std::max<size_t>(c.chunk() / kInterleave * kInterleave, kInterleave);
-            for_chunks(c.boxes, chunk, [&](size_t, size_t a, size_t b, int) {
-                thread_local std::vector<double> scratch, points;
-                cubature_float32_directions(c.d, lo.data() + a * c.k, hi.data() + a * c.k, b - a, c.k, nodes.data(),
-                                            c.g, c.at, slack, n, cols + a * c.per, ok + a * c.per, scratch, points);
-            });
-        }
-        return nb::make_tuple(ca, oa);
+        return float32_directions(c.boxes, c.per, c.chunk(), [&](size_t a, size_t b, size_t n, float *cols, bool *ok) {
+            thread_local std::vector<double> scratch, points;
+            cubature_float32_directions(c.d, lo.data() + a * c.k, hi.data() + a * c.k, b - a, c.k, nodes.data(), c.g,
+                                        c.at, slack, n, cols + a * c.per, ok + a * c.per, scratch, points);
+        });
     }, "kind"_a, "lo"_a, "hi"_a, "nodes"_a, "columns"_a, "slack"_a,
        "(columns (3, N) float32, ok (N,)): float32_unit_rows(cubature_points(kind, 0, 1, lo, hi, nodes, columns), "
        "slack) on the hemisphere or sphere, the same bits, in the interleaved order (blocks of 8 boxes, node k of "
        "box b of a block of w at k w + b): the order cubature_sums(..., interleaved=True) reads.");
+    m.def("cubature_cap_float32_directions", [](InArray lo, InArray hi, InArray nodes, InArray axis, InArray t,
+                                                InArray b, double cos_alpha, double scale, double slack) {
+        const CubatureCall c(int(CheckDomain::hemisphere), 0.0, 1.0, lo, hi, nodes, {});
+        if (axis.size() != 3 || t.size() != 3 || b.size() != 3)
+            throw nb::value_error("'axis', 't' and 'b' must be 3-vectors");
+        return float32_directions(c.boxes, c.per, c.chunk(), [&](size_t a, size_t e, size_t n, float *cols, bool *ok) {
+            thread_local std::vector<double> scratch, points;
+            cubature_cap_float32_directions(lo.data() + a * 2, hi.data() + a * 2, e - a, nodes.data(), c.g, axis.data(),
+                                            t.data(), b.data(), cos_alpha, scale, slack, n, cols + a * c.per,
+                                            ok + a * c.per, scratch, points);
+        });
+    }, "lo"_a, "hi"_a, "nodes"_a, "axis"_a, "t"_a, "b"_a, "cos_alpha"_a, "scale"_a, "slack"_a,
+       "(columns (3, N) float32, ok (N,)): float32_unit_rows(cap_to_world(cubature_points(hemisphere, 0, 1, lo, hi, "
+       "nodes), axis, t, b, cos_alpha, scale), slack), the same bits, in cubature_float32_directions' order.");
     m.def("split_points", [](InArray lo, InArray hi, InArray breaks) {
         if (lo.ndim() != 1 || hi.ndim() != 1 || lo.size() != hi.size() || breaks.ndim() != 1)
             throw nb::value_error("'lo' and 'hi' must be arrays (B,) and 'breaks' (n,)");
@@ -275,11 +296,11 @@ void bind_cubature(nb::module_ &m) {
     m.def("cubature_sums", [sums](InArray lo, InArray hi, InArray values, InArray weights, double scale,
                                   bool interleaved) {
         return sums(lo, hi, values, weights, scale, interleaved);
-    }, "lo"_a, "hi"_a, "values"_a, "weights"_a, "scale"_a, "interleaved"_a, sums_doc);
+    }, "lo"_a, "hi"_a, "values"_a, "weights"_a, "scale"_a, "interleaved"_a = false, sums_doc);
     m.def("cubature_sums", [sums](InArray lo, InArray hi, nb::ndarray<const float, nb::c_contig, nb::device::cpu> values,
                                   InArray weights, double scale, bool interleaved) {
         return sums(lo, hi, values, weights, scale, interleaved);
-    }, "lo"_a, "hi"_a, "values"_a, "weights"_a, "scale"_a, "interleaved"_a, sums_doc);
+    }, "lo"_a, "hi"_a, "values"_a, "weights"_a, "scale"_a, "interleaved"_a = false, sums_doc);
     m.def("cubature_moment_sums", [](InArray lo, InArray hi, InArray values, InArray weights, double c) {
         const size_t k = check_boxes(lo, hi), boxes = lo.shape(0), per = weights.size();
         if (values.ndim() != 1 || values.shape(0) != boxes * per)

@@ -173,15 +173,15 @@ inline void interleave_rows(const double *rows, size_t boxes, size_t per, double
     }
 }
 
-// One block of w boxes from box m0 (interleaved_float32_directions): each box's g radii and
+// One block of w boxes from box m0 (cubature_float32_directions): each box's g radii and
 // heights at its s0 nodes and g sines and cosines at its s1 nodes, computed kWidth boxes a
 // vector (a short block repeats its last box in the spare lanes), then node (i, j) of every
-// box: its row placed by `at`, its squared length checked against float32_unit_rows' inner
-// interval, rounded to float32 and stored, W boxes' at a time (W = kInterleave for a full block:
-// the lanes' loops of fixed length vectorise).
-template <size_t W>
+// box: its point (x, y, z) made into the row map(xyz, row) gives (placed by a permutation, or
+// carried through the cap's map), its squared length checked against float32_unit_rows' inner
+// interval, rounded to float32 and stored, V boxes' at a time in vector lanes.
+template <size_t W, class Map>
 void interleaved_block(CheckDomain d, const double *lo, const double *hi, size_t m0, size_t w, const double *nodes,
-                       size_t g, const Placement &at, double inner_lo, double inner_hi, bool fast, double slack,
+                       size_t g, const Map &map, double inner_lo, double inner_hi, bool fast, double slack,
                        size_t stride, float *out, bool *ok) {
     constexpr size_t V = simd::kWidth;
     static_assert(kInterleave % V == 0, "a block is whole vectors");
@@ -204,9 +204,6 @@ void interleaved_block(CheckDomain d, const double *lo, const double *hi, size_t
         }
     float *base = out + m0 * g * g;
     bool *okb = ok + m0 * g * g;
-    // coordinate c of a node's row is its coordinate `from[c]` (at.dest inverted)
-    int from[3];
-    for (int c = 0; c < 3; ++c) from[at.dest[c]] = c;
     using simd::f32v;
     using simd::f64v;
     for (size_t i = 0; i < g; ++i)
@@ -214,14 +211,15 @@ void interleaved_block(CheckDomain d, const double *lo, const double *hi, size_t
             const size_t k = i * g + j;
             float *o[3] = {base + k * n, base + stride + k * n, base + 2 * stride + k * n};
             for (size_t v = 0; v < n; v += V) {   // V boxes' node (i, j) in lanes
-                f64v r, cs, sn, xyz[3];
+                f64v r, cs, sn, xyz[3], row[3];
                 std::memcpy(&r, &R[i][v], sizeof r);
                 std::memcpy(&cs, &C[j][v], sizeof cs);
                 std::memcpy(&sn, &S[j][v], sizeof sn);
                 std::memcpy(&xyz[2], &Z[i][v], sizeof xyz[2]);
                 xyz[0] = r * cs;   // write_box_points' products
                 xyz[1] = r * sn;
-                const f64v &r0 = xyz[from[0]], &r1 = xyz[from[1]], &r2 = xyz[from[2]];
+                map(xyz, row);
+                const f64v &r0 = row[0], &r1 = row[1], &r2 = row[2];
                 const f64v n2 = r0 * r0 + r1 * r1 + r2 * r2;   // the row's, in its order
                 const size_t lanes = std::min(V, n - v);
                 // every lane inside (a NaN n2 is not): n2 where inside, NaN elsewhere, equal to n2
@@ -250,26 +248,62 @@ void interleaved_block(CheckDomain d, const double *lo, const double *hi, size_t
 // calls of 2^18 nodes (1.5 in calls of 2^16), what cubature_points alone takes, where its rows
 // written out, read back and rounded had taken 1.2 (2.5) and each chunk's rows rounded while in
 // cache 1.1 (1.8); writing floats from separable_points' lanes, box-major, 2.1-2.7 (2^16).
+template <class Map>
+void interleaved_directions(CheckDomain d, const double *lo, const double *hi, size_t boxes, const double *nodes,
+                            size_t g, const Map &map, double slack, size_t stride, float *out, bool *ok) {
+    const double inner_lo = (1 - slack / 2) * (1 - slack / 2), inner_hi = (1 + slack / 2) * (1 + slack / 2);
+    const bool fast = slack < 1;
+    for (size_t m0 = 0; m0 < boxes; m0 += kInterleave) {
+        const size_t w = std::min(kInterleave, boxes - m0);
+        w == kInterleave ? interleaved_block<kInterleave>(d, lo, hi, m0, w, nodes, g, map, inner_lo, inner_hi, fast,
+                                                          slack, stride, out, ok)
+                         : interleaved_block<0>(d, lo, hi, m0, w, nodes, g, map, inner_lo, inner_hi, fast, slack,
+                                                stride, out, ok);
+    }
+}
+
 inline void cubature_float32_directions(CheckDomain d, const double *lo, const double *hi, size_t boxes, size_t k,
                                         const double *nodes, size_t g, const Placement &at, double slack,
                                         size_t stride, float *out, bool *ok, std::vector<double> &scratch,
                                         std::vector<double> &points) {
     if (k == 2 && g <= 8) {
-        const double inner_lo = (1 - slack / 2) * (1 - slack / 2), inner_hi = (1 + slack / 2) * (1 + slack / 2);
-        const bool fast = slack < 1;
-        for (size_t m0 = 0; m0 < boxes; m0 += kInterleave) {
-            const size_t w = std::min(kInterleave, boxes - m0);
-            w == kInterleave ? interleaved_block<kInterleave>(d, lo, hi, m0, w, nodes, g, at, inner_lo, inner_hi, fast,
-                                                              slack, stride, out, ok)
-                             : interleaved_block<0>(d, lo, hi, m0, w, nodes, g, at, inner_lo, inner_hi, fast, slack,
-                                                    stride, out, ok);
-        }
+        int from[3];   // coordinate c of a node's row is its coordinate from[c] (at.dest inverted)
+        for (int c = 0; c < 3; ++c) from[at.dest[c]] = c;
+        auto placed = [&](const simd::f64v *xyz, simd::f64v *row) {
+            for (int c = 0; c < 3; ++c) row[c] = xyz[from[c]];
+        };
+        interleaved_directions(d, lo, hi, boxes, nodes, g, placed, slack, stride, out, ok);
         return;
     }
     const size_t per = k == 1 ? g : g * g;
     points.resize(3 * boxes * per);
     cubature_points(d, 0.0, 1.0, lo, hi, boxes, k, nodes, g, at, points.data(), scratch);
     interleave_rows(points.data(), boxes, per, slack, stride, out, ok);
+}
+
+// The world directions (cap_to_world) of the tensor rule's nodes on boxes [lo, hi] of the
+// hemisphere, as float32 unit vectors in the interleaved order: the values of
+// float32_unit_rows(cap_to_world(cubature_points("hemisphere", ...)), slack), the same bits
+// (an area light's pdf at the cubature's nodes of its cap's map).  g <= 8 in lanes (cap_point
+// on the vectors), else through the rows.
+inline void cubature_cap_float32_directions(const double *lo, const double *hi, size_t boxes, const double *nodes,
+                                            size_t g, const double *axis, const double *t, const double *b,
+                                            double cos_alpha, double scale, double slack, size_t stride, float *out,
+                                            bool *ok, std::vector<double> &scratch, std::vector<double> &points) {
+    if (g <= 8) {
+        auto capped = [&](const simd::f64v *xyz, simd::f64v *row) {
+            cap_point(xyz[0], xyz[1], xyz[2], axis, t, b, cos_alpha, scale, row[0], row[1], row[2]);
+        };
+        interleaved_directions(CheckDomain::hemisphere, lo, hi, boxes, nodes, g, capped, slack, stride, out, ok);
+        return;
+    }
+    const size_t per = g * g;
+    points.resize(6 * boxes * per);
+    cubature_points(CheckDomain::hemisphere, 0.0, 1.0, lo, hi, boxes, 2, nodes, g, Placement{}, points.data(),
+                    scratch);
+    double *world = points.data() + 3 * boxes * per;
+    cap_to_world(points.data(), 0, boxes * per, axis, t, b, cos_alpha, scale, world);
+    interleave_rows(world, boxes, per, slack, stride, out, ok);
 }
 
 // The volume prod (hi - lo) of a box with corners lo, hi (k coordinates each), in axis order.

@@ -12,6 +12,8 @@ import os
 import numpy as np
 import pytest
 
+import reference_estimators as rest
+
 from harness.adapters.mitsuba import catalogue as cat
 from harness.adapters.mitsuba import checks, faults, runtime
 from harness.adapters.mitsuba import samplers as ms
@@ -615,6 +617,33 @@ def test_area_light_in_the_equal_area_map_of_its_cap():
     np.testing.assert_array_equal(view.pdf(h), expected(world))
     np.testing.assert_array_equal(view.pdf(h[:10]), expected(world[:10]))
     assert view.pdf(np.array([[0.0, 0.0, -1.0]])).tolist() == [0.0]    # below the horizon: outside the cap
+    # the cubature's nodes as the float32 renderer takes them: pdf's densities, bit for bit, in
+    # the core's interleaved order; up to 4096 nodes declined (pdf looks them up in the draw)
+    rng = np.random.default_rng(9)
+    lo = rng.random((700, 2)) * 0.9
+    hi = lo + 0.05
+    nodes = (np.polynomial.legendre.leggauss(4)[0] + 1) / 2
+    columns, ok = view.float32_directions(lo, hi, nodes)
+    density = view.float32_density(columns)
+    assert ok.all() and density.dtype == np.float32
+    want = view.pdf(rest.cubature_points("hemisphere", lo, hi, nodes))
+    np.testing.assert_array_equal(density.astype(float), want[rest.interleaved_order(700, 16)])
+    assert view.float32_directions(lo[:256], hi[:256], nodes) is None
+
+
+def test_an_area_lights_check_is_the_same_bits_through_its_float32_directions(monkeypatch):
+    """An area light's tables take their nodes' world directions as float32 columns
+    (CapView.float32_directions): the check's p-values are those of the float64 path, bit for
+    bit."""
+    from harness.adapters.mitsuba import emitters as em
+    from harness.adapters.mitsuba.cap import CapView
+
+    s = ms.area_emitter_sampler(em.rectangle_light([1.0, 2.0, 3.0]), ref=(0.6, -0.4, 0.3))
+    fast = checks.check_mitsuba_sampler(s, sample_count=N, seed=0)
+    monkeypatch.setattr(CapView, "float32_directions", lambda self, lo, hi, nodes: None)
+    slow = checks.check_mitsuba_sampler(s, sample_count=N, seed=0)
+    np.testing.assert_array_equal(fast.tests["pvalue"].to_numpy(), slow.tests["pvalue"].to_numpy())
+    assert fast.passed == slow.passed and fast.normalization == slow.normalization
 
 
 def test_area_light_rectangle_bitmap_reports_its_pdf_and_weight():

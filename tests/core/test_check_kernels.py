@@ -219,6 +219,12 @@ def interleaved(values, boxes, per):
     return out
 
 
+@pytest.mark.parametrize("boxes", [0, 1, 7, 8, 9, 8 * 5 + 3])
+def test_interleaved_order_is_the_blocks_node_major_order(boxes):
+    values = np.random.default_rng(boxes).random((2, boxes * 9))
+    np.testing.assert_array_equal(values[:, rest.interleaved_order(boxes, 9)], interleaved(values, boxes, 9))
+
+
 @pytest.mark.parametrize("kind", ["hemisphere", "sphere"])
 @pytest.mark.parametrize("g", [4, 3, 9])
 def test_cubature_float32_directions_are_the_rounded_cubature_points(kind, g):
@@ -353,6 +359,28 @@ def cap_to_world_reference(h, axis, t, b, cos_alpha, scale):
         s = np.sqrt(np.maximum(0.0, 1 - c * c)) / np.where(pole, 1.0, r)
         cos_phi, sin_phi = np.where(pole, s, s * x[:, 0]), np.where(pole, 0.0, s * x[:, 1])
     return cos_phi[:, None] * t + sin_phi[:, None] * b + c[:, None] * axis
+
+
+@pytest.mark.parametrize("g", [4, 9])
+def test_cubature_cap_float32_directions_are_the_rounded_cap_map_of_the_nodes(g):
+    """An area light's cubature nodes in one pass: float32_unit_rows(cap_to_world(the
+    hemisphere's cubature_points)), bit for bit, in the interleaved order, for caps from a
+    sliver to past a hemisphere (g = 9: through the rows)."""
+    from harness.adapters.mitsuba.cap import Cap
+
+    lo, hi = random_boxes(2, 20_001 // g**2 | 1, np.random.default_rng(17))
+    lo[:3], hi[:3] = 0.0, 1.0
+    nodes = GL_X if g == 4 else np.sort(np.random.default_rng(g).random(g))
+    for cap in (Cap([0.3, -0.2, 0.9], 0.97), Cap([0.0, 0.6, -0.8], 0.9999), Cap([1.0, 0.0, 0.0], -0.3)):
+        world = cap.to_world(rest.cubature_points("hemisphere", lo, hi, nodes))
+        cols, ok = rest.float32_unit_rows(world, 1e-6)
+        got, got_ok = rest.cubature_cap_float32_directions(lo, hi, nodes, cap.axis, cap.t, cap.b,
+                                                           cap.cos_alpha, cap.scale, 1e-6)
+        want = interleaved(cols, lo.shape[0], g * g)
+        np.testing.assert_array_equal(got.view(np.uint32), want.view(np.uint32))
+        np.testing.assert_array_equal(got_ok, interleaved(ok, lo.shape[0], g * g))
+    with pytest.raises(ValueError, match="3-vectors"):
+        rest.cubature_cap_float32_directions(lo, hi, nodes, [0, 0, 1, 0], cap.t, cap.b, 0.5, 0.5)
 
 
 def test_cap_to_world_matches_the_numpy_map_at_poles_horizons_and_nan():

@@ -33,6 +33,8 @@ import numpy as np
 
 import reference_estimators as rest
 
+from harness.adapters.mitsuba.batch import UNIT_SLACK
+
 __all__ = ["Cap", "CapView", "bounding_cap", "box_cap"]
 
 #: directions this little outside the cap (in cos theta) are float32 rounding of its rim
@@ -136,6 +138,28 @@ class CapView:
                 drawn = i >= 0
                 world[drawn] = self._world[i[drawn]]
         return rest.cap_density(h, self.sampler.pdf(world), self.cap.scale)
+
+    def float32_directions(self, lo: np.ndarray, hi: np.ndarray,
+                           nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """The world directions of the tensor rule's nodes on boxes [lo, hi] (M, 2) of the
+        hemisphere through the cap's map, as the sampler's float32_pdf takes them (float32
+        columns in the core's interleaved order, and a per-node ok): ``pdf``'s, the same bits,
+        in one pass (:func:`reference_estimators.cubature_cap_float32_directions`); the
+        ``directions`` of :class:`~harness.samplers.domains.Float32DirectionPdf`.  None for up
+        to _FEW_ROWS nodes: ``pdf`` then looks them up among the draw's points, as before."""
+        if lo.shape[0] * np.size(nodes) ** 2 <= _FEW_ROWS:
+            return None
+        c = self.cap
+        return rest.cubature_cap_float32_directions(lo, hi, nodes, c.axis, c.t, c.b, c.cos_alpha, c.scale,
+                                                    UNIT_SLACK)
+
+    def float32_density(self, columns: np.ndarray) -> np.ndarray:
+        """``pdf`` at the hemisphere points whose world directions are the float32 columns
+        (3, N) (:meth:`float32_directions`): the sampler's float32_pdf there, rounded to
+        float32, times the Jacobian in float32, as float32 (``pdf``'s density, cap_density's
+        product, widened where it is summed)."""
+        p = np.asarray(self.sampler.float32_pdf(columns), dtype=np.float32)
+        return p * np.float32(self.cap.scale)
 
 
 def _same_memory(a: np.ndarray, b: np.ndarray) -> bool:

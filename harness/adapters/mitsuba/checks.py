@@ -85,7 +85,8 @@ def check_mitsuba_sampler(sampler: Any, *, sample_count: int = 1_000_000, seed: 
     Mitsuba's variant lock (:func:`~harness.adapters.mitsuba.runtime.jit_threads`).  Its
     cubature passes the pdf the sampler's ``pdf_batch`` directions a call, and, where the
     sampler has ``float32_pdf``, as float32 columns
-    (:class:`~harness.samplers.domains.Float32DirectionPdf`: the same integrals, bit for bit).
+    (:class:`~harness.samplers.domains.Float32DirectionPdf`; an area light's through its cap's
+    map, ``CapView.float32_directions``: the same integrals, bit for bit).
     """
     if _scalar_variant(sampler):
         raise ValueError("check_mitsuba_sampler needs a JIT variant ('llvm_ad_rgb'): the cubature evaluates "
@@ -126,7 +127,9 @@ def _checked(sampler: Any, sample_count: int, seed: int, alpha: float) -> Sample
                                   seed=seed, alpha=alpha, udim=sampler.udim,
                                   breaks=getattr(sampler, "breaks", None), pdf_batch=batch)
     view = CapView(sampler, cap)
-    r = check_with_missing(view.sample, view.pdf, view.domain, sample_count=sample_count, seed=seed,
+    pdf = view.pdf if _float32_pdf(sampler) is None else Float32DirectionPdf(view.pdf, view.float32_density,
+                                                                              view.float32_directions)
+    r = check_with_missing(view.sample, pdf, view.domain, sample_count=sample_count, seed=seed,
                            alpha=alpha, udim=sampler.udim, pdf_batch=batch)
     if with_pdf is None:
         return r

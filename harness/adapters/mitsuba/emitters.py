@@ -240,9 +240,6 @@ class AreaEmitterSampler(MitsubaSampler):
     udim = 2
     domain = "sphere"
     check_threads = None   # its pdf traces a ray a direction: every drjit worker (MitsubaSampler)
-    # directions a pdf call in the check's cubature (MitsubaSampler): 2^18 in the cap's float64
-    # map (an area rectangle's check 1.25 s at 2^16, 1.07 at 2^18, 1.10 at 2^19)
-    pdf_batch = 2**18
     sample_outputs = ("x", "weight", "pdf", "dist", "cos")
 
     def __init__(self, shape: dict[str, Any], *, ref: Sequence[float] = (0.0, 0.0, 0.0),
