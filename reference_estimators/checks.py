@@ -330,14 +330,18 @@ def cubature_sums(lo: Any, hi: Any, values: Any, weights: Any, scale: float = 1.
                                float(scale), bool(interleaved))
 
 
-def cubature_moment_sums(lo: Any, hi: Any, values: Any, weights: Any, c: float) -> np.ndarray:
+def cubature_moment_sums(lo: Any, hi: Any, values: Any, weights: Any, c: float, scale: float = 1.0,
+                         interleaved: bool = False) -> np.ndarray:
     """(M, 3) integrals of q, h q and h^2 q, h = q / (q + c) (0 when c <= 0), by the tensor rule
-    on the boxes [lo, hi] (M, k), from q's ``values`` (M g^k,) at cubature_nodes' nodes:
-    cubature_sums of those columns made in numpy (h * q, h * h * q), the same bits, without
-    their array.  One pass in C++."""
+    on the boxes [lo, hi] (M, k), from q = ``values`` * ``scale`` (M g^k,) at cubature_nodes'
+    nodes: cubature_sums of those columns made in numpy (values * scale, h * q, h * h * q), the
+    same bits, without their arrays.  float32 values are read as given (widened), others as
+    float64; ``interleaved``: in :func:`cubature_float32_directions`' order.  One pass in C++."""
     a, b = (np.ascontiguousarray(v, dtype=np.float64) for v in (lo, hi))
-    return _core.cubature_moment_sums(a, b, np.ascontiguousarray(values, dtype=np.float64).reshape(-1),
-                                      np.ascontiguousarray(weights, dtype=np.float64).reshape(-1), float(c))
+    v = np.asarray(values)
+    v = np.ascontiguousarray(v, dtype=np.float32 if v.dtype == np.float32 else np.float64).reshape(-1)
+    w = np.ascontiguousarray(weights, dtype=np.float64).reshape(-1)
+    return _core.cubature_moment_sums(a, b, v, w, float(c), float(scale), bool(interleaved))
 
 
 def grid_histogram(s: Any, inside: Any, shape: tuple[int, ...]) -> np.ndarray:

@@ -234,8 +234,10 @@ class ParamDensity:
         :class:`Float32DirectionPdf`), and a constant Jacobian multiplies each box's sum rather
         than every value (the same integrals to rounding)."""
         dom = self.dom
-        # (a single column: the moment and square columns are made from box-major values)
-        if isinstance(self.pdf, Float32DirectionPdf) and dom.point_dim == 3 and self.columns is None:
+        # (q alone or its moment columns, which the core makes from any order; other columns
+        # are made in numpy from box-major values)
+        if isinstance(self.pdf, Float32DirectionPdf) and dom.point_dim == 3 and (
+                self.columns is None or isinstance(self.columns, MomentColumns)):
             directions = self.pdf.directions
             columns, ok = (rest.cubature_float32_directions(dom.kind, lo, hi, nodes, dom.pole_columns,
                                                             FLOAT32_UNIT_SLACK)
@@ -251,10 +253,13 @@ class ParamDensity:
                    weights: np.ndarray, interleaved: bool = False) -> np.ndarray:
         """rule_integrals from the pdf's values at the nodes (float32 ones summed as given) and
         the Jacobian there; ``interleaved``: the values in
-        :func:`reference_estimators.cubature_float32_directions`' order (one column, a constant
-        Jacobian)."""
+        :func:`reference_estimators.cubature_float32_directions`' order (q or its moment
+        columns, a constant Jacobian)."""
         if self.columns is None and np.ndim(jacobian) == 0:
             return rest.cubature_sums(lo, hi, pdf, weights, jacobian, interleaved=interleaved)
+        if isinstance(self.columns, MomentColumns) and np.ndim(jacobian) == 0:
+            return rest.cubature_moment_sums(lo, hi, pdf, weights, self.columns.c, jacobian,
+                                             interleaved=interleaved)
         pdf = np.asarray(pdf, dtype=float)
         if isinstance(self.columns, MomentColumns):
             return rest.cubature_moment_sums(lo, hi, pdf * jacobian, weights, self.columns.c)

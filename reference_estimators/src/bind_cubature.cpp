@@ -301,7 +301,9 @@ void bind_cubature(nb::module_ &m) {
                                   InArray weights, double scale, bool interleaved) {
         return sums(lo, hi, values, weights, scale, interleaved);
     }, "lo"_a, "hi"_a, "values"_a, "weights"_a, "scale"_a, "interleaved"_a = false, sums_doc);
-    m.def("cubature_moment_sums", [](InArray lo, InArray hi, InArray values, InArray weights, double c) {
+    // values as float64 or float32, box-major or interleaved (as cubature_sums')
+    auto moments = [](const InArray &lo, const InArray &hi, const auto &values, const InArray &weights, double c,
+                      double scale, bool interleaved) {
         const size_t k = check_boxes(lo, hi), boxes = lo.shape(0), per = weights.size();
         if (values.ndim() != 1 || values.shape(0) != boxes * per)
             throw nb::value_error("'values' must have one value per node: shape (M g^k,)");
@@ -309,15 +311,27 @@ void bind_cubature(nb::module_ &m) {
         OutArray oa = new_array(boxes, 3, &out);
         {
             nb::gil_scoped_release r;
-            for_chunks(boxes, std::max<size_t>(kCheckChunk / per, 1), [&](size_t, size_t a, size_t b, int) {
+            const size_t chunk = std::max<size_t>(kCheckChunk / per, 1);   // interleaved: whole blocks
+            for_chunks(boxes, interleaved ? std::max<size_t>(chunk / kInterleave * kInterleave, kInterleave) : chunk,
+                       [&](size_t, size_t a, size_t b, int) {
                 cubature_moment_sums(lo.data() + a * k, hi.data() + a * k, b - a, k, values.data() + a * per,
-                                     weights.data(), per, c, out + a * 3);
+                                     weights.data(), per, c, scale, interleaved, out + a * 3);
             });
         }
         return oa;
-    }, "lo"_a, "hi"_a, "values"_a, "weights"_a, "c"_a,
-       "(M, 3) integrals of q, h q and h^2 q (h = q / (q + c), 0 when c <= 0) by the tensor rule on the boxes "
-       "[lo, hi] (M, k), from q's values (M g^k,) at the nodes.");
+    };
+    const char *moments_doc = "(M, 3) integrals of q, h q and h^2 q (h = q / (q + c), 0 when c <= 0) by the tensor "
+                              "rule on the boxes [lo, hi] (M, k), q = values * scale from the values (M g^k,) at the "
+                              "nodes (float64 or float32; with `interleaved` in cubature_float32_directions' order).";
+    m.def("cubature_moment_sums", [moments](InArray lo, InArray hi, InArray values, InArray weights, double c,
+                                            double scale, bool interleaved) {
+        return moments(lo, hi, values, weights, c, scale, interleaved);
+    }, "lo"_a, "hi"_a, "values"_a, "weights"_a, "c"_a, "scale"_a = 1.0, "interleaved"_a = false, moments_doc);
+    m.def("cubature_moment_sums", [moments](InArray lo, InArray hi,
+                                            nb::ndarray<const float, nb::c_contig, nb::device::cpu> values,
+                                            InArray weights, double c, double scale, bool interleaved) {
+        return moments(lo, hi, values, weights, c, scale, interleaved);
+    }, "lo"_a, "hi"_a, "values"_a, "weights"_a, "c"_a, "scale"_a = 1.0, "interleaved"_a = false, moments_doc);
 }
 
 }  // namespace re::py

@@ -381,17 +381,21 @@ void cubature_sums_interleaved(const double *lo, const double *hi, size_t boxes,
 // c <= 0), from q's values v (boxes per) at the nodes: cubature_sums of those three columns
 // made in numpy's order of operations (h * q, then (h * h) * q), the same bits, without the
 // columns' array (making it cost more than the pdf calls on a cheap pdf).  kSideBySide boxes
-// at a time, as cubature_sums' single column.
-inline void cubature_moment_sums(const double *lo, const double *hi, size_t boxes, size_t k, const double *v,
-                                 const double *weights, size_t per, double c, double *out) {
-    auto sums = [&](size_t m, auto count) {   // boxes m .. m + count - 1
+// at a time, as cubature_sums' single column.  q = double(v) * scale (a constant factor, the
+// Jacobian: numpy's pdf * jacobian; 1 changes no bit), v of type T (double, or a float32
+// renderer's float as returned); box-major, or in cubature_float32_directions' interleaved
+// order (blocks of kInterleave boxes, node i of box b of a block of w at i w + b).
+template <class T>
+void cubature_moment_sums(const double *lo, const double *hi, size_t boxes, size_t k, const T *v,
+                          const double *weights, size_t per, double c, double scale, bool interleaved, double *out) {
+    // boxes m .. m + count - 1, node i of box b at vm[b row + i column]
+    auto sums = [&](const T *vm, size_t m, auto count, size_t row, size_t column) {
         constexpr size_t B = decltype(count)::value;
-        const double *vm = v + m * per;
         double s0[B] = {}, s1[B] = {}, s2[B] = {};
         for (size_t i = 0; i < per; ++i) {
             const double w = weights[i];
             for (size_t b = 0; b < B; ++b) {
-                const double q = vm[b * per + i], h = c > 0 ? q / (q + c) : 0.0;
+                const double q = double(vm[b * row + i * column]) * scale, h = c > 0 ? q / (q + c) : 0.0;
                 s0[b] += w * q;
                 s1[b] += w * (h * q);
                 s2[b] += w * (h * h * q);
@@ -402,9 +406,18 @@ inline void cubature_moment_sums(const double *lo, const double *hi, size_t boxe
             out[3 * (m + b)] = s0[b] * vol, out[3 * (m + b) + 1] = s1[b] * vol, out[3 * (m + b) + 2] = s2[b] * vol;
         }
     };
+    using One = std::integral_constant<size_t, 1>;
     size_t m = 0;
-    for (; m + kSideBySide <= boxes; m += kSideBySide) sums(m, std::integral_constant<size_t, kSideBySide>{});
-    for (; m < boxes; ++m) sums(m, std::integral_constant<size_t, 1>{});
+    if (interleaved) {
+        for (; m + kInterleave <= boxes; m += kInterleave)
+            sums(v + m * per, m, std::integral_constant<size_t, kInterleave>{}, 1, kInterleave);
+        for (size_t w = boxes - m, b = 0; b < w; ++b)   // the last, short block: box b at b + i w
+            sums(v + m * per + b, m + b, One{}, 0, w);
+        return;
+    }
+    for (; m + kSideBySide <= boxes; m += kSideBySide)
+        sums(v + m * per, m, std::integral_constant<size_t, kSideBySide>{}, per, 1);
+    for (; m < boxes; ++m) sums(v + m * per, m, One{}, per, 1);
 }
 
 }  // namespace re

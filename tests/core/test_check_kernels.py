@@ -315,6 +315,25 @@ def test_cubature_moment_sums_are_the_sums_of_the_moment_columns(c):
     np.testing.assert_array_equal(got.view(np.uint64), want.view(np.uint64))
 
 
+@pytest.mark.parametrize("boxes", [3_001, 8, 5])
+def test_cubature_moment_sums_of_scaled_float32_or_interleaved_values_are_numpys(boxes):
+    """A float32 renderer's densities times the Jacobian (scale), read as returned and in the
+    interleaved order: the same bits as the moment columns of numpy's float64 product."""
+    from harness.samplers.domains import MomentColumns
+    rng = np.random.default_rng(18)
+    lo, hi = random_boxes(2, boxes, rng)
+    w = np.outer(GL_W, GL_W).reshape(-1)
+    p = rng.lognormal(0, 3, lo.shape[0] * w.size).astype(np.float32)
+    p[[0, 3]] = [0.0, np.inf]
+    order = rest.interleaved_order(boxes, w.size)
+    for c in (0.7, 0.0):
+        with np.errstate(invalid="ignore"):
+            want = rest.cubature_sums(lo, hi, MomentColumns(c)(p.astype(np.float64) * (4 * math.pi)), w)
+            for values, flag in [(p, False), (p[order], True), (p[order].astype(np.float64), True)]:
+                got = rest.cubature_moment_sums(lo, hi, values, w, c, 4 * math.pi, interleaved=flag)
+                np.testing.assert_array_equal(got.view(np.uint64), want.view(np.uint64))
+
+
 def test_cubature_kernels_reject_mismatched_boxes_and_values():
     lo, hi = np.zeros((3, 2)), np.ones((3, 2))
     with pytest.raises(ValueError, match="shape"):
