@@ -46,7 +46,7 @@ from uniform_mc import best_of  # noqa: E402
 
 import reference_estimators as rest  # noqa: E402
 
-from harness.adapters.mitsuba.batch import UNIT_SLACK  # noqa: E402
+from harness.adapters.mitsuba.batch import UNIT_SLACK, float32_pdf_of  # noqa: E402
 from harness.adapters.mitsuba.catalogue import catalogue  # noqa: E402
 from harness.adapters.mitsuba.checks import check_mitsuba_sampler  # noqa: E402
 from harness.adapters.mitsuba.runtime import use_libllvm  # noqa: E402
@@ -97,10 +97,11 @@ class Split:
         cls = type(sampler)
         build = Transform.__dict__["build"].__func__
         patches = [(cls, "pdf", self.wrap("pdf", cls.pdf)),
-                   (cls, "float32_pdf", self.wrap("pdf", cls.float32_pdf, columns=True)),
                    (cls, "sample_batch", self.wrap("sample", cls.sample_batch)),   # under sample()
                    (Transform, "build", classmethod(self.wrap("tables", build))),
                    (SamplerTest, "check_points", self.wrap("points", SamplerTest.check_points))]
+        if float32_pdf_of(sampler) is not None:   # wrapped only where the check calls it (else pdf alone)
+            patches.append((cls, "float32_pdf", self.wrap("pdf", cls.float32_pdf, columns=True)))
         done = []
         try:
             for owner, name, value in patches:
@@ -137,8 +138,12 @@ def measure(entry: Any, repeat: int) -> dict[str, float]:
     sample_alone = best_of(repeat, lambda: sampler.sample_batch(u))
     x = sampler.sample(u)
     x = x[np.all(np.isfinite(x), axis=1)]
-    columns, _ = rest.float32_unit_rows(x, UNIT_SLACK)   # as the tables' nodes reach the plugin
-    rate = best_of(repeat, lambda: sampler.float32_pdf(columns)) / max(len(x), 1)
+    fast = float32_pdf_of(sampler)
+    if fast is not None:   # as the tables' nodes reach the plugin
+        columns, _ = rest.float32_unit_rows(x, UNIT_SLACK)
+        rate = best_of(repeat, lambda: fast(columns)) / max(len(x), 1)
+    else:
+        rate = best_of(repeat, lambda: sampler.pdf(x)) / max(len(x), 1)
     row["floor"] = sample_alone + rate * row["table evals"]
     return row
 

@@ -43,7 +43,8 @@ def drawn_points(sample: Callable[[np.ndarray], Any], u: np.ndarray,
 def checked_pdf(pdf: Callable[[np.ndarray], Any]) -> Callable[[np.ndarray], np.ndarray]:
     """pdf, returning float64 of shape (N,) for N points; errors name it and the input.  A
     :class:`Float32DirectionPdf` stays one, its float32 entry checked too (its float32
-    densities kept as float32)."""
+    densities kept as float32), and its ``directions`` (None, or float32 columns (3, N) and ok
+    (N,) for the N nodes asked)."""
     if getattr(pdf, "_checked", False):
         return pdf
     name = callable_name(pdf.pdf if isinstance(pdf, Float32DirectionPdf) else pdf)
@@ -59,9 +60,34 @@ def checked_pdf(pdf: Callable[[np.ndarray], Any]) -> Callable[[np.ndarray], np.n
         return _densities(pdf.float32_columns, name, columns, columns.shape[1],
                           f"float32 direction columns of shape {columns.shape}", None)
 
-    out = Float32DirectionPdf(checked, checked_columns, pdf.directions)
+    out = Float32DirectionPdf(checked, checked_columns,
+                              None if pdf.directions is None else _checked_directions(pdf.directions))
     object.__setattr__(out, "_checked", True)
     return out
+
+
+def _checked_directions(directions: Callable[..., Any]
+                        ) -> Callable[..., tuple[np.ndarray, np.ndarray] | None]:
+    """A Float32DirectionPdf's ``directions``: None, or (float32 columns (3, N) with C-contiguous
+    rows, ok (N,) bool) for the N = boxes x nodes^2 nodes of the boxes [lo, hi] (M, 2); any
+    other result, or an exception, a UserCodeError naming it."""
+    name = callable_name(directions)
+
+    def checked(lo: np.ndarray, hi: np.ndarray, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        n = lo.shape[0] * np.size(nodes) ** lo.shape[1]
+        want = f"None or (float32 columns of shape (3, {n}), ok of shape ({n},))"
+        got = call(directions, name, lo, hi, nodes, what=want)
+        if got is None:
+            return None
+        pair = got if isinstance(got, tuple) and len(got) == 2 else (None, None)
+        columns, ok = (np.asarray(v) if v is not None else None for v in pair)
+        if (columns is None or ok is None or columns.dtype != np.float32 or columns.shape != (3, n)
+                or ok.shape != (n,)):
+            shapes = (f"{type(got).__name__}" if columns is None or ok is None
+                      else f"columns {columns.shape} {columns.dtype}, ok {ok.shape}")
+            raise UserCodeError(f"{name} returned {shapes} for {lo.shape[0]} boxes; expected {want}")
+        return np.ascontiguousarray(columns), ok.astype(bool, copy=False)
+    return checked
 
 
 def _densities(fn: Callable[[np.ndarray], Any], name: str, points: np.ndarray, n: int, given: str,

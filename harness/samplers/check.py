@@ -68,8 +68,7 @@ class SamplerTest:
                  sample_count: int = 1_000_000, alpha: float = 0.01, breaks: Sequence[Any] | None = None,
                  pdf_batch: int | None = None):
         self.dom = dom = as_domain(domain)
-        if pdf_batch is not None and not (isinstance(pdf_batch, (int, np.integer)) and pdf_batch >= 1):
-            raise ValueError(f"'pdf_batch' must be a positive number of points (or None), got {pdf_batch!r}")
+        _checked_batch(pdf_batch)
         self.breaks = breaks = checked_breaks(breaks, dom)
         self.pdf = self.claimed_pdf = checked_pdf(pdf)   # claimed_pdf: the pdf as given (for_total keeps it)
         self.total = 1.0    # pdf = claimed_pdf / total (for_total)
@@ -318,11 +317,20 @@ def check_sampler(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.ndarray
     """
     dom = as_domain(domain)
     n = _sample_count(sample_count)
+    _checked_batch(pdf_batch)
     u, x, reported = _draw(sample, dom, n, seed, udim)
     if total is None and np.isfinite(x).all():
         test = SamplerTest(pdf, dom, sample_count=n, alpha=alpha, breaks=breaks, pdf_batch=pdf_batch)
         return test.check_points(x, reported, seed=seed)
     return _check_drawn(u, x, reported, pdf, dom, alpha, total, seed, breaks, pdf_batch)
+
+
+def _checked_batch(pdf_batch: Any) -> None:
+    """Raises ValueError, naming 'pdf_batch', unless it is None or a positive whole number of
+    points (not a bool)."""
+    whole = isinstance(pdf_batch, (int, np.integer)) and not isinstance(pdf_batch, bool)
+    if pdf_batch is not None and not (whole and pdf_batch >= 1):
+        raise ValueError(f"'pdf_batch' must be a positive number of points (or None), got {pdf_batch!r}")
 
 
 def failure_pvalue(failed: int, n: int, total: float, total_err: float) -> float:
@@ -356,6 +364,7 @@ def check_with_missing(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.nd
     ``normalization`` the cubature's P and its error bound; ``breaks`` and ``pdf_batch`` as
     check_sampler's."""
     dom = as_domain(domain)
+    _checked_batch(pdf_batch)
     u, x, reported = _draw(sample, dom, _sample_count(sample_count), seed, udim)
     return _check_drawn(u, x, reported, pdf, dom, alpha, total, seed, breaks, pdf_batch)
 

@@ -45,6 +45,7 @@ struct CubatureCall {
         : d(check_domain(kind)), dlo(dlo_), dhi(dhi_), lo(lo_), hi(hi_), nodes(nodes_), k(check_boxes(lo_, hi_)),
           g(nodes_.size()), per(k == 1 ? g : g * g), boxes(lo_.shape(0)), pdim(domain_point_dim(d)) {
         if (size_t(domain_param_dim(d)) != k) throw nb::value_error("the boxes' dimension is not the domain's");
+        if (g == 0) throw nb::value_error("'nodes' must hold at least one point");
         if (columns.empty()) return;
         std::vector<int> seen(columns);
         std::sort(seen.begin(), seen.end());
@@ -63,9 +64,19 @@ struct CubatureCall {
     }
 };
 
+// Boxes a chunk of a kernel on the interleaved order: `chunk` rounded down to whole blocks
+// (kInterleave), at least one, so that the order is the same on any number of threads.
+inline size_t whole_blocks(size_t chunk) { return std::max<size_t>(chunk / kInterleave * kInterleave, kInterleave); }
+
+// Weights of a tensor rule: at least one (a chunk's boxes are counted in nodes per box).
+inline size_t checked_per(const InArray &weights) {
+    if (weights.size() == 0) throw nb::value_error("'weights' must hold at least one weight");
+    return weights.size();
+}
+
 // (columns (3, N) float32, ok (N,)) of the N = boxes x per nodes, filled by
-// fill(a, b, N, columns, ok) for boxes a .. b - 1 in chunks of whole blocks of the interleaved
-// order (kInterleave), so that the order is the same on any number of threads, on all threads.
+// fill(a, b, N, columns, ok) for boxes a .. b - 1 in chunks of whole blocks (whole_blocks), on
+// all threads.
 template <class Fill>
 nb::tuple float32_directions(size_t boxes, size_t per, size_t chunk, Fill fill) {
     const size_t n = boxes * per;
@@ -76,8 +87,7 @@ nb::tuple float32_directions(size_t boxes, size_t per, size_t chunk, Fill fill) 
     auto oa = new_bool_array(n, &ok);
     {
         nb::gil_scoped_release r;
-        for_chunks(boxes, std::max<size_t>(chunk / kInterleave * kInterleave, kInterleave),
-                   [&](size_t, size_t a, size_t b, int) { fill(a, b, n, cols, ok); });
+        for_chunks(boxes, whole_blocks(chunk), [&](size_t, size_t a, size_t b, int) { fill(a, b, n, cols, ok); });
     }
     return nb::make_tuple(ca, oa);
 }
@@ -87,6 +97,7 @@ nb::tuple float32_directions(size_t boxes, size_t per, size_t chunk, Fill fill) 
 void bind_cubature(nb::module_ &m) {
     m.def("cubature_nodes", [](InArray lo, InArray hi, InArray nodes) {
         const size_t k = check_boxes(lo, hi), boxes = lo.shape(0), g = nodes.size();
+        if (g == 0) throw nb::value_error("'nodes' must hold at least one point");
         const size_t per = k == 1 ? g : g * g;
         double *out;
         OutArray pts = new_array(boxes * per, k, &out);
@@ -265,7 +276,7 @@ void bind_cubature(nb::module_ &m) {
     // or (one column) in cubature_float32_directions' interleaved order
     auto sums = [](const InArray &lo, const InArray &hi, const auto &values, const InArray &weights, double scale,
                    bool interleaved) {
-        const size_t k = check_boxes(lo, hi), boxes = lo.shape(0), per = weights.size();
+        const size_t k = check_boxes(lo, hi), boxes = lo.shape(0), per = checked_per(weights);
         const size_t cols = values.ndim() == 2 ? values.shape(1) : 1;
         if ((values.ndim() != 1 && values.ndim() != 2) || values.shape(0) != boxes * per)
             throw nb::value_error("'values' must have one row per node: shape (M g^k,) or (M g^k, m)");
@@ -275,9 +286,8 @@ void bind_cubature(nb::module_ &m) {
         {
             nb::gil_scoped_release r;
             const size_t chunk = std::max<size_t>(kCheckChunk / per, 1);
-            if (interleaved) {   // chunks of whole blocks of the order
-                for_chunks(boxes, std::max<size_t>(chunk / kInterleave * kInterleave, kInterleave),
-                           [&](size_t, size_t a, size_t b, int) {
+            if (interleaved) {
+                for_chunks(boxes, whole_blocks(chunk), [&](size_t, size_t a, size_t b, int) {
                     cubature_sums_interleaved(lo.data() + a * k, hi.data() + a * k, b - a, k, values.data() + a * per,
                                               weights.data(), per, scale, out + a);
                 });
@@ -304,16 +314,15 @@ void bind_cubature(nb::module_ &m) {
     // values as float64 or float32, box-major or interleaved (as cubature_sums')
     auto moments = [](const InArray &lo, const InArray &hi, const auto &values, const InArray &weights, double c,
                       double scale, bool interleaved) {
-        const size_t k = check_boxes(lo, hi), boxes = lo.shape(0), per = weights.size();
+        const size_t k = check_boxes(lo, hi), boxes = lo.shape(0), per = checked_per(weights);
         if (values.ndim() != 1 || values.shape(0) != boxes * per)
             throw nb::value_error("'values' must have one value per node: shape (M g^k,)");
         double *out;
         OutArray oa = new_array(boxes, 3, &out);
         {
             nb::gil_scoped_release r;
-            const size_t chunk = std::max<size_t>(kCheckChunk / per, 1);   // interleaved: whole blocks
-            for_chunks(boxes, interleaved ? std::max<size_t>(chunk / kInterleave * kInterleave, kInterleave) : chunk,
-                       [&](size_t, size_t a, size_t b, int) {
+            const size_t chunk = std::max<size_t>(kCheckChunk / per, 1);
+            for_chunks(boxes, interleaved ? whole_blocks(chunk) : chunk, [&](size_t, size_t a, size_t b, int) {
                 cubature_moment_sums(lo.data() + a * k, hi.data() + a * k, b - a, k, values.data() + a * per,
                                      weights.data(), per, c, scale, interleaved, out + a * 3);
             });

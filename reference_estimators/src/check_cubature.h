@@ -161,14 +161,13 @@ inline constexpr size_t kInterleave = 8;
 // nodes an axis, which the separable map does not take.
 inline void interleave_rows(const double *rows, size_t boxes, size_t per, double slack, size_t stride, float *out,
                             bool *ok) {
-    const double inner_lo = (1 - slack / 2) * (1 - slack / 2), inner_hi = (1 + slack / 2) * (1 + slack / 2);
+    const UnitSlack unit(slack);
     for (size_t m0 = 0; m0 < boxes; m0 += kInterleave) {
         const size_t w = std::min(kInterleave, boxes - m0);
         for (size_t b = 0; b < w; ++b)
             for (size_t k = 0; k < per; ++k) {
                 const size_t at = m0 * per + k * w + b;
-                float32_unit_row(rows + 3 * (m0 + b) * per, k, stride, inner_lo, inner_hi, slack < 1, slack,
-                                 out + at - k, ok + at - k);
+                float32_unit_row(rows + 3 * (m0 + b) * per, k, stride, unit, out + at - k, ok + at - k);
             }
     }
 }
@@ -181,8 +180,7 @@ inline void interleave_rows(const double *rows, size_t boxes, size_t per, double
 // interval, rounded to float32 and stored, V boxes' at a time in vector lanes.
 template <size_t W, class Map>
 void interleaved_block(CheckDomain d, const double *lo, const double *hi, size_t m0, size_t w, const double *nodes,
-                       size_t g, const Map &map, double inner_lo, double inner_hi, bool fast, double slack,
-                       size_t stride, float *out, bool *ok) {
+                       size_t g, const Map &map, const UnitSlack &unit, size_t stride, float *out, bool *ok) {
     constexpr size_t V = simd::kWidth;
     static_assert(kInterleave % V == 0, "a block is whole vectors");
     const size_t n = W ? W : w;
@@ -222,12 +220,10 @@ void interleaved_block(CheckDomain d, const double *lo, const double *hi, size_t
                 const f64v &r0 = row[0], &r1 = row[1], &r2 = row[2];
                 const f64v n2 = r0 * r0 + r1 * r1 + r2 * r2;   // the row's, in its order
                 const size_t lanes = std::min(V, n - v);
-                // every lane inside (a NaN n2 is not): n2 where inside, NaN elsewhere, equal to n2
-                if (!(fast && simd::all_equal((n2 >= inner_lo) & (n2 <= inner_hi) ? n2 : f64v{} + NAN, n2))) {
+                if (!unit.all_inside(n2)) {
                     for (size_t l = 0; l < lanes; ++l) {   // a node off unit length (none is)
                         const double x[3] = {r0[l], r1[l], r2[l]};
-                        float32_unit_row(x, 0, stride, inner_lo, inner_hi, fast, slack, o[0] + v + l,
-                                         okb + k * n + v + l);
+                        float32_unit_row(x, 0, stride, unit, o[0] + v + l, okb + k * n + v + l);
                     }
                     continue;
                 }
@@ -251,14 +247,11 @@ void interleaved_block(CheckDomain d, const double *lo, const double *hi, size_t
 template <class Map>
 void interleaved_directions(CheckDomain d, const double *lo, const double *hi, size_t boxes, const double *nodes,
                             size_t g, const Map &map, double slack, size_t stride, float *out, bool *ok) {
-    const double inner_lo = (1 - slack / 2) * (1 - slack / 2), inner_hi = (1 + slack / 2) * (1 + slack / 2);
-    const bool fast = slack < 1;
+    const UnitSlack unit(slack);
     for (size_t m0 = 0; m0 < boxes; m0 += kInterleave) {
         const size_t w = std::min(kInterleave, boxes - m0);
-        w == kInterleave ? interleaved_block<kInterleave>(d, lo, hi, m0, w, nodes, g, map, inner_lo, inner_hi, fast,
-                                                          slack, stride, out, ok)
-                         : interleaved_block<0>(d, lo, hi, m0, w, nodes, g, map, inner_lo, inner_hi, fast, slack,
-                                                stride, out, ok);
+        w == kInterleave ? interleaved_block<kInterleave>(d, lo, hi, m0, w, nodes, g, map, unit, stride, out, ok)
+                         : interleaved_block<0>(d, lo, hi, m0, w, nodes, g, map, unit, stride, out, ok);
     }
 }
 

@@ -15,15 +15,29 @@
 
 namespace re {
 
+// The rows float32_unit_rows rounds as given, by their squared length n2: a row whose n2 lies
+// within (1 -+ slack / 2)^2 is within slack of 1 whatever the rounding (it is far inside);
+// none where slack >= 1 (fast false: 1 - slack / 2 may be <= 0).
+struct UnitSlack {
+    double slack, lo, hi;
+    bool fast;
+    explicit UnitSlack(double s)
+        : slack(s), lo((1 - s / 2) * (1 - s / 2)), hi((1 + s / 2) * (1 + s / 2)), fast(s < 1) {}
+    bool inside(double n2) const { return fast && n2 >= lo && n2 <= hi; }
+    // every lane's n2 inside (a NaN is not): n2 where inside, NaN elsewhere, equal to n2
+    bool all_inside(simd::f64v n2) const {
+        return fast && simd::all_equal((n2 >= lo) & (n2 <= hi) ? n2 : simd::f64v{} + NAN, n2);
+    }
+};
+
 // Row i of float32_unit_rows (below), one at a time.
-inline void float32_unit_row(const double *x, size_t i, size_t stride, double inner_lo, double inner_hi, bool fast,
-                             double slack, float *out, bool *ok) {
+inline void float32_unit_row(const double *x, size_t i, size_t stride, const UnitSlack &unit, float *out, bool *ok) {
     double u = x[3 * i], v = x[3 * i + 1], w = x[3 * i + 2];
     const double n2 = u * u + v * v + w * w;
-    if (!(fast && n2 >= inner_lo && n2 <= inner_hi)) {
+    if (!unit.inside(n2)) {
         const double norm = std::sqrt(n2);
         const bool good = std::isfinite(norm) && norm > 0;
-        const double scale = good && std::fabs(norm - 1) > slack ? norm : 1.0;
+        const double scale = good && std::fabs(norm - 1) > unit.slack ? norm : 1.0;
         u = good ? u / scale : 0.0;
         v = good ? v / scale : 0.0;
         w = good ? w / scale : 1.0;
@@ -49,19 +63,16 @@ inline void float32_unit_row(const double *x, size_t i, size_t stride, double in
 // million directions of a diffuse BSDF's check 15 ms).
 inline void float32_unit_rows(const double *x, size_t a, size_t b, size_t stride, double slack, float *out,
                               bool *ok) {
-    const double inner_lo = (1 - slack / 2) * (1 - slack / 2), inner_hi = (1 + slack / 2) * (1 + slack / 2);
-    const bool fast = slack < 1;   // else 1 - slack / 2 may be <= 0: no inner interval
+    const UnitSlack unit(slack);
     constexpr size_t W = simd::kWidth;
     using simd::f32v;
     size_t i = a;
-    for (; fast && i + W <= b; i += W) {
+    for (; unit.fast && i + W <= b; i += W) {
         simd::f64v u, v, w;
         simd::load3(x + 3 * i, u, v, w);
         const simd::f64v n2 = u * u + v * v + w * w;
-        // every lane inside (a NaN n2 is not): n2 where inside, NaN elsewhere, equal to n2
-        if (!simd::all_equal((n2 >= inner_lo) & (n2 <= inner_hi) ? n2 : simd::f64v{} + NAN, n2)) {
-            for (size_t j = i; j < i + W; ++j)
-                float32_unit_row(x, j, stride, inner_lo, inner_hi, fast, slack, out, ok);
+        if (!unit.all_inside(n2)) {
+            for (size_t j = i; j < i + W; ++j) float32_unit_row(x, j, stride, unit, out, ok);
             continue;
         }
         const f32v fu = __builtin_convertvector(u, f32v), fv = __builtin_convertvector(v, f32v),
@@ -71,7 +82,7 @@ inline void float32_unit_rows(const double *x, size_t a, size_t b, size_t stride
         std::memcpy(out + 2 * stride + i, &fw, sizeof fw);
         for (size_t j = i; j < i + W; ++j) ok[j] = true;
     }
-    for (; i < b; ++i) float32_unit_row(x, i, stride, inner_lo, inner_hi, fast, slack, out, ok);
+    for (; i < b; ++i) float32_unit_row(x, i, stride, unit, out, ok);
 }
 
 // Columns (c, n) of float32 values, rows a .. b - 1, as rows (n, c) of doubles into out: a

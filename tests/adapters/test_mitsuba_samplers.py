@@ -17,6 +17,7 @@ import reference_estimators as rest
 from harness.adapters.mitsuba import catalogue as cat
 from harness.adapters.mitsuba import checks, faults, runtime
 from harness.adapters.mitsuba import samplers as ms
+from harness.adapters.mitsuba.batch import float32_pdf_of
 from harness.samplers import check_sampler
 from harness.samplers.check import failure_pvalue
 from harness.stats import ConfidenceInterval
@@ -139,18 +140,33 @@ def test_the_cubature_reaches_the_plugin_as_float32_columns_or_through_a_replace
         def pdf(self, x):
             return 1.02 * super().pdf(x)
 
-    assert checks._float32_pdf(TooLarge(spec, wi=wi)) is None
-    r = checks.check_mitsuba_sampler(TooLarge(spec, wi=wi), sample_count=N, seed=0)
+    too_large = TooLarge(spec, wi=wi)
+    assert float32_pdf_of(too_large) is None
+    r = checks.check_mitsuba_sampler(too_large, sample_count=N, seed=0)
     assert not r.passed and abs(r.normalization[0] - 1.02 * fast.normalization[0]) < 1e-3
     own = ms.BSDFSampler(spec, wi=wi)
     own.pdf = lambda x: 1.02 * ms.BSDFSampler.pdf(own, x)
-    assert checks._float32_pdf(own) is None
+    assert float32_pdf_of(own) is None
+    # a mutant takes its pdf_from's float32_pdf only where that is pdf_from's pdf
     mutant = faults.Mutant(s, "2 % too large", pdf_scale=1.02)
-    assert checks._float32_pdf(mutant) == mutant.float32_pdf
     x = s.sample(np.random.default_rng(0).random((1000, s.udim)))
     x = x[np.isfinite(x).all(axis=1)]
     cols = np.ascontiguousarray(x.T, dtype=np.float32)
-    np.testing.assert_array_equal(mutant.float32_pdf(cols), mutant.pdf(cols.T.astype(float)))
+    np.testing.assert_array_equal(float32_pdf_of(mutant)(cols), mutant.pdf(cols.T.astype(float)))
+    for pdf_from in (too_large, own):
+        assert float32_pdf_of(faults.Mutant(s, "its pdf", pdf_from=pdf_from)) is None
+
+    class Wrapper:   # a sampler of the user's own that forwards all but pdf
+        def __init__(self, inner):
+            self.inner = inner
+
+        def __getattr__(self, name):
+            return getattr(self.inner, name)
+
+        def pdf(self, x):
+            return self.inner.pdf(x)
+
+    assert float32_pdf_of(Wrapper(s)) is None
 
 
 @pytest.mark.slow

@@ -230,8 +230,8 @@ def test_interleaved_order_is_the_blocks_node_major_order(boxes):
 def test_cubature_float32_directions_are_the_rounded_cubature_points(kind, g):
     """The nodes' directions as float32 columns in one pass: float32_unit_rows of
     cubature_points' rows, bit for bit, in the interleaved order (blocks of 8 boxes, a short
-    one last), with the pole's permutation and with a slack so small that every row goes
-    through the normalising path; other domains refused."""
+    one last), with the pole's permutation and with a slack of 1e-18 (every row not of squared
+    length exactly 1 through the normalising path); other domains refused."""
     lo, hi = random_boxes(2, 40_001 // g**2 | 1, np.random.default_rng(15))
     lo[:3], hi[:3] = 0.0, 1.0        # whole-domain boxes: nodes near both poles
     assert lo.shape[0] % 8
@@ -344,6 +344,18 @@ def test_cubature_kernels_reject_mismatched_boxes_and_values():
         rest.cubature_sums(lo, hi, np.ones(47), np.ones(16))
     with pytest.raises(ValueError, match="one value per node"):
         rest.cubature_moment_sums(lo, hi, np.ones((48, 2)), np.ones(16), 1.0)
+    # no node or weight: refused, not a division by zero
+    for call in (lambda: rest.cubature_nodes(lo, hi, []), lambda: rest.cubature_points("sphere", lo, hi, []),
+                 lambda: rest.cubature_float32_directions("sphere", lo, hi, []),
+                 lambda: rest.cubature_cap_float32_directions(lo, hi, [], [0, 0, 1], [1, 0, 0], [0, 1, 0],
+                                                              0.5, 0.5)):
+        with pytest.raises(ValueError, match="'nodes' must hold at least one point"):
+            call()
+    for call in (lambda: rest.cubature_sums(lo, hi, np.ones(0), np.ones(0), interleaved=True),
+                 lambda: rest.cubature_sums(lo, hi, np.ones(0), np.ones(0)),
+                 lambda: rest.cubature_moment_sums(lo, hi, np.ones(0), np.ones(0), 1.0)):
+        with pytest.raises(ValueError, match="'weights' must hold at least one weight"):
+            call()
 
 
 def test_float32_unit_rows_match_numpy_and_name_the_bad_rows():

@@ -352,8 +352,9 @@ def test_a_float32_direction_pdf_integrates_to_the_plain_pdfs_bits(pole):
                 a, b = getattr(t, field), getattr(u, field)
                 np.testing.assert_array_equal(a.view(np.uint64), b.view(np.uint64))
             assert t.error == u.error
-        # the same evaluations: the transform's tables' through the columns, the rest (the
-        # pre-grid's centres, the base grid's moment and square columns) through pdf
+        # the same evaluations: the transform's tables' and the base grid's moment columns
+        # through the float32 columns, the rest (the pre-grid's centres, its square columns)
+        # through pdf
         assert sum(r.calls["columns"]) + sum(r.calls["pdf"]) == sum(plain.calls["pdf"])
         assert r.calls["pdf"][0] == 32 * 64 and sum(r.calls["columns"]) > sum(r.calls["pdf"])
         results.append(r.calls["columns"])
@@ -371,7 +372,43 @@ def test_a_float32_direction_pdf_that_returns_the_wrong_count_is_named():
                     sample_count=10_000)
 
 
-@pytest.mark.parametrize("batch", [0, -5, 2.5, "big"])
+def test_a_float32_direction_pdfs_own_directions_are_checked_and_may_decline():
+    """Float32DirectionPdf.directions: None declines a call (pdf gets the float64 points: the
+    same bits); an exception, a result of another shape or dtype, or not a pair, is a
+    UserCodeError naming it."""
+    import reference_estimators as rest
+
+    from harness.samplers import Float32DirectionPdf, SamplerTest
+    from harness.usercode import UserCodeError
+
+    r = _Renderer()
+    ref = SamplerTest(r.pdf, "sphere", sample_count=10_000)
+
+    def own(lo, hi, nodes):   # the domain's own directions, as the core gives them
+        return rest.cubature_float32_directions("sphere", lo, hi, nodes)
+
+    for directions in (own, lambda lo, hi, nodes: None):
+        test = SamplerTest(Float32DirectionPdf(r.pdf, r.float32_columns, directions), "sphere",
+                           sample_count=10_000)
+        np.testing.assert_array_equal(test.mass.view(np.uint64), ref.mass.view(np.uint64))
+        np.testing.assert_array_equal(test.transform.marginal.start, ref.transform.marginal.start)
+
+    def raises(lo, hi, nodes):
+        raise RuntimeError("planted")
+
+    bad = {"raises": (raises, "raised RuntimeError: planted"),
+           "float64": (lambda lo, hi, nodes: (own(lo, hi, nodes)[0].astype(float), own(lo, hi, nodes)[1]),
+                       r"returned columns \(3, \d+\) float64"),
+           "short": (lambda lo, hi, nodes: (own(lo, hi, nodes)[0][:, :5], own(lo, hi, nodes)[1]),
+                     "expected None or"),
+           "not a pair": (lambda lo, hi, nodes: own(lo, hi, nodes)[0], "returned ndarray")}
+    for what, (directions, match) in bad.items():
+        with pytest.raises(UserCodeError, match=match):
+            SamplerTest(Float32DirectionPdf(r.pdf, r.float32_columns, directions), "sphere",
+                        sample_count=10_000)
+
+
+@pytest.mark.parametrize("batch", [0, -5, 2.5, "big", True])
 def test_pdf_batch_must_be_a_positive_count(batch):
     from harness.samplers import SamplerTest
 

@@ -50,6 +50,7 @@ from scipy import stats
 
 import reference_estimators as rest
 
+from harness.adapters.mitsuba.batch import float32_pdf_of
 from harness.adapters.mitsuba.cap import CapView
 from harness.adapters.mitsuba.runtime import is_jit, jit_threads
 from harness.samplers.check import SAMPLE_CASE, check_with_missing
@@ -96,23 +97,6 @@ def check_mitsuba_sampler(sampler: Any, *, sample_count: int = 1_000_000, seed: 
         return _checked(sampler, sample_count, seed, alpha)
 
 
-def _float32_pdf(sampler: Any) -> Any:
-    """The sampler's ``float32_pdf`` where it is its ``pdf`` by construction: defined by the
-    class that defines ``pdf`` or by a subclass of it.  A subclass or instance that replaces
-    ``pdf`` alone (a user's planted fault, a wrapper) has its pdf integrated through ``pdf``,
-    as the drawn points are evaluated; None then, and for a sampler without one."""
-    fast = getattr(sampler, "float32_pdf", None)
-    if fast is None:
-        return None
-    own = vars(sampler) if hasattr(sampler, "__dict__") else {}
-    if "pdf" in own or "float32_pdf" in own:
-        return fast if "pdf" in own and "float32_pdf" in own else None
-
-    def owner(name: str) -> type:
-        return next(c for c in type(sampler).__mro__ if name in c.__dict__)
-    return fast if issubclass(owner("float32_pdf"), owner("pdf")) else None
-
-
 def _checked(sampler: Any, sample_count: int, seed: int, alpha: float) -> SamplerCheck:
     """check_mitsuba_sampler's checks, drjit's threads set."""
     cap = getattr(sampler, "cap", None)
@@ -121,14 +105,14 @@ def _checked(sampler: Any, sample_count: int, seed: int, alpha: float) -> Sample
     if cap is None:
         domain = Domain(sampler.domain, pole=getattr(sampler, "pole", "z"))
         # the cubature's nodes go to the plugin as float32 columns where it takes them
-        float32_pdf = _float32_pdf(sampler)
+        float32_pdf = float32_pdf_of(sampler)
         pdf = sampler.pdf if float32_pdf is None else Float32DirectionPdf(sampler.pdf, float32_pdf)
         return check_with_missing(with_pdf or sampler.sample, pdf, domain, sample_count=sample_count,
                                   seed=seed, alpha=alpha, udim=sampler.udim,
                                   breaks=getattr(sampler, "breaks", None), pdf_batch=batch)
     view = CapView(sampler, cap)
-    pdf = view.pdf if _float32_pdf(sampler) is None else Float32DirectionPdf(view.pdf, view.float32_density,
-                                                                              view.float32_directions)
+    pdf = view.pdf if float32_pdf_of(sampler) is None else Float32DirectionPdf(view.pdf, view.float32_density,
+                                                                               view.float32_directions)
     r = check_with_missing(view.sample, pdf, view.domain, sample_count=sample_count, seed=seed,
                            alpha=alpha, udim=sampler.udim, pdf_batch=batch)
     if with_pdf is None:

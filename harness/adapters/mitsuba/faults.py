@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from harness.adapters.mitsuba.batch import MitsubaSampler, SampleBatch
+from harness.adapters.mitsuba.batch import MitsubaSampler, SampleBatch, float32_pdf_of
 
 __all__ = ["Mutant", "area_density_reported", "lobe_pdf_reported", "no_cosine", "opacity_missing",
            "reported_from", "scaled_weight"]
@@ -68,10 +68,17 @@ class Mutant:
     def pdf(self, x: np.ndarray) -> np.ndarray:
         return self.pdf_scale * self.pdf_from.pdf(x)
 
-    def float32_pdf(self, columns: np.ndarray) -> np.ndarray:
-        """``pdf`` at float32 unit directions as columns (3, N) (MitsubaSampler.float32_pdf):
-        the scale applied in float64, as ``pdf`` applies it."""
-        return self.pdf_scale * np.asarray(self.pdf_from.float32_pdf(columns), dtype=float)
+    @property
+    def float32_pdf(self) -> Callable[[np.ndarray], np.ndarray] | None:
+        """``pdf`` at float32 unit directions as columns (3, N) (MitsubaSampler.float32_pdf),
+        the scale applied in float64 as ``pdf`` applies it, where ``pdf_from``'s float32_pdf is
+        its pdf (float32_pdf_of); None where not (``pdf_from`` replaces pdf alone, or has none):
+        the check then integrates through ``pdf``."""
+        fast = float32_pdf_of(self.pdf_from)
+        if fast is None:
+            return None
+        scale = self.pdf_scale
+        return lambda columns: scale * np.asarray(fast(columns), dtype=float)
 
     def eval(self, x: np.ndarray) -> np.ndarray | None:
         return self.base.eval(x)
