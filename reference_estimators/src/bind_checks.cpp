@@ -243,19 +243,15 @@ void bind_checks(nb::module_ &m) {
         }, "q"_a, "(M,) int64: for each row of q the first equal row of x, or -1.");
     m.def("float32_unit_rows", [](InArray x, double slack) {
         const size_t n = check_points(x, 3, "x");
-        nb::capsule owner;
-        float *cols = output_buffer<float>(3 * n, owner);   // reused memory: no page faults a call
-        nb::ndarray<nb::numpy, float> ca(cols, {size_t(3), n}, owner);
-        bool *ok;
-        auto oa = new_bool_array(n, &ok);
+        const Float32Directions out(n);
         {
             nb::gil_scoped_release g;
             // each row's result is its own: chunks on all threads
             for_chunks(n, kCubatureChunk, [&](size_t, size_t a, size_t b, int) {
-                float32_unit_rows(x.data(), a, b, n, slack, cols, ok);
+                float32_unit_rows(x.data(), a, b, n, slack, out.cols, out.flags);
             });
         }
-        return nb::make_tuple(ca, oa);
+        return out.result();
     }, "x"_a, "slack"_a,
        "(columns (3, N) float32, ok (N,)): rows x (N, 3) as float32 unit vectors (normalised first where their "
        "length is off 1 by more than `slack`); rows that are not finite non-zero vectors become +z, ok False.");

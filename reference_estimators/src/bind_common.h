@@ -95,6 +95,24 @@ nb::ndarray<nb::numpy, T> new_vector(size_t n, T **data) {
 inline nb::ndarray<nb::numpy, bool> new_bool_array(size_t n, bool **data) { return new_vector(n, data); }
 inline nb::ndarray<nb::numpy, int64_t> new_index_array(size_t n, int64_t **data) { return new_vector(n, data); }
 
+// Direction columns (3, n) of float32 (row j C-contiguous), from reused memory (no page faults
+// a call), and a bool array ok (n,): float32_unit_rows' result and the cubature's float32
+// directions; `cols` and `flags` their memory.
+struct Float32Directions {
+    float *cols;
+    bool *flags;
+    nb::ndarray<nb::numpy, float> columns;
+    nb::ndarray<nb::numpy, bool> ok;
+
+    explicit Float32Directions(size_t n) {
+        nb::capsule owner;
+        cols = output_buffer<float>(3 * n, owner);
+        columns = nb::ndarray<nb::numpy, float>(cols, {size_t(3), n}, owner);
+        ok = new_bool_array(n, &flags);
+    }
+    nb::tuple result() const { return nb::make_tuple(columns, ok); }
+};
+
 // A new int64 numpy array (n,) holding `values` (row indices a kernel collected).
 inline nb::ndarray<nb::numpy, int64_t> index_array(const std::vector<int64_t> &values) {
     int64_t *out;

@@ -80,16 +80,13 @@ inline size_t checked_per(const InArray &weights) {
 template <class Fill>
 nb::tuple float32_directions(size_t boxes, size_t per, size_t chunk, Fill fill) {
     const size_t n = boxes * per;
-    nb::capsule owner;
-    float *cols = output_buffer<float>(3 * n, owner);   // reused memory: no page faults a call
-    nb::ndarray<nb::numpy, float> ca(cols, {size_t(3), n}, owner);
-    bool *ok;
-    auto oa = new_bool_array(n, &ok);
+    const Float32Directions out(n);
     {
         nb::gil_scoped_release r;
-        for_chunks(boxes, whole_blocks(chunk), [&](size_t, size_t a, size_t b, int) { fill(a, b, n, cols, ok); });
+        for_chunks(boxes, whole_blocks(chunk),
+                   [&](size_t, size_t a, size_t b, int) { fill(a, b, n, out.cols, out.flags); });
     }
-    return nb::make_tuple(ca, oa);
+    return out.result();
 }
 
 }  // namespace
