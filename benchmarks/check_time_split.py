@@ -100,7 +100,9 @@ class Split:
                    (cls, "sample_batch", self.wrap("sample", cls.sample_batch)),   # under sample()
                    (Transform, "build", classmethod(self.wrap("tables", build))),
                    (SamplerTest, "check_points", self.wrap("points", SamplerTest.check_points))]
-        if float32_pdf_of(sampler) is not None:   # wrapped only where the check calls it (else pdf alone)
+        # float32_pdf wrapped only where the check calls it (else pdf alone), and where it is a
+        # method (a Mutant's is a property: its calls then count as the check's own work)
+        if float32_pdf_of(sampler) is not None and callable(getattr(cls, "float32_pdf", None)):
             patches.append((cls, "float32_pdf", self.wrap("pdf", cls.float32_pdf, columns=True)))
         done = []
         try:

@@ -75,18 +75,22 @@ def _checked_directions(directions: Callable[..., Any]
 
     def checked(lo: np.ndarray, hi: np.ndarray, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         n = lo.shape[0] * np.size(nodes) ** lo.shape[1]
-        want = f"None or (float32 columns of shape (3, {n}), ok of shape ({n},))"
+        want = f"None or (float32 columns of shape (3, {n}), bool ok of shape ({n},))"
         got = call(directions, name, lo, hi, nodes, what=want)
         if got is None:
             return None
-        pair = got if isinstance(got, tuple) and len(got) == 2 else (None, None)
-        columns, ok = (np.asarray(v) if v is not None else None for v in pair)
-        if (columns is None or ok is None or columns.dtype != np.float32 or columns.shape != (3, n)
-                or ok.shape != (n,)):
-            shapes = (f"{type(got).__name__}" if columns is None or ok is None
-                      else f"columns {columns.shape} {columns.dtype}, ok {ok.shape}")
-            raise UserCodeError(f"{name} returned {shapes} for {lo.shape[0]} boxes; expected {want}")
-        return np.ascontiguousarray(columns), ok.astype(bool, copy=False)
+        boxes = f"{lo.shape[0]} boxes; expected {want}"
+        if not (isinstance(got, tuple) and len(got) == 2):
+            raise UserCodeError(f"{name} returned {type(got).__name__} for {boxes}")
+        try:
+            columns, ok = (np.asarray(v) for v in got)
+        except Exception as e:   # a ragged list, an object whose __array__ raises
+            raise UserCodeError(f"{name} returned a pair that is not two arrays ({type(e).__name__}: {e}) "
+                                f"for {boxes}") from None
+        if columns.dtype != np.float32 or columns.shape != (3, n) or ok.dtype != np.bool_ or ok.shape != (n,):
+            raise UserCodeError(f"{name} returned columns {columns.shape} {columns.dtype}, "
+                                f"ok {ok.shape} {ok.dtype} for {boxes}")
+        return np.ascontiguousarray(columns), ok
     return checked
 
 

@@ -17,7 +17,7 @@ namespace re {
 
 // The rows float32_unit_rows rounds as given, by their squared length n2: a row whose n2 lies
 // within (1 -+ slack / 2)^2 is within slack of 1 whatever the rounding (it is far inside);
-// none where slack >= 1 (fast false: 1 - slack / 2 may be <= 0).
+// none where slack >= 1 (fast false: 1 - slack / 2 may be <= 0) or is NaN.
 struct UnitSlack {
     double slack, lo, hi;
     bool fast;

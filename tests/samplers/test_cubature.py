@@ -401,7 +401,11 @@ def test_a_float32_direction_pdfs_own_directions_are_checked_and_may_decline():
                        r"returned columns \(3, \d+\) float64"),
            "short": (lambda lo, hi, nodes: (own(lo, hi, nodes)[0][:, :5], own(lo, hi, nodes)[1]),
                      "expected None or"),
-           "not a pair": (lambda lo, hi, nodes: own(lo, hi, nodes)[0], "returned ndarray")}
+           "not a pair": (lambda lo, hi, nodes: own(lo, hi, nodes)[0], "returned ndarray"),
+           "ragged": (lambda lo, hi, nodes: ([[1.0], [1.0, 2.0]], own(lo, hi, nodes)[1]), "not two arrays"),
+           "float ok": (lambda lo, hi, nodes: (own(lo, hi, nodes)[0], own(lo, hi, nodes)[1].astype(float)),
+                        r"ok \(\d+,\) float64"),
+           "no ok": (lambda lo, hi, nodes: (own(lo, hi, nodes)[0], None), r"ok \(\) object")}
     for what, (directions, match) in bad.items():
         with pytest.raises(UserCodeError, match=match):
             SamplerTest(Float32DirectionPdf(r.pdf, r.float32_columns, directions), "sphere",
