@@ -230,14 +230,15 @@ def test_interleaved_order_is_the_blocks_node_major_order(boxes):
 def test_cubature_float32_directions_are_the_rounded_cubature_points(kind, g):
     """The nodes' directions as float32 columns in one pass: float32_unit_rows of
     cubature_points' rows, bit for bit, in the interleaved order (blocks of 8 boxes, a short
-    one last), with the pole's permutation and with a slack of 1e-18 (every row not of squared
-    length exactly 1 through the normalising path); other domains refused."""
+    one last), with the pole's permutation, with a slack of 1e-18 (every row not of squared
+    length exactly 1 through the normalising path) and with slacks of 3 and NaN (no inner
+    interval: every row one at a time); other domains refused."""
     lo, hi = random_boxes(2, 40_001 // g**2 | 1, np.random.default_rng(15))
     lo[:3], hi[:3] = 0.0, 1.0        # whole-domain boxes: nodes near both poles
     assert lo.shape[0] % 8
     nodes = np.sort(np.random.default_rng(g).random(g)) if g != 4 else GL_X
     for columns in (None, [2, 0, 1]):
-        for slack in (1e-6, 1e-18):
+        for slack in (1e-6, 1e-18, 3.0, math.nan):
             points = rest.cubature_points(kind, lo, hi, nodes, columns=columns)
             cols, ok = rest.float32_unit_rows(points, slack)
             got = rest.cubature_float32_directions(kind, lo, hi, nodes, columns, slack)
