@@ -166,11 +166,11 @@ class Float32DirectionPdf:
     ``float32_columns(c) == pdf(x)`` wherever c is x's coordinates rounded to float32 (x of
     length 1 within :data:`FLOAT32_UNIT_SLACK`), which a float32 renderer's pdf meets by
     rounding the directions it is given (Mitsuba's adapter: ``harness.adapters.mitsuba.batch``).
-    The check's cubature then maps its nodes straight to
-    float32 columns (:func:`reference_estimators.cubature_float32_directions`) and sums float32
-    densities as returned: the same integrals, bit for bit, without an (N, 3) array of float64
-    directions written, read back and rounded, or a float64 copy of the densities, for each of
-    the 10-100 million nodes of a check's CDF tables.
+    The check's cubature then maps its nodes straight to float32 columns
+    (:func:`reference_estimators.cubature_float32_directions`) and sums float32 densities as
+    returned: the same integrals, bit for bit, without an (N, 3) array of float64 directions
+    written, read back and rounded, or a float64 copy of the densities, for each of the 1-100
+    million nodes of a check's CDF tables and base grid.
 
     ``directions``: where the pdf's domain points are not the renderer's directions (an area
     light seen through its cap's equal-area map, ``harness.adapters.mitsuba.cap.CapView``),
