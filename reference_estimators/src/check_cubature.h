@@ -235,15 +235,8 @@ void interleaved_block(CheckDomain d, const double *lo, const double *hi, size_t
         }
 }
 
-// The directions of the tensor rule's nodes on boxes [lo, hi] (boxes from a multiple of
-// kInterleave) of the hemisphere or sphere as float32 unit vectors, columns into out (column
-// c of node i at out[c * stride + i]) and ok, in the interleaved order (kInterleave): the
-// values of float32_unit_rows(cubature_points(...), slack), the same bits, each node where
-// the order puts it.  On the separable map (g <= 8) a block's nodes are mapped, rounded and
-// stored in vector lanes, one node of every box at a time: 0.8 ns a node on two threads in
-// calls of 2^18 nodes (1.5 in calls of 2^16), what cubature_points alone takes, where its rows
-// written out, read back and rounded had taken 1.2 (2.5) and each chunk's rows rounded while in
-// cache 1.1 (1.8); writing floats from separable_points' lanes, box-major, 2.1-2.7 (2^16).
+// The nodes of boxes [lo, hi] (from a multiple of kInterleave) through `map`, rounded to float32
+// columns in the interleaved order, block by block (interleaved_block).
 template <class Map>
 void interleaved_directions(CheckDomain d, const double *lo, const double *hi, size_t boxes, const double *nodes,
                             size_t g, const Map &map, double slack, size_t stride, float *out, bool *ok) {
@@ -255,6 +248,15 @@ void interleaved_directions(CheckDomain d, const double *lo, const double *hi, s
     }
 }
 
+// The directions of the tensor rule's nodes on boxes [lo, hi] (boxes from a multiple of
+// kInterleave) of the hemisphere or sphere as float32 unit vectors, columns into out (column
+// c of node i at out[c * stride + i]) and ok, in the interleaved order (kInterleave): the
+// values of float32_unit_rows(cubature_points(...), slack), the same bits, each node where
+// the order puts it.  On the separable map (g <= 8) a block's nodes are mapped, rounded and
+// stored in vector lanes, one node of every box at a time: 0.8 ns a node on two threads in
+// calls of 2^18 nodes (1.5 in calls of 2^16), what cubature_points alone takes, where its rows
+// written out, read back and rounded had taken 1.2 (2.5) and each chunk's rows rounded while in
+// cache 1.1 (1.8); writing floats from separable_points' lanes, box-major, 2.1-2.7 (2^16).
 inline void cubature_float32_directions(CheckDomain d, const double *lo, const double *hi, size_t boxes, size_t k,
                                         const double *nodes, size_t g, const Placement &at, double slack,
                                         size_t stride, float *out, bool *ok, std::vector<double> &scratch,
