@@ -16,9 +16,7 @@ from .arguments import stream_arg
 __all__ = [
     "CHECK_DOMAINS", "domain_params", "dithered_domain_params", "domain_points", "cubature_nodes",
     "cubature_points", "cubature_float32_directions", "cubature_cap_float32_directions", "interleaved_order",
-    "cubature_sums",
-    "split_points", "BoxRefinement",
-    "uncut_parents", "grouped_agreement", "leaf_quarters",
+    "cubature_sums", "split_points", "BoxRefinement", "uncut_parents", "grouped_agreement", "leaf_quarters",
     "cubature_moment_sums", "grid_histogram", "rosenblatt",
     "piecewise_linear_lookup", "transform_statistics", "cramer_von_mises_sum", "pdf_summary",
     "all_float32", "dither_float32", "finite_rows", "pdf_mismatches", "float64_rows", "float32_columns",
@@ -324,10 +322,15 @@ def cubature_sums(lo: Any, hi: Any, values: Any, weights: Any, scale: float = 1.
     :func:`cubature_float32_directions`' order, each box's nodes summed in node order as
     box-major ones are (the same bits).  One pass in C++."""
     a, b = (np.ascontiguousarray(v, dtype=np.float64) for v in (lo, hi))
+    w = np.ascontiguousarray(weights, dtype=np.float64).reshape(-1)
+    return _core.cubature_sums(a, b, _node_values(values), w, float(scale), bool(interleaved))
+
+
+def _node_values(values: Any) -> np.ndarray:
+    """The values at the rule's nodes as the core's sums read them: float32 as given (a float32
+    renderer's pdf), anything else as float64; contiguous."""
     v = np.asarray(values)
-    v = np.ascontiguousarray(v, dtype=np.float32 if v.dtype == np.float32 else np.float64)
-    return _core.cubature_sums(a, b, v, np.ascontiguousarray(weights, dtype=np.float64).reshape(-1),
-                               float(scale), bool(interleaved))
+    return np.ascontiguousarray(v, dtype=np.float32 if v.dtype == np.float32 else np.float64)
 
 
 def cubature_moment_sums(lo: Any, hi: Any, values: Any, weights: Any, c: float, scale: float = 1.0,
@@ -338,10 +341,9 @@ def cubature_moment_sums(lo: Any, hi: Any, values: Any, weights: Any, c: float, 
     same bits, without their arrays.  float32 values are read as given (widened), others as
     float64; ``interleaved``: in :func:`cubature_float32_directions`' order.  One pass in C++."""
     a, b = (np.ascontiguousarray(v, dtype=np.float64) for v in (lo, hi))
-    v = np.asarray(values)
-    v = np.ascontiguousarray(v, dtype=np.float32 if v.dtype == np.float32 else np.float64).reshape(-1)
     w = np.ascontiguousarray(weights, dtype=np.float64).reshape(-1)
-    return _core.cubature_moment_sums(a, b, v, w, float(c), float(scale), bool(interleaved))
+    return _core.cubature_moment_sums(a, b, _node_values(values).reshape(-1), w, float(c), float(scale),
+                                      bool(interleaved))
 
 
 def grid_histogram(s: Any, inside: Any, shape: tuple[int, ...]) -> np.ndarray:

@@ -255,15 +255,16 @@ class ParamDensity:
         the Jacobian there; ``interleaved``: the values in
         :func:`reference_estimators.cubature_float32_directions`' order (q or its moment
         columns, a constant Jacobian)."""
-        if self.columns is None and np.ndim(jacobian) == 0:
+        moments = isinstance(self.columns, MomentColumns)
+        if np.ndim(jacobian) == 0 and (self.columns is None or moments):   # the core's constant factor
+            if moments:
+                return rest.cubature_moment_sums(lo, hi, pdf, weights, self.columns.c, jacobian,
+                                                 interleaved=interleaved)
             return rest.cubature_sums(lo, hi, pdf, weights, jacobian, interleaved=interleaved)
-        if isinstance(self.columns, MomentColumns) and np.ndim(jacobian) == 0:
-            return rest.cubature_moment_sums(lo, hi, pdf, weights, self.columns.c, jacobian,
-                                             interleaved=interleaved)
-        pdf = np.asarray(pdf, dtype=float)
-        if isinstance(self.columns, MomentColumns):
-            return rest.cubature_moment_sums(lo, hi, pdf * jacobian, weights, self.columns.c)
-        return rest.cubature_sums(lo, hi, self._columns_of(pdf * jacobian), weights)
+        q = np.asarray(pdf, dtype=float) * jacobian
+        if moments:
+            return rest.cubature_moment_sums(lo, hi, q, weights, self.columns.c)
+        return rest.cubature_sums(lo, hi, self._columns_of(q), weights)
 
 
 def _azimuth(phi: np.ndarray) -> np.ndarray:

@@ -145,9 +145,9 @@ void bind_cubature(nb::module_ &m) {
             throw nb::value_error("'axis', 't' and 'b' must be 3-vectors");
         return float32_directions(c.boxes, c.per, c.chunk(), [&](size_t a, size_t e, size_t n, float *cols, bool *ok) {
             thread_local std::vector<double> scratch, points;
-            cubature_cap_float32_directions(lo.data() + a * 2, hi.data() + a * 2, e - a, nodes.data(), c.g, axis.data(),
-                                            t.data(), b.data(), cos_alpha, scale, slack, n, cols + a * c.per,
-                                            ok + a * c.per, scratch, points);
+            cubature_cap_float32_directions(lo.data() + a * c.k, hi.data() + a * c.k, e - a, nodes.data(), c.g,
+                                            axis.data(), t.data(), b.data(), cos_alpha, scale, slack, n,
+                                            cols + a * c.per, ok + a * c.per, scratch, points);
         });
     }, "lo"_a, "hi"_a, "nodes"_a, "axis"_a, "t"_a, "b"_a, "cos_alpha"_a, "scale"_a, "slack"_a,
        "(columns (3, N) float32, ok (N,)): float32_unit_rows(cap_to_world(cubature_points(hemisphere, 0, 1, lo, hi, "
@@ -283,17 +283,14 @@ void bind_cubature(nb::module_ &m) {
         {
             nb::gil_scoped_release r;
             const size_t chunk = std::max<size_t>(kCheckChunk / per, 1);
-            if (interleaved) {
-                for_chunks(boxes, whole_blocks(chunk), [&](size_t, size_t a, size_t b, int) {
+            for_chunks(boxes, interleaved ? whole_blocks(chunk) : chunk, [&](size_t, size_t a, size_t b, int) {
+                if (interleaved)
                     cubature_sums_interleaved(lo.data() + a * k, hi.data() + a * k, b - a, k, values.data() + a * per,
                                               weights.data(), per, scale, out + a);
-                });
-            } else {
-                for_chunks(boxes, chunk, [&](size_t, size_t a, size_t b, int) {
+                else
                     cubature_sums(lo.data() + a * k, hi.data() + a * k, b - a, k, values.data() + a * per * cols, cols,
                                   weights.data(), per, scale, out + a * cols);
-                });
-            }
+            });
         }
         return oa;
     };

@@ -98,12 +98,11 @@ def uniforms(u: np.ndarray, udim: int) -> list[np.ndarray]:
 UNIT_SLACK = FLOAT32_UNIT_SLACK
 
 
-def unit_columns(x: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
-    """Direction columns as float32 (rows of length 1 within UNIT_SLACK as given, others
+def unit_columns(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Direction columns (3, N) as float32 (rows of length 1 within UNIT_SLACK as given, others
     normalised in float64 first) and the rows that are finite non-zero vectors (the others
     become +z): one pass in the core (reference_estimators.float32_unit_rows)."""
-    cols, ok = rest.float32_unit_rows(x, UNIT_SLACK)
-    return list(cols), ok
+    return rest.float32_unit_rows(x, UNIT_SLACK)
 
 
 def _to_numpy(value: Any, n: int, widen: bool = True) -> np.ndarray:
@@ -311,10 +310,10 @@ class MitsubaSampler:
 
     def pdf(self, x: np.ndarray) -> np.ndarray:
         """Density per solid angle at directions x (N, 3) (0 at non-finite or zero rows; see
-        the module for how x is rounded to float32)."""
+        the module for how x is rounded to float32): ``float32_pdf`` at the rounded directions,
+        widened, so that the two agree by construction."""
         cols, ok = unit_columns(x)
-        (p,) = self._run(lambda m, o, w, *c: (self._pdf_kernel(m, o, w, *c),), cols)
-        p = p.reshape(-1)
+        p = np.asarray(self.float32_pdf(cols), dtype=np.float64)
         return p if ok.all() else np.where(ok, p, 0.0)
 
     def float32_pdf(self, columns: np.ndarray) -> np.ndarray:
@@ -331,7 +330,7 @@ class MitsubaSampler:
         phase function: its value; emitter: radiance), (N, channels); None where the sampler
         has no weight."""
         cols, ok = unit_columns(x)
-        (v,) = self._run(lambda m, o, w, *c: (self._eval_kernel(m, o, w, *c),), cols)
+        (v,) = self._run(lambda m, o, w, *c: (self._eval_kernel(m, o, w, *c),), list(cols))
         v = v.reshape(len(ok), -1)
         return np.where(ok[:, None], v, 0.0)
 

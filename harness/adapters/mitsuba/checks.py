@@ -102,17 +102,16 @@ def _checked(sampler: Any, sample_count: int, seed: int, alpha: float) -> Sample
     cap = getattr(sampler, "cap", None)
     with_pdf = getattr(sampler, "sample_with_pdf", None)
     batch = getattr(sampler, "pdf_batch", None)   # the cubature's directions a pdf call
+    float32_pdf = float32_pdf_of(sampler)   # where it takes them, the cubature's nodes as float32 columns
     if cap is None:
         domain = Domain(sampler.domain, pole=getattr(sampler, "pole", "z"))
-        # the cubature's nodes go to the plugin as float32 columns where it takes them
-        float32_pdf = float32_pdf_of(sampler)
         pdf = sampler.pdf if float32_pdf is None else Float32DirectionPdf(sampler.pdf, float32_pdf)
         return check_with_missing(with_pdf or sampler.sample, pdf, domain, sample_count=sample_count,
                                   seed=seed, alpha=alpha, udim=sampler.udim,
                                   breaks=getattr(sampler, "breaks", None), pdf_batch=batch)
     view = CapView(sampler, cap)
-    pdf = view.pdf if float32_pdf_of(sampler) is None else Float32DirectionPdf(view.pdf, view.float32_density,
-                                                                               view.float32_directions)
+    pdf = view.pdf if float32_pdf is None else Float32DirectionPdf(view.pdf, view.float32_density,
+                                                                   view.float32_directions)
     r = check_with_missing(view.sample, pdf, view.domain, sample_count=sample_count, seed=seed,
                            alpha=alpha, udim=sampler.udim, pdf_batch=batch)
     if with_pdf is None:
