@@ -177,7 +177,11 @@ class Float32DirectionPdf:
     ``directions(lo, hi, nodes)`` gives the float32 columns ``float32_columns`` takes for the
     tensor rule's nodes on parameter boxes [lo, hi] (M, 2), and a per-node ok (N,), in
     :func:`reference_estimators.cubature_float32_directions`' order, or None to decline the
-    call (``pdf`` then gets the nodes' float64 points); None: the domain's own directions."""
+    call (``pdf`` then gets the nodes' float64 points); None: the domain's own directions.
+
+    The declaration also sets the check's rounding floor (the float32 one,
+    :data:`harness.samplers.cubature.FLOAT32_FLOOR`) without judging values: a lobe narrower
+    than the pre-grid's cells is zero at every centre a plain pdf is judged at."""
 
     pdf: Callable[[np.ndarray], Any]
     float32_columns: Callable[[np.ndarray], Any]
