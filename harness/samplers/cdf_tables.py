@@ -114,18 +114,22 @@ def tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: n
     strip's of the conditional from the marginal), which sets the first pass's tolerance
     (else a thousandth of the refinement's, relative to the pieces' measure: a pass that drove
     every box of Mitsuba's 256 x 128 envmap to its float32 floor and to the evaluation limit).
-    ``coarse``: fewer pieces (S, P', 2) to refine with instead, where on the starting leaves
-    they give every quarter's integral within the refinement's tolerance (or q's rounding) of
-    ``pieces``' and their cubature error within it too, or, on a leaf where ``pieces``' own
-    error misses it, within 1 % of that error (a singular pole or a step along the axis,
-    which pieces across do not resolve: the cone's rim, the disk's centre): a density smooth
-    across the pieces (an azimuth that does not matter, a lobe at the pole) needs no more, and
-    the refinement's pdf calls fall by P / P'; a density with structure across them (a step,
-    a texel table) keeps ``pieces``.
+    ``coarse``: fewer pieces (S, P', 2) to refine with instead, strip by strip: in a strip
+    that refines past its starting leaves, where on those leaves they give every quarter's
+    integral within the refinement's tolerance (or q's rounding) of ``pieces``' and their
+    cubature error within it too, or, on a leaf where ``pieces``' own error misses it, within
+    1 % of that error (a singular pole or a step along the axis, which pieces across do not
+    resolve: the cone's rim, the disk's centre): a density smooth across the pieces (an
+    azimuth that does not matter, a lobe at the pole, a strip of the conditional narrow
+    across) needs no more, and the strip's pdf calls fall by up to P / P'; a density with
+    structure across them (a step, a texel table) keeps ``pieces``.  A strip that does not
+    refine (fine on every starting leaf, or stopped: an area light's marginal along the
+    light's curved edge) is not tried: its coarse pass would be wasted.  The pieces are only
+    how the cubature starts: the table's bound is its own either way.
     A box whose integral is not finite counts as mass 0 with error 1 (the bound then covers
     the whole strip: its tests lose their power, never their level)."""
-    nstrip, npiece = pieces.shape[:2]
-    used = np.maximum(np.sum(pieces[:, :, 1] > pieces[:, :, 0], axis=1), 1)   # non-empty pieces
+    nstrip = pieces.shape[0]
+    used = _used(pieces)
     strip = np.repeat(np.arange(nstrip), leaves)
     a = np.tile(np.arange(leaves) / leaves, nstrip)
     b = np.tile((np.arange(leaves) + 1) / leaves, nstrip)
@@ -171,21 +175,10 @@ def tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: n
     strip_mass = np.bincount(strip, qs.sum(axis=1), minlength=nstrip)
     strip_tol = 0.1 * eps * np.maximum(strip_mass, 1e-300)   # cubature error: a tenth of eps
     spent_err = np.bincount(strip, errs, minlength=nstrip)
-    if coarse is not None:
-        fine = pieces, used, npiece
-        pieces, npiece = coarse, coarse.shape[1]
-        used = np.maximum(np.sum(coarse[:, :, 1] > coarse[:, :, 0], axis=1), 1)
-        coarse_qs, coarse_errs, boxes = quarters(strip, a, b, strip_tol)
-        spent += boxes
-        # a quarter's tolerance, as the cubature's: its share of the strip's, or q's rounding
-        allowed = np.maximum((strip_tol[strip] * np.maximum((b - a) / 4, 1 / 4096))[:, None], floor * qs)
-        # errs: pieces' own cubature error on each leaf (at the first pass's tighter tolerance)
-        if not (np.all(np.abs(coarse_qs - qs) <= allowed)
-                and np.all(coarse_errs <= allowed.sum(axis=1) + 1.01 * errs)):
-            pieces, used, npiece = fine
-    done: list[tuple[np.ndarray, ...]] = []
-    settled = 0.0   # _settled_bound of the leaves kept so far
-    for depth in range(_MAX_DEPTH + 1):
+
+    def judged(depth: int, settled: float) -> tuple[np.ndarray, np.ndarray, float]:
+        """Which leaves stay as they are at this depth (fine, or their strip stopped), their
+        interpolation bounds, and the settled bound (_settled_bound) so far."""
         bound = _interpolation_bound(qs)
         spent_all = (spent > _MAX_BOXES) | (counted.evals > _MAX_TABLE_EVALS)
         hopeless = spent_err[strip] > useless * strip_mass[strip]
@@ -194,7 +187,28 @@ def tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: n
         # the table's error is at least `settled`: past `useless`, refining to eps is wasted
         target = eps if settled <= useless else settled
         fine = (bound <= target * strip_mass[strip]) & (qs.max(axis=1) <= max_share * strip_mass[strip])
-        ok = fine | stopped
+        return fine | stopped, bound, settled
+
+    # only strips that refine further are tried with the coarse pieces
+    tried = np.bincount(strip, ~judged(0, 0.0)[0], minlength=nstrip) > 0
+    if coarse is not None and tried.any():
+        on = tried[strip]
+        fine_pieces = pieces, used
+        pieces, used = coarse, _used(coarse)
+        coarse_qs, coarse_errs, boxes = quarters(strip[on], a[on], b[on], strip_tol)
+        spent += boxes
+        # a quarter's tolerance, as the cubature's: its share of the strip's, or q's rounding
+        allowed = np.maximum((strip_tol[strip[on]] * np.maximum((b[on] - a[on]) / 4, 1 / 4096))[:, None],
+                             floor * qs[on])
+        # errs: pieces' own cubature error on each leaf (at the first pass's tighter tolerance)
+        agrees = (np.all(np.abs(coarse_qs - qs[on]) <= allowed, axis=1)
+                  & (coarse_errs <= allowed.sum(axis=1) + 1.01 * errs[on]))
+        take = tried & (np.bincount(strip[on], ~agrees, minlength=nstrip) == 0)   # strip by strip
+        pieces, used = _mixed(take, coarse, *fine_pieces)
+    done: list[tuple[np.ndarray, ...]] = []
+    settled = 0.0   # _settled_bound of the leaves kept so far
+    for depth in range(_MAX_DEPTH + 1):
+        ok, bound, settled = judged(depth, settled)
         done.append((strip[ok], a[ok], b[ok], qs[ok], bound[ok], errs[ok]))
         if ok.all():
             break
@@ -218,6 +232,28 @@ def tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: n
     # and the rounding of the cumulated sums (an ulp of the total per addition)
     error = float(np.max((worst + np.bincount(strip, errs, minlength=nstrip)) / norm)) + sub_q.size * 2.0**-52
     return AxisCdf(sub_strip, sub_lo, sub_hi, before / norm[sub_strip], sub_q / norm[sub_strip], total, error)
+
+
+def _used(pieces: np.ndarray) -> np.ndarray:
+    """Each strip's non-empty pieces of ``pieces`` (S, P, 2): at least 1 (S,)."""
+    return np.maximum(np.sum(pieces[:, :, 1] > pieces[:, :, 0], axis=1), 1)
+
+
+def _mixed(take: np.ndarray, coarse: np.ndarray, fine: np.ndarray, fine_used: np.ndarray
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """The pieces (S, P, 2) and their used counts (S,) of ``coarse`` for the strips ``take``
+    (S,) bool, of ``fine`` for the others, the narrower padded with empty pieces at the end
+    where they mix (empty pieces add zeros to a leaf's sum, which can move its last bit)."""
+    if take.all():
+        return coarse, _used(coarse)
+    if not take.any():
+        return fine, fine_used
+    width = max(coarse.shape[1], fine.shape[1])
+    def padded(p: np.ndarray) -> np.ndarray:
+        end = np.broadcast_to(p[:, -1:, 1:], (p.shape[0], width - p.shape[1], 1))
+        return np.concatenate([p, np.concatenate([end, end], axis=2)], axis=1)
+    mixed = np.where(take[:, None, None], padded(coarse), padded(fine))
+    return mixed, np.where(take, _used(coarse), fine_used)
 
 
 def _settled_bound(bound: np.ndarray, strip_mass: np.ndarray) -> float:

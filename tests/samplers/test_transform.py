@@ -135,6 +135,64 @@ def test_the_marginal_refines_with_coarse_pieces_only_where_they_agree_with_the_
     assert np.max(np.abs(np.append(kept.start, 1.0) - c * c)) <= kept.error + 1e-12
 
 
+def test_the_conditional_takes_the_strips_own_pieces_only_in_strips_where_they_agree(monkeypatch):
+    """The conditional's strips refine with one piece across each (its own cuts: steps, a
+    pole's grading) where that agrees with its SUBSTRIPS pieces on the starting leaves, strip
+    by strip.  q = 1 + 0.9 sin(2 pi s1), its sign flipped on a band of s0 inside strip 5
+    (between the nodes of one piece's halves, on nodes of the substrips' halves), and flat
+    along s0 on average, so the strips are the 32 equal ones: strip 5 keeps its substrips,
+    which see the band, the other 31 take one piece, for half the pdf calls of the substrips
+    everywhere; both strips' tables are within their bound of the exact conditional CDF."""
+    band = (5 / 32 + 0.4 / 64, 5 / 32 + 0.6 / 64)
+
+    def q(sp):
+        flipped = (sp[:, 0] >= band[0]) & (sp[:, 0] < band[1])
+        return 1 + np.where(flipped, -0.9, 0.9) * np.sin(2 * np.pi * sp[:, 1])
+
+    def built(mixed) -> tuple[Transform, int, list]:
+        calls, takes = [0], []
+
+        def recorded(take, *args):
+            takes.append(take.copy())
+            return mixed(take, *args)
+
+        def counted(sp):
+            calls[0] += sp.shape[0]
+            return q(sp)
+
+        monkeypatch.setattr(cdf_tables, "_mixed", recorded)
+        return Transform.build(counted, 2, 1_000_000, total=1.0), calls[0], takes
+
+    t, calls, takes = built(cdf_tables._mixed)
+    _, fine_calls, _ = built(lambda take, coarse, fine, fine_used: (fine, fine_used))
+    assert len(takes) == 1 and np.flatnonzero(~takes[0]).tolist() == [5]   # the marginal is flat: not tried
+    assert calls <= 0.6 * fine_calls, (calls, fine_calls)
+    assert np.allclose(t.edges * 32, np.arange(33))
+
+    def exact(s1: np.ndarray, g: int) -> np.ndarray:   # the CDF of s1 over strip g's s0
+        lo, hi = t.edges[g], t.edges[g + 1]
+        flipped = max(0.0, min(hi, band[1]) - max(lo, band[0]))
+        ramp = 0.9 * (1 - np.cos(2 * np.pi * s1)) / (2 * np.pi)
+        return s1 + ramp * ((hi - lo) - 2 * flipped) / (hi - lo)
+
+    s1 = np.linspace(0, 1, 1001)
+    for g in (4, 5):
+        u = t(np.column_stack([np.full_like(s1, (t.edges[g] + t.edges[g + 1]) / 2), s1]))
+        assert np.max(np.abs(u[:, 1] - exact(s1, g))) <= t.conditional.error, g
+
+
+def test_mixed_pieces_pad_only_where_strips_mix():
+    coarse = np.array([[[0.0, 0.5]], [[0.5, 1.0]]])
+    fine = np.array([[[0.0, 0.25], [0.25, 0.5]], [[0.5, 0.75], [0.75, 1.0]]])
+    fine_used = np.array([2, 2])
+    pieces, used = cdf_tables._mixed(np.array([True, True]), coarse, fine, fine_used)
+    assert pieces is coarse and used.tolist() == [1, 1]
+    pieces, used = cdf_tables._mixed(np.array([False, False]), coarse, fine, fine_used)
+    assert pieces is fine and used is fine_used
+    pieces, used = cdf_tables._mixed(np.array([True, False]), coarse, fine, fine_used)
+    assert pieces.tolist() == [[[0.0, 0.5], [0.5, 0.5]], fine[1].tolist()] and used.tolist() == [1, 2]
+
+
 @pytest.mark.parametrize("name, q, cdf, fewer", [
     # singular at both ends of s0, like a pole (uniform_theta_sphere) or the disk's centre
     ("arcsine", lambda sp: 1 / (math.pi * np.sqrt(sp[:, 0] * (1 - sp[:, 0]))),
