@@ -128,6 +128,9 @@ def tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: n
     how the cubature starts: the table's bound is its own either way.
     A box whose integral is not finite counts as mass 0 with error 1 (the bound then covers
     the whole strip: its tests lose their power, never their level)."""
+    if coarse is not None and k != 2:
+        # pieces are across the square's other axis: on an interval there is none to cut
+        raise ValueError("tabulate: 'coarse' pieces are for the square (k = 2)")
     nstrip = pieces.shape[0]
     used = _used(pieces)
     strip = np.repeat(np.arange(nstrip), leaves)

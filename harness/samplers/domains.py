@@ -179,9 +179,13 @@ class Float32DirectionPdf:
     :func:`reference_estimators.cubature_float32_directions`' order, or None to decline the
     call (``pdf`` then gets the nodes' float64 points); None: the domain's own directions.
 
-    The declaration also sets the check's rounding floor (the float32 one,
-    :data:`harness.samplers.cubature.FLOAT32_FLOOR`) without judging values: a lobe narrower
-    than the pre-grid's cells is zero at every centre a plain pdf is judged at."""
+    The declaration also says the densities carry float32 rounding (a float32 renderer's,
+    up to a constant factor: a planted fault's scale, an area light's float32 Jacobian), so
+    the check's cubature stops at the float32 floor
+    (:data:`harness.samplers.cubature.FLOAT32_FLOOR`) without judging values: a lobe narrower
+    than the pre-grid's cells is zero at every centre a plain pdf is judged at.  A pdf
+    computed in float64 on the rounded directions is better passed plain (its floor then 0:
+    the float32 floor would stop its cubature short, the error charged, the power lost)."""
 
     pdf: Callable[[np.ndarray], Any]
     float32_columns: Callable[[np.ndarray], Any]

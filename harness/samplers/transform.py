@@ -44,7 +44,8 @@ _MARGINAL_PIECES = 32   # boxes across the square for the marginal of s0
 _CONDITIONAL_LEAVES = 16  # leaves along s1 a strip of the conditional starts with (refined
                         # where needed: 64 left the zoo's smooth conditionals at bounds of 1e-12
                         # to 1e-6, far below eps, for a quarter of the transform's pdf calls)
-_COARSE_PIECES = 4      # its refinement's, where they agree with those on the starting leaves
+_COARSE_PIECES = 4      # the marginal's refinement's, where they agree with those on the starting
+                        # leaves (the conditional's strips refine with their own cuts alone)
 _MAX_STEP_CUTS = 8      # cuts at density steps per strip of the conditional
 _POLE_GRADING = 2.0 ** -np.arange(1, 25)   # cuts of the first and last strips toward s0 = 0, 1
 

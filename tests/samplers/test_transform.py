@@ -164,10 +164,13 @@ def test_the_conditional_takes_the_strips_own_pieces_only_in_strips_where_they_a
         return Transform.build(counted, 2, 1_000_000, total=1.0), calls[0], takes
 
     t, calls, takes = built(cdf_tables._mixed)
-    _, fine_calls, _ = built(lambda take, coarse, fine, fine_used: (fine, fine_used))
+    fine, fine_calls, _ = built(lambda take, coarse, fine, fine_used: (fine, fine_used))
     assert len(takes) == 1 and np.flatnonzero(~takes[0]).tolist() == [5]   # the marginal is flat: not tried
     assert calls <= 0.6 * fine_calls, (calls, fine_calls)
     assert np.allclose(t.edges * 32, np.arange(33))
+    # the strips' masses as the substrips everywhere find them, the bound no looser
+    assert np.allclose(t.conditional.strip_mass, fine.conditional.strip_mass, rtol=1e-7, atol=0)
+    assert t.conditional.error <= 1.01 * fine.conditional.error
 
     def exact(s1: np.ndarray, g: int) -> np.ndarray:   # the CDF of s1 over strip g's s0
         lo, hi = t.edges[g], t.edges[g + 1]
@@ -179,6 +182,48 @@ def test_the_conditional_takes_the_strips_own_pieces_only_in_strips_where_they_a
     for g in (4, 5):
         u = t(np.column_stack([np.full_like(s1, (t.edges[g] + t.edges[g + 1]) / 2), s1]))
         assert np.max(np.abs(u[:, 1] - exact(s1, g))) <= t.conditional.error, g
+
+
+def test_coarse_pieces_are_tried_only_in_strips_that_refine(monkeypatch):
+    """tabulate with two strips: strip 0 a lobe along s1 (it refines; one piece across agrees
+    with its four), strip 1 flat (fine on its starting leaves: not tried).  Strip 0's table is
+    the one it gets tabulated alone with the same pieces, strip 1's pdf calls are its own
+    without coarse pieces: the two add up to the pair's, no coarse pass over strip 1."""
+    def q(sp):
+        lobe = np.exp(-0.5 * ((sp[:, 1] - 0.4) / 0.05) ** 2) * (1 + sp[:, 0])
+        return np.where(sp[:, 0] < 0.5, lobe, 1.0)
+
+    fine = np.array([[[0, .125], [.125, .25], [.25, .375], [.375, .5]],
+                     [[.5, .625], [.625, .75], [.75, .875], [.875, 1]]])
+    coarse = np.array([[[0, .5]], [[.5, 1]]])
+
+    def tabulated(pieces, coarse_pieces):
+        calls = [0]
+
+        def counted(sp):
+            calls[0] += sp.shape[0]
+            return q(sp)
+
+        return cdf_tables.tabulate(counted, 2, 1, pieces, 16, 2e-5, coarse=coarse_pieces), calls[0]
+
+    takes = []
+    mixed = cdf_tables._mixed
+
+    def recorded(take, *args):
+        takes.append(take.copy())
+        return mixed(take, *args)
+
+    monkeypatch.setattr(cdf_tables, "_mixed", recorded)
+    both, both_calls = tabulated(fine, coarse)
+    assert [t.tolist() for t in takes] == [[True, False]]
+    alone, alone_calls = tabulated(fine[:1], coarse[:1])
+    flat, flat_calls = tabulated(fine[1:], None)
+    assert both_calls == alone_calls + flat_calls
+    first = both.strip == 0
+    assert np.array_equal(both.lo[first], alone.lo) and np.array_equal(both.mass[first], alone.mass)
+    assert both.lo[~first].size == 4 * 16 and flat.error < 1e-12
+    with pytest.raises(ValueError, match="square"):
+        cdf_tables.tabulate(q, 1, 0, np.zeros((1, 1, 2)), 16, 2e-5, coarse=np.zeros((1, 1, 2)))
 
 
 def test_mixed_pieces_pad_only_where_strips_mix():
