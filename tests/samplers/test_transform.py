@@ -218,6 +218,8 @@ def test_coarse_pieces_are_tried_only_in_strips_that_refine(monkeypatch):
     assert [t.tolist() for t in takes] == [[True, False]]
     alone, alone_calls = tabulated(fine[:1], coarse[:1])
     flat, flat_calls = tabulated(fine[1:], None)
+    _, fine_calls = tabulated(fine[:1], None)
+    assert alone_calls <= 0.6 * fine_calls, (alone_calls, fine_calls)   # the one piece taken
     assert both_calls == alone_calls + flat_calls
     first = both.strip == 0
     assert np.array_equal(both.lo[first], alone.lo) and np.array_equal(both.mass[first], alone.mass)
