@@ -70,5 +70,6 @@ def main() -> None:
         print(f"{e.label[:60]:60s} {rejected:5d}/{args.seeds:<3d} {upper:10.3f} {missing:7d} {other:5d} "
               f"{statistics.median(seconds):7.3f} {total:9.6f}  {note}", flush=True)
 
+
 if __name__ == "__main__":
     main()
