@@ -33,15 +33,8 @@ import reference_estimators as rest
 
 from harness.samplers.calls import checked_pdf, drawn_points
 from harness.samplers.cramer_von_mises import cramer_von_mises_from_sums
-from harness.samplers.cubature import FLOAT32_FLOOR, cell_integrals, rounding_floor
-from harness.samplers.domains import (
-    Domain,
-    Float32DirectionPdf,
-    MomentColumns,
-    ParamDensity,
-    as_domain,
-    checked_breaks,
-)
+from harness.samplers.cubature import cell_integrals
+from harness.samplers.domains import Domain, MomentColumns, ParamDensity, as_domain, checked_breaks, pdf_floor
 from harness.samplers.reported import reported_pdf_failure
 from harness.samplers.result import SamplerCheck
 from harness.samplers.transform import STRIPS, Transform
@@ -87,18 +80,9 @@ class SamplerTest:
         self.alpha = alpha
         self.base = base = (4096,) if dom.k == 1 else (128, 256)
         pre_shape = (64,) if dom.k == 1 else (32, 64)
-        # the pdf's rounding: a float32 pdf's own noise is where the cubature stops refining.
-        # A renderer's float32 pdf declares itself (Float32DirectionPdf); any other is judged
-        # at the pre-grid's cell centres, which cannot tell a lobe that misses them all: the
-        # Beckmann alpha = 0.01 lobes at the pole, zero at every centre, had their boxes
-        # refined to the depth limit chasing float32 noise (73 million pdf calls for the
-        # marginal's table at theta_i = 0, 1.3 million with the declared floor)
-        if isinstance(self.pdf, Float32DirectionPdf):
-            self.floor = floor = FLOAT32_FLOOR
-        else:
-            centres = (np.stack(np.meshgrid(*[np.arange(m) for m in pre_shape], indexing="ij"), axis=-1)
-                       .reshape(-1, dom.k) + 0.5) / np.array(pre_shape)
-            self.floor = floor = rounding_floor(self.pdf(dom.to_points(centres)))
+        # the pdf's rounding (judged on the pre-grid where not declared): a float32 pdf's own
+        # noise is where the cubature stops refining
+        self.floor = floor = pdf_floor(self.pdf, dom, pre_shape)
 
         density = ParamDensity(dom, self.pdf, pdf_batch=pdf_batch)
         squares = dataclasses.replace(density, columns=lambda v: np.column_stack([v, v * v]))
