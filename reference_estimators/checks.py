@@ -17,6 +17,7 @@ __all__ = [
     "CHECK_DOMAINS", "domain_params", "dithered_domain_params", "domain_points", "cubature_nodes",
     "cubature_points", "cubature_float32_directions", "cubature_cap_float32_directions", "interleaved_order",
     "cubature_sums", "split_points", "BoxRefinement", "uncut_parents", "grouped_agreement", "leaf_quarters",
+    "interpolation_bound",
     "cubature_moment_sums", "grid_histogram", "rosenblatt",
     "piecewise_linear_lookup", "transform_statistics", "cramer_von_mises_sum", "pdf_summary",
     "all_float32", "dither_float32", "finite_rows", "pdf_mismatches", "float64_rows", "float32_columns",
@@ -152,10 +153,20 @@ def float32_columns(rows: Any, cap: float) -> np.ndarray:
 
 
 def float64_rows(columns: Any) -> np.ndarray:
-    """(N, c) float64 in C order: float32 columns (c, N) (a float32 renderer's vectors, as
-    drjit gives them) as rows, cast and transposed in one pass in C++, into memory the core
-    reuses from call to call (a fresh numpy array of a million directions cost 5-10 ms of page
-    faults on a loaded machine, more than the copy)."""
+    """(N, c) float64 in C order: float32 columns as rows, cast and transposed in one pass in
+    C++, into memory the core reuses from call to call (a fresh numpy array of a million
+    directions cost 5-10 ms of page faults on a loaded machine, more than the copy).
+    ``columns``: a float32 array (c, N) (a float32 renderer's vectors, as drjit gives them), or
+    a list or tuple of c float32 arrays (N,) (a drjit vector's components, each read in place:
+    drjit's (3, N) copy of a million directions cost 1.7 ms, more than this pass)."""
+    if isinstance(columns, (list, tuple)):
+        cols = [np.asarray(c) for c in columns]
+        if (not cols or any(c.dtype != np.float32 or c.ndim != 1 for c in cols)
+                or len({c.shape for c in cols}) != 1):
+            got = [(c.dtype, c.shape) for c in cols]
+            raise ValueError("'columns' must be float32 of shape (c, N), c >= 1, or c >= 1 float32 "
+                             f"columns of one shape (N,); got {got}")
+        return _core.float64_rows_of([np.ascontiguousarray(c) for c in cols])
     a = np.asarray(columns)
     if a.dtype != np.float32 or a.ndim != 2 or a.shape[0] == 0:
         raise ValueError(f"'columns' must be float32 of shape (c, N), c >= 1, got {a.dtype} {a.shape}")
@@ -310,6 +321,17 @@ def leaf_quarters(strip: Any, a: Any, b: Any, pieces: Any, used: Any, strip_tol:
     f64 = [np.ascontiguousarray(v, dtype=np.float64) for v in (a, b, pieces, strip_tol)]
     return _core.LeafQuarters(_indices(strip, "strip"), f64[0].reshape(-1), f64[1].reshape(-1), f64[2],
                               _indices(used, "used"), f64[3].reshape(-1), int(axis), int(k))
+
+
+def interpolation_bound(qs: Any) -> np.ndarray:
+    """(L,) the sampler check's CDF tables' bound on the interpolation's error within each
+    leaf's quarters, from its quarter masses qs (L, 4)
+    (harness.samplers.cdf_tables._interpolation_bound states it): the numpy code's order of
+    operations, the same values (a zero's sign aside), in one pass in C++."""
+    q = np.ascontiguousarray(qs, dtype=np.float64)
+    if q.ndim != 2 or q.shape[1] != 4:
+        raise ValueError(f"'qs' must be quarter masses of shape (L, 4), got {q.shape}")
+    return _core.interpolation_bound(q)
 
 
 def cubature_sums(lo: Any, hi: Any, values: Any, weights: Any, scale: float = 1.0,

@@ -255,19 +255,36 @@ void bind_checks(nb::module_ &m) {
     }, "x"_a, "slack"_a,
        "(columns (3, N) float32, ok (N,)): rows x (N, 3) as float32 unit vectors (normalised first where their "
        "length is off 1 by more than `slack`); rows that are not finite non-zero vectors become +z, ok False.");
-    m.def("float64_rows", [](nb::ndarray<const float, nb::ndim<2>, nb::c_contig, nb::device::cpu> columns) {
-        const size_t c = columns.shape(0), n = columns.shape(1);
-        if (c == 0) throw nb::value_error("'columns' must have at least one column (c, N), c >= 1");
+    // float32 columns as float64 rows: columns[j] points at column j's n values
+    auto rows_of = [](const std::vector<const float *> &columns, size_t n) {
         double *out;
-        OutArray rows = new_array(n, c, &out);
+        OutArray rows = new_array(n, columns.size(), &out);
         {
             nb::gil_scoped_release g;
             for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t b, int) {
-                float64_rows(columns.data(), c, n, a, b, out);
+                float64_rows(columns.data(), columns.size(), a, b, out);
             });
         }
         return rows;
+    };
+    m.def("float64_rows", [rows_of](nb::ndarray<const float, nb::ndim<2>, nb::c_contig, nb::device::cpu> columns) {
+        const size_t c = columns.shape(0), n = columns.shape(1);
+        if (c == 0) throw nb::value_error("'columns' must have at least one column (c, N), c >= 1");
+        std::vector<const float *> at(c);
+        for (size_t j = 0; j < c; ++j) at[j] = columns.data() + j * n;
+        return rows_of(at, n);
     }, "columns"_a.noconvert(), "(N, c) float64: the float32 columns (c, N) as rows.");
+    m.def("float64_rows_of", [rows_of](
+              const std::vector<nb::ndarray<const float, nb::ndim<1>, nb::c_contig, nb::device::cpu>> &columns) {
+        if (columns.empty()) throw nb::value_error("'columns' must hold at least one column");
+        const size_t n = columns[0].shape(0);
+        std::vector<const float *> at;
+        for (const auto &column : columns) {
+            if (column.shape(0) != n) throw nb::value_error("'columns' must all have the same length");
+            at.push_back(column.data());
+        }
+        return rows_of(at, n);
+    }, "columns"_a, "(N, c) float64: the c float32 columns (N,) each, as rows.");
     m.def("float32_columns", [](nb::ndarray<const double, nb::ndim<2>, nb::c_contig, nb::device::cpu> rows,
                                 float cap) {
         const size_t n = rows.shape(0), c = rows.shape(1);

@@ -269,6 +269,16 @@ void bind_cubature(nb::module_ &m) {
             }
             return nb::make_tuple(qa, ea);
         }, "v"_a, "e"_a, "(qs (L, 4), errs (L,)): each leaf's quarter masses and its boxes' summed errors.");
+    m.def("interpolation_bound", [](InArray qs) {
+        if (qs.ndim() != 2 || qs.shape(1) != 4) throw nb::value_error("'qs' must be quarter masses of shape (L, 4)");
+        double *out;
+        OutArray oa = new_array(qs.shape(0), 0, &out);
+        {
+            nb::gil_scoped_release r;
+            interpolation_bound(qs.data(), qs.shape(0), out);
+        }
+        return oa;
+    }, "qs"_a, "(L,): the CDF tables' interpolation bound of each leaf from its quarter masses (L, 4).");
     // values as float64, or as float32 (a float32 renderer's pdf as it returned them); box-major,
     // or (one column) in cubature_float32_directions' interleaved order
     auto sums = [](const InArray &lo, const InArray &hi, const auto &values, const InArray &weights, double scale,

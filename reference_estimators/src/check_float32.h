@@ -85,23 +85,24 @@ inline void float32_unit_rows(const double *x, size_t a, size_t b, size_t stride
     for (; i < b; ++i) float32_unit_row(x, i, stride, unit, out, ok);
 }
 
-// Columns (c, n) of float32 values, rows a .. b - 1, as rows (n, c) of doubles into out: a
-// float32 renderer's vectors (drjit's (3, N) arrays) in the row order the check's kernels read.
+// Columns of float32 values (column j's n values at columns[j], c of them), rows a .. b - 1,
+// as rows (n, c) of doubles into out: a float32 renderer's vectors (drjit's (3, N) arrays, or
+// a drjit vector's components, each its own array) in the row order the check's kernels read.
 // Three columns (directions) a vector of rows at a time, widened in lanes and stored by
 // store3's transposition (GCC's element loop had cost a diffuse BSDF's check 3.8 ms).
-inline void float64_rows(const float *columns, size_t c, size_t n, size_t a, size_t b, double *out) {
+inline void float64_rows(const float *const *columns, size_t c, size_t a, size_t b, double *out) {
     size_t i = a;
     if (c == 3) {
         constexpr size_t W = simd::kWidth;
         for (; i + W <= b; i += W) {
             simd::f32v p[3];
-            for (size_t j = 0; j < 3; ++j) std::memcpy(&p[j], columns + j * n + i, sizeof p[j]);
+            for (size_t j = 0; j < 3; ++j) std::memcpy(&p[j], columns[j] + i, sizeof p[j]);
             simd::store3(out + 3 * i, __builtin_convertvector(p[0], simd::f64v), __builtin_convertvector(p[1], simd::f64v),
                          __builtin_convertvector(p[2], simd::f64v));
         }
     }
     for (; i < b; ++i)
-        for (size_t j = 0; j < c; ++j) out[i * c + j] = double(columns[j * n + i]);
+        for (size_t j = 0; j < c; ++j) out[i * c + j] = double(columns[j][i]);
 }
 
 // Rows (n, c) of doubles, rows a .. b - 1, as columns (c, n) of float32 into out, each value

@@ -352,6 +352,31 @@ def test_the_sample_calls_uniforms_are_float32_columns_below_one():
         uniforms(u, 4)
 
 
+def test_drjit_vectors_become_float64_rows_bit_for_bit():
+    """A JIT vector's components are read in place where each holds N values; one with a
+    literal component, a constant colour and a scalar go through drjit's own copy: every one
+    the same float64 rows as numpy's cast of drjit's (channels, N) array."""
+    from harness.adapters.mitsuba.batch import _to_numpy
+
+    n = 1000
+    v = np.random.default_rng(4).normal(size=(3, n)).astype(np.float32)
+    v[:, :3] = [[-0.0, np.inf, np.nan], [1e-45, -np.inf, 0.5], [np.float32(3.4e38), -1e-38, 2.0]]
+    with runtime.using_variant("llvm_ad_rgb") as mi:
+        import drjit as dr
+
+        full, partial = mi.Vector3f(*v), mi.Vector3f(mi.Float(v[0]), 1.0, mi.Float(v[2]))
+        colour, scalar = mi.Color3f(0.25, 0.5, 2.0), mi.Float(v[1])
+        dr.eval(full, partial, colour, scalar)
+        for value in (full, partial, colour):
+            want = np.broadcast_to(np.asarray(value).T.astype(np.float64), (n, 3))
+            got = _to_numpy(value, n)
+            assert got.shape == (n, 3) and got.dtype == np.float64
+            np.testing.assert_array_equal(got.view(np.uint64), np.ascontiguousarray(want).view(np.uint64))
+        assert _to_numpy(colour, n).strides[0] == 0    # a constant stays a broadcast view
+        np.testing.assert_array_equal(_to_numpy(scalar, n), v[1].astype(np.float64))
+        assert _to_numpy(scalar, n, widen=False).dtype == np.float32
+
+
 @pytest.mark.parametrize("plugin", [{"type": "hg", "g": 0.3}, {"type": "rayleigh"}], ids=lambda p: p["type"])
 def test_a_constant_weight_decides_validity_by_its_one_row(plugin):
     """A phase function's weight is one constant, kept a read-only broadcast view: its one row

@@ -699,6 +699,15 @@ def test_row_kernels_match_numpy(n):
     for bad in (columns[0], columns.astype(np.float64), columns[:0]):
         with pytest.raises(ValueError, match="float32 of shape"):
             rest.float64_rows(bad)
+    # the columns as separate arrays (a drjit vector's components), strided ones too: the same rows
+    as_rows = columns.T.astype(np.float64)
+    np.testing.assert_array_equal(rest.float64_rows(list(columns)), as_rows)
+    np.testing.assert_array_equal(rest.float64_rows((columns[2], columns[0])), as_rows[:, [2, 0]])
+    np.testing.assert_array_equal(rest.float64_rows([columns[1, ::2]]), as_rows[::2, 1:2])
+    longer = np.zeros(n + 1, np.float32)
+    for bad in ([], [columns[0], longer], [columns[0].astype(np.float64)], [columns], ["x"]):
+        with pytest.raises(ValueError, match="float32 columns of one shape"):
+            rest.float64_rows(bad)
 
 
 @pytest.mark.parametrize("n", [0, 7, CHUNKS])

@@ -609,6 +609,53 @@ def test_the_quarters_bound_is_tighter_than_the_leafs_on_smooth_densities(k):
             assert bound <= 0.27 * leaf
 
 
+def _reference_interpolation_bound(qs):
+    """_interpolation_bound in numpy (what the core's interpolation_bound computes)."""
+    m = qs.sum(axis=1)
+    cum = np.cumsum(qs, axis=1)[:, :3]
+    gap = np.max(np.abs(cum - m[:, None] * np.array([0.25, 0.5, 0.75])), axis=1)
+    leaf = np.minimum(2 * gap, qs.max(axis=1))
+    steps = np.diff(qs, axis=1)
+    rising, falling = np.all(steps >= 0, axis=1), np.all(steps <= 0, axis=1)
+    d = np.where(falling[:, None], qs[:, ::-1], qs)
+    low = np.concatenate([np.zeros((d.shape[0], 1)), d[:, :3]], axis=1)
+    high = np.concatenate([d[:, 1:], np.full((d.shape[0], 1), np.inf)], axis=1)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        inner = (d - low) * (high - d) / (high - low)
+        quarters = np.where(np.isinf(high), d - low, np.where(high > low, inner, 0.0))
+    return np.where(rising | falling, np.minimum(leaf, quarters.max(axis=1)), leaf)
+
+
+@pytest.mark.parametrize("rows", [0, 1, 7, 5000])
+def test_the_interpolation_bound_in_the_core_is_its_numpy_definition_bit_for_bit(rows):
+    """Quarter masses rising, falling, flat, with an extremum, zeros, -0.0, denormals, spans of
+    600 orders of magnitude, NaN and infinities: the core's bound is the numpy code's, bit for
+    bit (NaN where numpy's is), but for the sign of a zero, which numpy's vector maximum and
+    minimum choose by the ISA and no use of the bound reads (it is compared, and summed
+    with non-negative errors)."""
+    rng = np.random.default_rng(rows)
+    qs = rng.random((rows, 4)) * 10.0 ** rng.integers(-300, 300, (rows, 1))
+    kind = rng.integers(0, 6, rows)
+    qs[kind == 0] = np.sort(qs[kind == 0], axis=1)                   # rising
+    qs[kind == 1] = np.sort(qs[kind == 1], axis=1)[:, ::-1]          # falling
+    qs[kind == 2] = qs[kind == 2, :1] * np.ones(4)                   # flat
+    qs[kind == 3, rng.integers(0, 4)] = 0.0
+    special = np.array([0.0, -0.0, 5e-324, np.inf, -np.inf, np.nan, 1e308])
+    odd = rng.random((rows, 4)) < 0.02
+    qs[odd] = rng.choice(special, int(odd.sum()))
+    chosen = np.array([[1.0, 1e-16, 1e-16, 1e-16], [0.0, 0.0, 0.0, 0.0], [3.0, 2.0, 2.0, 1.0]])
+    qs[:min(rows, 3)] = chosen[:rows]
+    with np.errstate(invalid="ignore", over="ignore"):
+        want = _reference_interpolation_bound(qs)
+    got = rest.interpolation_bound(qs)
+    assert got.shape == (rows,) and got.dtype == np.float64
+    np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
+    keep = ~np.isnan(want)
+    np.testing.assert_array_equal((got[keep] + 0.0).view(np.uint64), (want[keep] + 0.0).view(np.uint64))
+    with pytest.raises(ValueError, match=r"shape \(L, 4\)"):
+        rest.interpolation_bound(qs[:, :3])
+
+
 def _reference_quarters(strip, a, b, pieces, used, strip_tol, axis, k):
     """tabulate's quarter boxes in numpy (what the core's LeafQuarters builds): (lo, hi, tol,
     group, parent_lo, parent_hi, full)."""
