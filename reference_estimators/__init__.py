@@ -15,6 +15,8 @@ _core.set_sobol_directions(sobol.direction_numbers())
 from . import kernels, sampling  # noqa: E402  (sampling's functions are built from the registry)
 from .api import *  # noqa: E402,F403
 from .api import __all__ as _api_all  # noqa: E402
+from .check_cubature import *  # noqa: E402,F403
+from .check_cubature import __all__ as _cubature_all  # noqa: E402
 from .checks import *  # noqa: E402,F403
 from .checks import __all__ as _checks_all  # noqa: E402
 from .estimate import ERROR_ISSUES, Estimate  # noqa: E402
@@ -37,5 +39,5 @@ def core_fingerprint() -> str:
 
 
 _FINGERPRINT: str | None = None
-__all__ = [*_api_all, *_checks_all, "Estimate", "ERROR_ISSUES", "CHUNK_SIZE", "core_fingerprint", "kernels",
-           "sampling"]
+__all__ = [*_api_all, *_checks_all, *_cubature_all, "Estimate", "ERROR_ISSUES", "CHUNK_SIZE",
+           "core_fingerprint", "kernels", "sampling"]
