@@ -154,6 +154,7 @@ inline CheckDomain check_domain(int kind) {
 // The module's functions, by file.
 void bind_checks(nb::module_ &m);
 void bind_cubature(nb::module_ &m);
+void bind_rows(nb::module_ &m);
 void bind_results(nb::module_ &m);
 
 }  // namespace re::py

@@ -1,6 +1,6 @@
 // Python bindings of the core (module reference_estimators._core): the module, integrands,
 // samplers, techniques, point sets and estimates; the sampler check's kernels are bound in
-// bind_checks.cpp and bind_cubature.cpp, accumulator states, tails and extremes in
+// bind_checks.cpp, bind_cubature.cpp and bind_rows.cpp, accumulator states, tails and extremes in
 // bind_results.cpp.  Every batch function allocates its outputs, then releases the GIL for the
 // computation.  Inputs are validated here too (shape, dimension), so no call can read out of
 // bounds; the Python layer adds friendlier messages on top.
@@ -50,6 +50,7 @@ PointSetKind point_set(const std::string &name) {
 NB_MODULE(_core, m) {
     bind_checks(m);
     bind_cubature(m);
+    bind_rows(m);
     bind_results(m);
     m.doc() = "C++ core of the reference estimators: PCG32 chunk streams, accumulators, samplers, integrands.";
     m.attr("CHUNK_SIZE") = kChunkSize;
