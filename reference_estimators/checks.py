@@ -19,7 +19,7 @@ __all__ = [
     "rosenblatt", "piecewise_linear_lookup", "transform_statistics", "cramer_von_mises_sum", "pdf_summary",
     "all_float32", "dither_float32", "finite_rows", "pdf_mismatches", "float64_rows", "float32_columns",
     "take_rows", "nan_rows", "float32_unit_rows", "cap_to_world", "cap_to_hemisphere", "cap_density",
-    "RowLookup",
+    "RowLookup", "weight_agreement",
 ]
 
 #: The sampling domains of the sampler check, in the order the core numbers them.
@@ -309,6 +309,27 @@ def pdf_mismatches(reported: Any, p: Any, rtol: float) -> np.ndarray:
     r = np.ascontiguousarray(reported, dtype=np.float64).reshape(-1)
     v = np.ascontiguousarray(p, dtype=np.float64).reshape(-1)
     return _core.pdf_mismatches(r, v, float(rtol))
+
+
+def weight_agreement(w: Any, e: Any, p: Any, atol: float,
+                     rtol: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """The weight check of a renderer's samples
+    (harness.adapters.mitsuba.checks.weight_consistency) for N samples of c channels: the
+    weights w (N, c) a sample call returned (a view whose rows are one constant weight, row
+    stride 0, is read as that one row), the values e (N, c) re-evaluated at their directions
+    and the pdf p (N,) there.  Per channel ratio = e / p and diff = |w - ratio|.  (mismatch
+    (N,) bool: not bad, and a channel with diff not within atol + rtol |ratio|; bad (N,) bool:
+    a channel of w not finite, or negative; max_rel: the largest relative difference, diff /
+    |ratio| where |ratio| > atol, else diff, over the rows not bad, NaN as +inf and +inf as
+    the largest double, 0 for none.)  numpy's expressions, the same values, in one pass in
+    C++ on all threads."""
+    wa = np.asarray(w, dtype=np.float64)
+    constant = wa.ndim == 2 and wa.shape[0] > 0 and wa.strides[0] == 0
+    wa = np.ascontiguousarray(wa[:1] if constant else wa)
+    ea = np.ascontiguousarray(e, dtype=np.float64)
+    pa = np.ascontiguousarray(p, dtype=np.float64).reshape(-1)
+    mismatch, bad, most = _core.weight_agreement(wa, constant, ea, pa, float(atol), float(rtol))
+    return mismatch, bad, float(most)
 
 
 def piecewise_linear_lookup(lo: Any, hi: Any, start: Any, mass: Any, offsets: Any, strip: Any,

@@ -4,6 +4,7 @@
 // bounds.
 #include <nanobind/stl/vector.h>
 
+#include <algorithm>
 #include <utility>
 #include <vector>
 
@@ -144,6 +145,28 @@ void bind_rows(nb::module_ &m) {
         }
         return rows;
     }, "x"_a, "keep"_a, "x (N,) or (N, k) with the rows not kept NaN: where(keep[:, None], x, nan).");
+    m.def("weight_agreement", [](InArray w, bool constant, InArray e, InArray p, double atol, double rtol) {
+        if (e.ndim() != 2 || e.shape(1) == 0 || p.ndim() != 1 || p.size() != e.shape(0))
+            throw nb::value_error("'e' must be (N, c), c >= 1, and 'p' (N,)");
+        const size_t n = e.shape(0), c = e.shape(1);
+        if (w.ndim() != 2 || w.shape(1) != c || w.shape(0) != (constant ? 1 : n))
+            throw nb::value_error("'w' must be (N, c) as 'e', or (1, c) for one constant weight");
+        bool *mismatch, *bad;
+        auto ma = new_bool_array(n, &mismatch), ba = new_bool_array(n, &bad);
+        const size_t chunks = (n + kCheckChunk - 1) / kCheckChunk;
+        std::vector<double> most(chunks, 0.0);
+        {
+            nb::gil_scoped_release g;
+            for_chunks(n, kCheckChunk, [&](size_t k, size_t a, size_t b, int) {
+                most[k] = weight_agreement(w.data(), constant ? 0 : c, e.data(), p.data(), a, b, c, atol, rtol,
+                                           mismatch, bad);
+            });
+        }
+        double largest = 0.0;
+        for (double v : most) largest = std::max(largest, v);
+        return nb::make_tuple(ma, ba, largest);
+    }, "w"_a, "constant"_a, "e"_a, "p"_a, "atol"_a, "rtol"_a,
+       "(mismatch (N,), bad (N,), max_rel): the weight check of samples' weights w against e / p per channel.");
 }
 
 }  // namespace re::py

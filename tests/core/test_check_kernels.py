@@ -711,6 +711,50 @@ def test_row_kernels_match_numpy(n):
 
 
 @pytest.mark.parametrize("n", [0, 7, CHUNKS])
+@pytest.mark.parametrize("channels", [1, 3])
+def test_weight_agreement_is_numpys_weight_check(n, channels):
+    """The adapter's weight check in the core against its numpy expressions: weights equal to
+    e / p, off by a little (within atol + rtol |ratio|) and by more, NaN, infinite, negative and
+    -0.0 weights, NaN and zero pdfs and values, ratios below atol; per-row weights and one
+    constant weight (a broadcast view, row stride 0).  The same masks and the same largest
+    relative difference (numpy's nan_to_num(nan=inf) of it over the rows not bad)."""
+    atol, rtol = 1e-6, 1e-4
+    rng = np.random.default_rng(n + channels)
+    p = rng.uniform(0.01, 10.0, n)
+    e = rng.uniform(0.0, 5.0, (n, channels))
+    with np.errstate(all="ignore"):
+        w = e / p[:, None] * (1 + rng.choice([0.0, 5e-5, 2e-4, -3e-3], (n, channels)))
+    odd = rng.random((n, channels)) < 0.01
+    w[odd] = rng.choice([np.nan, np.inf, -np.inf, -1.0, -0.0, 0.0, 1e-9], int(odd.sum()))
+    p[rng.random(n) < 0.005] = rng.choice([0.0, np.nan, 1e300], 1)
+    e[rng.random((n, channels)) < 0.005] = np.nan
+    constant = np.broadcast_to(np.array([0.5, 2.0, 0.0][:channels]), (n, channels))
+
+    def numpy_check(w):
+        with np.errstate(all="ignore"):
+            ratio = e / p[:, None]
+            diff = np.abs(w - ratio)
+            rel = np.where(np.abs(ratio) > atol, diff / np.abs(ratio), diff)
+        bad = ~np.all(np.isfinite(w) & (w >= 0), axis=1)
+        mis = ~np.all(diff <= atol + rtol * np.abs(ratio), axis=1) & ~bad
+        most = float(np.max(np.nan_to_num(rel[~bad], nan=np.inf))) if (~bad).any() else 0.0
+        return mis, bad, most
+
+    for weights in (w, constant):
+        mis, bad, most = rest.weight_agreement(weights, e, p, atol, rtol)
+        want_mis, want_bad, want_most = numpy_check(weights)
+        np.testing.assert_array_equal(mis, want_mis)
+        np.testing.assert_array_equal(bad, want_bad)
+        assert most == want_most and isinstance(most, float)
+        if n == CHUNKS and weights is w:   # every kind of row is there
+            assert 0 < mis.sum() < n and 0 < bad.sum() < n and most == np.inf   # a NaN value: inf
+    with pytest.raises(ValueError, match="'e' must be"):
+        rest.weight_agreement(w, e[:, :0], p, atol, rtol)
+    with pytest.raises(ValueError, match="'w' must be"):
+        rest.weight_agreement(w[:, :1] if channels == 3 else np.zeros((n, 2)), e, p, atol, rtol)
+
+
+@pytest.mark.parametrize("n", [0, 7, CHUNKS])
 def test_float32_columns_match_numpy(n):
     """float32_columns is numpy's minimum(rows[:, j], cap, dtype=float32) for every column j,
     bit for bit: values rounded to float32 first (those between the cap and 1 round to 1 or to
