@@ -1,7 +1,8 @@
 """The sampler check's batch kernels (src/checks.h and the src/check_*.h it includes): the
 work of harness.samplers.check that is not the user's sample and pdf calls (domain maps,
 histograms, the Rosenblatt transform, Cramer-von Mises sums, the pdf's screening, a float32
-renderer's rows and columns), each one pass over numpy arrays in C++.  The cubature's kernels
+renderer's rows and columns), and the Mitsuba adapter's weight check, each one pass over numpy
+arrays in C++.  The cubature's kernels
 are :mod:`reference_estimators.check_cubature`'s.
 """
 from __future__ import annotations
@@ -323,10 +324,11 @@ def weight_agreement(w: Any, e: Any, p: Any, atol: float,
     |ratio| where |ratio| > atol, else diff, over the rows not bad, NaN as +inf and +inf as
     the largest double, 0 for none.)  numpy's expressions, the same values, in one pass in
     C++ on all threads."""
-    wa = np.asarray(w, dtype=np.float64)
+    wa, ea = np.asarray(w, dtype=np.float64), np.ascontiguousarray(e, dtype=np.float64)
+    if wa.shape != ea.shape:
+        raise ValueError(f"'w' must have the shape of 'e', {ea.shape}; got {wa.shape}")
     constant = wa.ndim == 2 and wa.shape[0] > 0 and wa.strides[0] == 0
     wa = np.ascontiguousarray(wa[:1] if constant else wa)
-    ea = np.ascontiguousarray(e, dtype=np.float64)
     pa = np.ascontiguousarray(p, dtype=np.float64).reshape(-1)
     mismatch, bad, most = _core.weight_agreement(wa, constant, ea, pa, float(atol), float(rtol))
     return mismatch, bad, float(most)

@@ -9,7 +9,6 @@
 #include <utility>
 
 #include "bind_common.h"
-#include "check_rows.h"
 #include "checks.h"
 #include "tables.h"
 

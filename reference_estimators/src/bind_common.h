@@ -1,8 +1,9 @@
 // What every binding file of reference_estimators._core shares: the array types, new numpy
 // arrays, the checks of array arguments and run options, and the conversions of estimates and
 // accumulator states to Python dicts (bind_results.cpp).  The module itself is bindings.cpp;
-// bind_checks.cpp binds the sampler check's kernels, bind_cubature.cpp its cubature's and
-// bind_results.cpp the accumulator states, tails and extremes.
+// bind_checks.cpp binds the sampler check's kernels, bind_cubature.cpp its cubature's,
+// bind_rows.cpp a renderer's rows and bind_results.cpp the accumulator states, tails and
+// extremes.
 #pragma once
 
 #include <nanobind/nanobind.h>

@@ -95,7 +95,7 @@ void bind_rows(nb::module_ &m) {
             at.push_back(column.data());
         }
         return rows_of(at, n);
-    }, "columns"_a, "(N, c) float64: the c float32 columns (N,) each, as rows.");
+    }, "columns"_a.noconvert(), "(N, c) float64: the c float32 columns (N,) each, as rows.");
     m.def("float32_columns", [](nb::ndarray<const double, nb::ndim<2>, nb::c_contig, nb::device::cpu> rows,
                                 float cap) {
         const size_t n = rows.shape(0), c = rows.shape(1);

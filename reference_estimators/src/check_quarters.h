@@ -272,7 +272,7 @@ inline double numpy_minimum(double a, double b) { return (a <= b || a != a) ? a 
 // The interpolation bound of tabulate's leaves (harness/samplers/cdf_tables.py,
 // _interpolation_bound, which states it) from their quarter masses qs (n, 4), into out (n):
 // the numpy code's expressions in its order of operations (a row's sum and cumulative sums left
-// to right, as numpy's along a row of four), the same values, NaN where a mass is NaN, but
+// to right, as numpy's along a row of four), the same values, NaN where numpy's is, but
 // for the sign of a zero (numpy's vector maximum and minimum pick it by the ISA; no use of
 // the bound reads it: it is compared, and added to non-negative errors).  In one pass over
 // the leaves, where the numpy code's thirty array passes a level had cost a lobe's

@@ -352,15 +352,22 @@ def test_the_sample_calls_uniforms_are_float32_columns_below_one():
         uniforms(u, 4)
 
 
-def test_drjit_vectors_become_float64_rows_bit_for_bit():
+@pytest.mark.parametrize("n", [1, 1000])
+def test_drjit_vectors_become_float64_rows_bit_for_bit(n):
     """A JIT vector's components are read in place where each holds N values; one with a
     literal component, a constant colour and a scalar go through drjit's own copy: every one
-    the same float64 rows as numpy's cast of drjit's (channels, N) array."""
+    the same float64 rows as numpy's cast of drjit's (channels, N) array; a mono variant's
+    one-channel spectrum too."""
     from harness.adapters.mitsuba.batch import _to_numpy
 
-    n = 1000
     v = np.random.default_rng(4).normal(size=(3, n)).astype(np.float32)
-    v[:, :3] = [[-0.0, np.inf, np.nan], [1e-45, -np.inf, 0.5], [np.float32(3.4e38), -1e-38, 2.0]]
+    odd = np.array([[-0.0, np.inf, np.nan], [1e-45, -np.inf, 0.5], [np.float32(3.4e38), -1e-38, 2.0]])
+    v[:, :3] = odd[:, :n]
+    with runtime.using_variant("llvm_ad_mono") as mi:
+        mono = mi.Spectrum(mi.Float(v[0]))
+        got, want = _to_numpy(mono, n), np.asarray(mono).reshape(1, -1).T.astype(np.float64)
+        assert got.shape == (n, 1)
+        np.testing.assert_array_equal(got.view(np.uint64), want.view(np.uint64))
     with runtime.using_variant("llvm_ad_rgb") as mi:
         import drjit as dr
 
@@ -372,7 +379,8 @@ def test_drjit_vectors_become_float64_rows_bit_for_bit():
             got = _to_numpy(value, n)
             assert got.shape == (n, 3) and got.dtype == np.float64
             np.testing.assert_array_equal(got.view(np.uint64), np.ascontiguousarray(want).view(np.uint64))
-        assert _to_numpy(colour, n).strides[0] == 0    # a constant stays a broadcast view
+        if n > 1:
+            assert _to_numpy(colour, n).strides[0] == 0    # a constant stays a broadcast view
         np.testing.assert_array_equal(_to_numpy(scalar, n), v[1].astype(np.float64))
         assert _to_numpy(scalar, n, widen=False).dtype == np.float32
 

@@ -726,7 +726,8 @@ def test_weight_agreement_is_numpys_weight_check(n, channels):
         w = e / p[:, None] * (1 + rng.choice([0.0, 5e-5, 2e-4, -3e-3], (n, channels)))
     odd = rng.random((n, channels)) < 0.01
     w[odd] = rng.choice([np.nan, np.inf, -np.inf, -1.0, -0.0, 0.0, 1e-9], int(odd.sum()))
-    p[rng.random(n) < 0.005] = rng.choice([0.0, np.nan, 1e300], 1)
+    odd_p = rng.random(n) < 0.005
+    p[odd_p] = rng.choice([0.0, np.nan, 1e300], int(odd_p.sum()))
     e[rng.random((n, channels)) < 0.005] = np.nan
     constant = np.broadcast_to(np.array([0.5, 2.0, 0.0][:channels]), (n, channels))
 
@@ -749,9 +750,12 @@ def test_weight_agreement_is_numpys_weight_check(n, channels):
         if n == CHUNKS and weights is w:   # every kind of row is there
             assert 0 < mis.sum() < n and 0 < bad.sum() < n and most == np.inf   # a NaN value: inf
     with pytest.raises(ValueError, match="'e' must be"):
-        rest.weight_agreement(w, e[:, :0], p, atol, rtol)
-    with pytest.raises(ValueError, match="'w' must be"):
-        rest.weight_agreement(w[:, :1] if channels == 3 else np.zeros((n, 2)), e, p, atol, rtol)
+        rest.weight_agreement(w[:, :0], e[:, :0], p, atol, rtol)
+    with pytest.raises(ValueError, match="'e' must be"):
+        rest.weight_agreement(w, e, np.append(p, 1.0), atol, rtol)
+    for wrong in (np.zeros((n, channels + 1)), np.broadcast_to(np.ones(channels), (n + 1, channels))):
+        with pytest.raises(ValueError, match="'w' must have the shape of 'e'"):
+            rest.weight_agreement(wrong, e, p, atol, rtol)
 
 
 @pytest.mark.parametrize("n", [0, 7, CHUNKS])

@@ -118,7 +118,8 @@ def _to_numpy(value: Any, n: int, widen: bool = True) -> np.ndarray:
     scalars (N,) as they are (drjit's memory, no copy)."""
     import drjit as dr
 
-    if dr.depth_v(value) == 2 and dr.type_v(value) == dr.VarType.Float32 and dr.width(value) == n:
+    if (dr.depth_v(value) == 2 and dr.size_v(value) > 0 and dr.type_v(value) == dr.VarType.Float32
+            and dr.width(value) == n):
         columns = [np.asarray(value[c]) for c in range(dr.size_v(value))]
         if all(c.shape == (n,) for c in columns):
             return rest.float64_rows(columns)
