@@ -75,7 +75,9 @@ out["direction_params"] = "".join(a.tobytes().hex() for kind in ("hemisphere", "
 rows = np.concatenate([unit[:2_003] * (1 + rng.uniform(-3e-6, 3e-6, (2_003, 1))), edge[:11], unit[:5] * 3])
 out["float32_unit_rows"] = "".join(a.tobytes().hex() for a in rest.float32_unit_rows(rows, 1e-6))
 columns = np.ascontiguousarray(f32[:2_011].T.astype(np.float32))
-out["float64_rows"] = "".join(rest.float64_rows(c).tobytes().hex() for c in (columns, list(columns)))
+odd = columns.copy()
+odd[:, :4] = np.array([[np.nan, np.inf, -np.inf, -0.0]] * 3, dtype=np.float32)
+out["float64_rows"] = "".join(rest.float64_rows(c).tobytes().hex() for c in (columns, list(odd)))
 # the CDF tables' interpolation bound: monotone, flat and mixed quarter masses, special values
 qs = rng.random((4_001, 4)) * 10.0 ** rng.uniform(-300, 300, (4_001, 1))
 qs[:1_000] = np.sort(qs[:1_000], axis=1)
@@ -85,12 +87,18 @@ qs[rng.random(qs.shape) < 0.01] = np.nan
 qs[:6] = [[0, 0, 0, 0], [-0.0, 0, 0, 0], [1, np.inf, 2, 3], [np.inf] * 4, [5e-324, 0, 1e308, 1e308],
           [1, 2, 2, 1]]
 out["interpolation_bound"] = rest.interpolation_bound(qs).tobytes().hex()
-# the weight check: weights near, at and off eval / pdf, bad weights, zero and NaN pdfs
+# the weight check: weights near, at and off eval / pdf; bad weights (NaN, infinite, negative,
+# -0.0 is not); zero, NaN and negative pdfs (apart: a NaN ratio makes the largest difference
+# inf); one constant weight
 e, p = rng.random((70_001, 3)), rng.uniform(0.01, 5.0, 70_001)
 w = e / p[:, None] * (1 + rng.choice([0.0, 5e-5, 2e-4], e.shape))
-w[rng.random(e.shape) < 0.01], p[:3] = np.nan, [0.0, np.nan, -1.0]
-mis, bad, most = rest.weight_agreement(w, e, p, 1e-6, 1e-4)
-out["weight_agreement"] = mis.tobytes().hex() + bad.tobytes().hex() + float(most).hex()
+odd = rng.random(e.shape) < 0.01
+w[odd] = rng.choice([np.nan, np.inf, -np.inf, -1.0, -0.0], int(odd.sum()))
+special = np.array([0.0, np.nan, -1.0, 1e-300])
+out["weight_agreement"] = "".join(
+    a.tobytes().hex() if isinstance(a, np.ndarray) else float(a).hex()
+    for args in ((w, e, p), (w[:4], e[:4], special), (np.broadcast_to(w[7], e.shape), e, p))
+    for a in rest.weight_agreement(*args, 1e-6, 1e-4))
 lo = rng.random((3_001, 2)) * 0.9
 out["cubature_points"] = rest.cubature_points("sphere", lo, lo + 0.05, np.linspace(0.1, 0.9, 4),
                                               columns=[0, 2, 1]).tobytes().hex()

@@ -383,6 +383,22 @@ def test_drjit_vectors_become_float64_rows_bit_for_bit(n):
             assert _to_numpy(colour, n).strides[0] == 0    # a constant stays a broadcast view
         np.testing.assert_array_equal(_to_numpy(scalar, n), v[1].astype(np.float64))
         assert _to_numpy(scalar, n, widen=False).dtype == np.float32
+        dynamic = dr.llvm.ad.ArrayXf(mi.Float(v[0]), mi.Float(v[2]))   # no static size: drjit's copy
+        np.testing.assert_array_equal(_to_numpy(dynamic, n), v[[0, 2]].T.astype(np.float64))
+
+
+def test_a_weight_check_of_a_sampler_that_produced_nothing_compares_nothing():
+    """Every sample failed: the weight check calls eval and pdf on no rows and reports nothing
+    produced, nothing compared (the failure count is the sampler check's to judge)."""
+    import dataclasses
+
+    s = ms.bsdf_sampler({"type": "roughconductor", "alpha": 0.1}, wi=30)
+    draw = s.sample_batch
+    s.sample_batch = lambda u: dataclasses.replace(draw(u), valid=np.zeros(len(u), dtype=bool))
+    assert s.eval(np.zeros((0, 3))).shape == (0, 3)
+    r = checks.weight_consistency(s, sample_count=1000)
+    assert (r.passed, r.n, r.produced, r.mismatches, r.bad_weights) == (True, 1000, 0, 0, 0)
+    assert r.max_rel_error == 0.0 and r.max_pdf_rel_error == 0.0 and not r.examples
 
 
 @pytest.mark.parametrize("plugin", [{"type": "hg", "g": 0.3}, {"type": "rayleigh"}], ids=lambda p: p["type"])

@@ -112,8 +112,8 @@ def _to_numpy(value: Any, n: int, widen: bool = True) -> np.ndarray:
     C order, and copied a transposed view a pass each).  A JIT vector's or colour's
     components are read in place where each holds N values (drjit's (channels, N) copy cost a
     million directions 1.7 ms, more than the cast).  A literal (width 1) becomes N
-    copies of its value, except a vector's or colour's (a constant weight: a phase function's,
-    a diffuse BSDF's), which stays a read-only broadcast view of it (24 MB a million samples
+    copies of its value, except a vector's or colour's (a constant weight: a phase function's),
+    which stays a read-only broadcast view of it (24 MB a million samples
     that only :class:`SampleBatch`'s weight holds).  ``widen`` False: a JIT variant's float32
     scalars (N,) as they are (drjit's memory, no copy)."""
     import drjit as dr
@@ -340,7 +340,8 @@ class MitsubaSampler:
         has no weight."""
         cols, ok = unit_columns(x)
         (v,) = self._run(lambda m, o, w, *c: (self._eval_kernel(m, o, w, *c),), list(cols))
-        v = v.reshape(len(ok), -1)
+        # no rows: (0, channels) as run_batch's dummy row gave them (reshape cannot infer -1)
+        v = v.reshape(len(ok), -1) if v.size else v.reshape(0, v.shape[1] if v.ndim == 2 else 1)
         return np.where(ok[:, None], v, 0.0)
 
     def fingerprint(self) -> dict[str, Any]:
