@@ -396,6 +396,8 @@ def test_a_weight_check_of_a_sampler_that_produced_nothing_compares_nothing():
     draw = s.sample_batch
     s.sample_batch = lambda u: dataclasses.replace(draw(u), valid=np.zeros(len(u), dtype=bool))
     assert s.eval(np.zeros((0, 3))).shape == (0, 3)
+    none = draw(np.zeros((0, 3)))      # a sample call on no uniforms: no rows of every output
+    assert none.x.shape == (0, 3) and none.weight.shape == (0, 3) and none.valid.shape == (0,)
     r = checks.weight_consistency(s, sample_count=1000)
     assert (r.passed, r.n, r.produced, r.mismatches, r.bad_weights) == (True, 1000, 0, 0, 0)
     assert r.max_rel_error == 0.0 and r.max_pdf_rel_error == 0.0 and not r.examples

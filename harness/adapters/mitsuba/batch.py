@@ -138,6 +138,14 @@ def _to_numpy(value: Any, n: int, widen: bool = True) -> np.ndarray:
     return view if out.ndim == 2 else view.copy()
 
 
+def _per_channel(v: np.ndarray) -> np.ndarray:
+    """A per-sample value as :func:`run_batch` returns it, (N,) or (N, channels), as (N,
+    channels): a scalar's one channel.  (Not reshape(N, -1): with no rows it cannot infer the
+    channels, and a weight check of a sampler that produced nothing, or a sample call on no
+    uniforms, had raised there.)"""
+    return v if v.ndim == 2 else v[:, None]
+
+
 def run_batch(mi: Any, variant: str, kernel: Callable[..., tuple], columns: list[np.ndarray],
               widen: bool = True) -> list[np.ndarray]:
     """Runs ``kernel(mi, width, *columns)`` once over drjit arrays (JIT variants) or once per
@@ -294,7 +302,7 @@ class MitsubaSampler:
         delta = out.pop("delta", None)
         valid = rest.finite_rows(x) & (spdf > 0)
         if weight is not None:
-            weight = weight.reshape(len(x), -1)
+            weight = _per_channel(weight)
             if len(x) and weight.strides[0] == 0:   # one constant weight (_to_numpy's view): its row decides
                 valid &= bool(np.any(weight[0] != 0))
             else:
@@ -340,9 +348,7 @@ class MitsubaSampler:
         has no weight."""
         cols, ok = unit_columns(x)
         (v,) = self._run(lambda m, o, w, *c: (self._eval_kernel(m, o, w, *c),), list(cols))
-        # no rows: (0, channels) as run_batch's dummy row gave them (reshape cannot infer -1)
-        v = v.reshape(len(ok), -1) if v.size else v.reshape(0, v.shape[1] if v.ndim == 2 else 1)
-        return np.where(ok[:, None], v, 0.0)
+        return np.where(ok[:, None], _per_channel(v), 0.0)
 
     def fingerprint(self) -> dict[str, Any]:
         """What the sampler's results depend on: Mitsuba's version, variant, kind and spec."""
