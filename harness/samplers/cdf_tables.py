@@ -193,8 +193,9 @@ def tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: n
         return fine | stopped, bound, settled
 
     # only strips that refine further are tried with the coarse pieces
-    tried = np.bincount(strip, ~judged(0, 0.0)[0], minlength=nstrip) > 0
-    if coarse is not None and tried.any():
+    tried = (np.zeros(nstrip, dtype=bool) if coarse is None
+             else np.bincount(strip, ~judged(0, 0.0)[0], minlength=nstrip) > 0)
+    if tried.any():
         on = tried[strip]
         fine_pieces = pieces, used
         pieces, used = coarse, _used(coarse)
