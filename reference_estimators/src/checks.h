@@ -48,16 +48,17 @@ inline void count_cells(const double *s, size_t a, size_t b, const bool *inside,
     }
 }
 
-// Integer counts in `cells` cells of n items, on all hardware threads: count(a, b, table) adds
-// the items a .. b - 1 of a fixed chunk to `table`, each thread's own; the tables' sums go to
-// counts (float64).  Integer sums: the same whichever thread counted what.
+// Integer counts in `cells` cells of n items, on all hardware threads: count(a, b, table, chunk,
+// worker) adds the items a .. b - 1 of fixed chunk `chunk` to `table`, the thread's own (worker
+// its index); the tables' sums go to counts (float64).  Integer sums: the same whichever thread
+// counted what.
 template <class Count>
 void count_on_threads(size_t n, size_t cells, double *counts, Count count) {
     std::vector<std::vector<int64_t>> tables(size_t(ThreadPool::default_threads()));
-    for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t b, int worker) {
+    for_chunks(n, kCheckChunk, [&](size_t c, size_t a, size_t b, int worker) {
         std::vector<int64_t> &table = tables[size_t(worker)];
         if (table.empty()) table.assign(cells, 0);
-        count(a, b, table.data());
+        count(a, b, table.data(), c, worker);
     });
     for (size_t j = 0; j < cells; ++j) {
         int64_t total = 0;
@@ -71,7 +72,9 @@ void count_on_threads(size_t n, size_t cells, double *counts, Count count) {
 // floor(s m) (at most m - 1).  Points outside, or with a NaN coordinate, are not counted.
 inline void grid_histogram(const double *s, size_t n, const bool *inside, int64_t m0, int64_t m1, double *counts) {
     count_on_threads(n, size_t(m0) * size_t(m1 > 0 ? m1 : 1), counts,
-                     [&](size_t a, size_t b, int64_t *table) { count_cells(s, a, b, inside, m0, m1, table); });
+                     [&](size_t a, size_t b, int64_t *table, size_t, int) {
+                         count_cells(s, a, b, inside, m0, m1, table);
+                     });
 }
 
 // Scratch buffer `which` (0 or 1) of this thread, at least n doubles, contents undefined:
@@ -105,38 +108,58 @@ struct CramerVonMisesSum {
 // Both passes run on the thread pool (so not to be called from inside one of its jobs).  NaN
 // (both) if any u is NaN.  32-bit counts (the table at K = 2^16 fits in L2: 1.4x faster than
 // 64-bit ones): at most 2^32 - 1 values.
-inline CramerVonMisesSum cramer_von_mises_sum(const double *u, size_t stride, size_t n) {
-    constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-    if (n == 0) return {0.0, 0.0};
-    if (n > UINT32_MAX) throw std::length_error("the Cramer-von Mises sum takes at most 2^32 - 1 values");
-    int bits = 10;
-    while (bits < 22 && double(int64_t(1) << bits) < 64.0 * std::sqrt(double(n))) ++bits;
-    const int64_t K = int64_t(1) << bits;
-    const double scale = double(K);
-    auto clamped = [](double v) { return v < 0 ? 0.0 : (v > 1 ? 1.0 : v); };
-    auto cell = [K, scale](double v) {  // of a clamped v
-        const double f = v * scale;  // exact: K is a power of two, so cell edges are b / K exactly
-        return f < scale ? int64_t(f) : K - 1;
-    };
-    // both passes on all threads in fixed chunks (kCheckChunk: whole blocks of the sums below):
-    // the counts merged, the block sums added in order after, so the same bits on any thread
-    // count as one thread's loop (a column on one thread had left the other idle in a 1-D check)
-    const size_t chunks = (n + kCheckChunk - 1) / kCheckChunk;
-    static_assert(kCheckChunk % 1024 == 0, "a chunk holds whole blocks of the sums");
-    // each worker's counts, owned by this call: the pool serves other callers between this
-    // call's jobs, so a table kept by the worker's thread could be reset under the merge below
-    std::vector<std::vector<uint32_t>> tables(size_t(ThreadPool::default_threads()));
-    std::vector<unsigned char> nan_in(chunks, 0);
-    for_chunks(n, kCheckChunk, [&](size_t c, size_t a, size_t b, int worker) {
-        std::vector<uint32_t> &table = tables[size_t(worker)];
-        if (table.empty()) table.assign(size_t(K), 0);
+//
+// CramerVonMisesCounts holds the two passes: the first (count) a caller may run inside its own
+// pass over the values, chunk by chunk while they are in cache (transform_statistics), the
+// second (sum) once every chunk is counted; cramer_von_mises_sum runs both on its own.
+class CramerVonMisesCounts {
+  public:
+    // For n values (at most 2^32 - 1: 32-bit counts).
+    explicit CramerVonMisesCounts(size_t n)
+        : n_(n), tables_(size_t(ThreadPool::default_threads())), nan_in_((n + kCheckChunk - 1) / kCheckChunk, 0) {
+        if (n > UINT32_MAX) throw std::length_error("the Cramer-von Mises sum takes at most 2^32 - 1 values");
+        int bits = 10;
+        while (bits < 22 && double(int64_t(1) << bits) < 64.0 * std::sqrt(double(n))) ++bits;
+        K_ = int64_t(1) << bits;
+    }
+
+    // Counts values a .. b - 1 (u[i * stride]) of fixed chunk `chunk` (kCheckChunk values) on
+    // worker `worker` of the thread pool.
+    void count(const double *u, size_t stride, size_t a, size_t b, size_t chunk, int worker) {
+        std::vector<uint32_t> &table = tables_[size_t(worker)];
+        if (table.empty()) table.assign(size_t(K_), 0);
         for (size_t i = a; i < b; ++i) {
             const double v = u[i * stride];
-            if (v != v) { nan_in[c] = 1; return; }
+            if (v != v) { nan_in_[chunk] = 1; return; }
             ++table[size_t(cell(clamped(v)))];
         }
-    });
-    if (std::find(nan_in.begin(), nan_in.end(), 1) != nan_in.end()) return {kNaN, kNaN};
+    }
+
+    // The bracket, from the counts of all n values and a second pass over them; on all threads
+    // (so not to be called from inside one of the pool's jobs).
+    CramerVonMisesSum sum(const double *u, size_t stride) const;
+
+  private:
+    static double clamped(double v) { return v < 0 ? 0.0 : (v > 1 ? 1.0 : v); }
+    int64_t cell(double v) const {   // of a clamped v
+        const double f = v * double(K_);  // exact: K is a power of two, so cell edges are b / K exactly
+        return f < double(K_) ? int64_t(f) : K_ - 1;
+    }
+
+    size_t n_;
+    int64_t K_;
+    // each worker's counts, owned by this object: the pool serves other callers between its
+    // jobs, so a table kept by the worker's thread could be reset under the merge
+    std::vector<std::vector<uint32_t>> tables_;
+    std::vector<unsigned char> nan_in_;   // per chunk: a NaN value seen
+};
+
+inline CramerVonMisesSum CramerVonMisesCounts::sum(const double *u, size_t stride) const {
+    constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+    const size_t n = n_;
+    if (n == 0) return {0.0, 0.0};
+    if (std::find(nan_in_.begin(), nan_in_.end(), 1) != nan_in_.end()) return {kNaN, kNaN};
+    const int64_t K = K_;
     thread_local std::vector<double> centres;   // per cell its values' mean c, cbar_b
     centres.resize(size_t(K));
     double *centre = centres.data();   // (a worker naming centres would get its own thread's)
@@ -145,7 +168,7 @@ inline CramerVonMisesSum cramer_von_mises_sum(const double *u, size_t stride, si
     uint32_t rank = 0;   // of the values before cell b
     for (int64_t b = 0; b < K; ++b) {
         uint32_t m = 0;
-        for (const std::vector<uint32_t> &table : tables) m += table.empty() ? 0 : table[size_t(b)];
+        for (const std::vector<uint32_t> &table : tables_) m += table.empty() ? 0 : table[size_t(b)];
         // cbar_b = (2 r + m) / (2 n), once a cell (a division a value had cost the pass a
         // tenth of its time)
         centre[b] = (2.0 * double(rank) + double(m)) / twice_n;
@@ -171,7 +194,19 @@ inline CramerVonMisesSum cramer_von_mises_sum(const double *u, size_t stride, si
     CompensatedSum acc;
     for (double block : blocks) acc.add(block);
     const double nn = double(n) * double(n);
-    return {acc.value() + cubes.value() / (12.0 * nn), pairs.value() / (scale * twice_n)};
+    return {acc.value() + cubes.value() / (12.0 * nn), pairs.value() / (double(K) * twice_n)};
+}
+
+// The bracket of S of n values u[i * stride] (above).
+inline CramerVonMisesSum cramer_von_mises_sum(const double *u, size_t stride, size_t n) {
+    // both passes on all threads in fixed chunks (kCheckChunk: whole blocks of the sums): the
+    // counts merged, the block sums added in order after, so the same bits on any thread count
+    // as one thread's loop (a column on one thread had left the other idle in a 1-D check)
+    static_assert(kCheckChunk % 1024 == 0, "a chunk holds whole blocks of the sums");
+    CramerVonMisesCounts counts(n);
+    for_chunks(n, kCheckChunk,
+               [&](size_t c, size_t a, size_t b, int worker) { counts.count(u, stride, a, b, c, worker); });
+    return counts.sum(u, stride);
 }
 
 // The statistics of the sampler check's transform tests (harness/samplers/transform.py) in one
@@ -181,15 +216,17 @@ inline CramerVonMisesSum cramer_von_mises_sum(const double *u, size_t stride, si
 // min(floor(v bins), bins - 1), v its u1 on the square and its u0 (strip 0) on an interval;
 // a NaN v counts nowhere).  u stays in this thread's scratch buffers instead of going to
 // Python with its strips: 24 MB of fresh arrays a check cost 8 ms of page faults, more than a
-// third of the transform.  Fixed chunks on all hardware threads (count_on_threads), the
-// columns' sums one after the other, each on all threads: the same for any thread count.
+// third of the transform.  Fixed chunks on all hardware threads (count_on_threads), each
+// chunk's values counted for the sums as it is transformed; the columns' second passes one
+// after the other, each on all threads: the same for any thread count.
 inline void transform_statistics(const PiecewiseLinearTable &marginal, const PiecewiseLinearTable *conditional,
                                  const double *edges, size_t nedges, const double *s, size_t k, size_t n,
                                  int64_t bins, CramerVonMisesSum *sums, double *counts) {
     const RosenblattTransform transform(marginal, conditional, edges, nedges);
     const int64_t strips = k == 2 ? int64_t(nedges) - 1 : 1;
     double *u[2] = {scratch(0, n), k == 2 ? scratch(1, n) : nullptr};
-    count_on_threads(n, size_t(strips * bins), counts, [&](size_t a, size_t b, int64_t *cells) {
+    std::vector<CramerVonMisesCounts> cvm(k, CramerVonMisesCounts(n));
+    count_on_threads(n, size_t(strips * bins), counts, [&](size_t a, size_t b, int64_t *cells, size_t c, int worker) {
         thread_local std::vector<int64_t> strip;
         strip.resize(kCheckChunk);
         transform(s, k, a, b, u[0], u[1], 1, strip.data());
@@ -201,8 +238,11 @@ inline void transform_statistics(const PiecewiseLinearTable &marginal, const Pie
             i = i < 0 ? 0 : (i < bins - 1 ? i : bins - 1);
             ++cells[size_t(strip[j - a] * bins + i)];
         }
+        // the sums' first pass while the chunk's u is in cache (a pass of its own over u had
+        // cost the statistics a tenth of their time)
+        for (size_t col = 0; col < k; ++col) cvm[col].count(u[col], 1, a, b, c, worker);
     });
-    for (size_t c = 0; c < k; ++c) sums[c] = cramer_von_mises_sum(u[c], 1, n);
+    for (size_t col = 0; col < k; ++col) sums[col] = cvm[col].sum(u[col], 1);
 }
 
 // The deterministic pdf checks and the pdf moment of the sampler check, in one pass over the

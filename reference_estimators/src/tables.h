@@ -112,11 +112,8 @@ class PiecewiseLinearTable {
     // when g is null), for j < n: for the leaf i of strip g with the largest lo[i] <= x (the
     // strip's first leaf when none is), start[i] + mass[i] * clamp((x - lo[i]) / (hi[i] -
     // lo[i]), 0, 1), clamped to [0, 1]; NaN for a strip outside [0, strips), an empty strip or
-    // a NaN x.  The leaves of a batch of points are found in one pass, their values in a
-    // second, so that each pass's short body lets the out-of-order core overlap many points
-    // (one pass was 1.2-2x slower: the division waited on the search's dependent loads).
-    // Each point's leaf index to leaves[j] if asked (the sentinel's, the last, where its value
-    // is NaN).
+    // a NaN x.  Each point's leaf index to leaves[j] if asked (the sentinel's, the last, where
+    // its value is NaN).
     void lookup(const int64_t *g, const double *x, size_t xstride, size_t n, double *out, size_t ostride,
                 int64_t *leaves = nullptr) const {
         leaves ? lookup_leaves<true>(g, x, xstride, n, out, ostride, leaves)
@@ -143,38 +140,67 @@ class PiecewiseLinearTable {
 
   private:
     // lookup, the leaves stored or not by a template (a test of `leaves` in the loop had cost
-    // the interval's transform a tenth of its time)
+    // the interval's transform a tenth of its time).  A batch of points goes through four
+    // passes, each with one level of the lookup's dependent loads (the bucket, its sub-bucket's
+    // candidates, the candidate after the first, the leaf's numbers), so that the out-of-order
+    // core overlaps that level's loads across the batch, where two passes (each point's leaf
+    // by its whole chain of loads, then its value) had it waiting on one point's chain at a
+    // time: a GGX check's Rosenblatt transform (a million points; marginal 2 092 leaves,
+    // conditional 28 544 in 32 strips) on one thread 30-32 -> 18-21 ms.  Batches of 64: 256
+    // and more came out 5-10 % slower.
     template <bool kLeaves>
     void lookup_leaves(const int64_t *g, const double *x, size_t xstride, size_t n, double *out, size_t ostride,
                        int64_t *leaves) const {
-        constexpr size_t kBatch = 256;
+        constexpr size_t kBatch = 64;
+        int64_t first[kBatch], strip[kBatch];   // pass 1: subs_ slot (-1: NaN leaf), strip; then begin, end
         uint32_t found[kBatch];
+        const uint32_t nan_leaf = uint32_t(leaves_.size() - 1);
         for (size_t a = 0; a < n; a += kBatch) {
             const size_t m = std::min(kBatch, n - a);
-            for (size_t j = 0; j < m; ++j) found[j] = leaf(g ? g[a + j] : 0, x[(a + j) * xstride]);
+            for (size_t j = 0; j < m; ++j) sub_bucket(g ? g[a + j] : 0, x[(a + j) * xstride], first[j], strip[j]);
+            for (size_t j = 0; j < m; ++j) candidates(first[j], strip[j]);
+            for (size_t j = 0; j < m; ++j)
+                found[j] = first[j] < 0 ? nan_leaf : leaf(first[j], strip[j], x[(a + j) * xstride]);
             for (size_t j = 0; j < m; ++j) out[(a + j) * ostride] = value(found[j], x[(a + j) * xstride]);
             if (kLeaves)
                 for (size_t j = 0; j < m; ++j) leaves[a + j] = int64_t(found[j]);
         }
     }
 
-    // The index of the leaf (g, x) falls in; the NaN leaf (the sentinel) for a strip outside
-    // [0, strips), an empty strip or a NaN x.
-    uint32_t leaf(int64_t g, double x) const {
-        if (g < 0 || g >= strips_ || offsets_[g + 1] <= offsets_[g] || !(x == x)) return uint32_t(leaves_.size() - 1);
-        // x in 52-bit fixed point, floor(x 2^52) of x clamped to [0, 1 - 2^-53]: the bucket and
-        // sub-bucket are its leading bits, found by shifts (exact: x 2^52 is, and floor commutes
-        // with them), where clamped double products and conversions had lengthened each
-        // lookup's chain of dependent loads (1.3-1.5x slower)
-        const double clamped = std::min(std::max(x, 0.0), 0x1.fffffffffffffp-1);
+    // Pass 1 of a lookup: the slot in subs_ of the sub-bucket (g, x) falls in, to `slot`, and
+    // the strip to `strip`; slot -1 for a strip outside [0, strips) or a NaN x (the NaN leaf;
+    // an empty strip's is found in pass 2).  x in 52-bit fixed point, floor(x 2^52) of x
+    // clamped to [0, 1 - 2^-53]: the bucket and sub-bucket are its leading bits, found by
+    // shifts (exact: x 2^52 is, and floor commutes with them), where clamped double products
+    // and conversions had lengthened each lookup's chain of dependent loads (1.3-1.5x slower).
+    void sub_bucket(int64_t g, double x, int64_t &slot, int64_t &strip) const {
+        // without a branch: g and x of the NaN leaf's points are replaced by harmless ones
+        const bool bad = (g < 0) | (g >= strips_) | !(x == x);
+        const int64_t gg = bad ? 0 : g;
+        const double clamped = std::min(std::max(bad ? 0.0 : x, 0.0), 0x1.fffffffffffffp-1);
         const uint64_t fixed = uint64_t(clamped * 0x1p52);
         const uint64_t b = fixed >> (52 - log2_buckets_);
-        const Bucket bucket = index_[size_t(g * buckets_ + int64_t(b))];
+        const Bucket bucket = index_[size_t(gg * buckets_ + int64_t(b))];
         const uint64_t j = (fixed >> (52 - log2_buckets_ - bucket.shift)) & ((uint64_t(1) << bucket.shift) - 1);
-        const int32_t *first = &subs_[size_t(bucket.base + j)];
+        slot = bad ? -1 : int64_t(bucket.base) + int64_t(j);
+        strip = gg;
+    }
+
+    // Pass 2: the candidate leaves begin .. end - 1 of the sub-bucket at `slot` of strip g:
+    // those that start in it and the one before (at least one), in place of (slot, g).
+    void candidates(int64_t &slot, int64_t &g) const {
+        const int32_t *first = &subs_[size_t(slot < 0 ? 0 : slot)];
         const int64_t begin = std::max(int64_t(first[0]) - 1, offsets_[g]);
         const int64_t end = std::max(int64_t(first[1]), begin + 1);
-        if (end - begin > 2) {  // leaves narrower than the finest sub-bucket: rare
+        slot = (slot < 0) | (offsets_[g + 1] <= offsets_[g]) ? -1 : begin;   // an empty strip's: NaN
+        g = end;
+    }
+
+    // Pass 3: the leaf among begin .. end - 1 with the largest lo <= x (begin if none): one
+    // comparison without a branch for the usual one or two candidates; a binary search for
+    // leaves narrower than the finest sub-bucket (rare).
+    uint32_t leaf(int64_t begin, int64_t end, double x) const {
+        if (end - begin > 2) {
             const Leaf *at = &leaves_[size_t(begin)];
             for (size_t m = size_t(end - begin); m > 1;) {
                 const size_t half = m / 2;

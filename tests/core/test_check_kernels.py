@@ -867,6 +867,23 @@ def test_piecewise_linear_lookup_matches_its_definition(strips, leaves):
     np.testing.assert_array_equal(got, lookup_reference(*table, g, x))
 
 
+@pytest.mark.parametrize("empty", [(0,), (1, 3), (3,), (0, 1, 2, 3)])
+def test_piecewise_linear_lookup_gives_nan_in_an_empty_strip(empty):
+    """A strip without leaves (first, inner, last: its leaves would start at the sentinel's
+    index, or all) gives NaN; the strips around it are looked up as defined."""
+    rng = np.random.default_rng(11)
+    lo, hi, start, mass, offsets = random_table(rng, 4, 50)
+    keep = ~np.isin(np.repeat(np.arange(4), np.diff(offsets)), empty)
+    sizes = np.where(np.isin(np.arange(4), empty), 0, np.diff(offsets))
+    table = (lo[keep], hi[keep], start[keep], mass[keep], np.concatenate([[0], np.cumsum(sizes)]))
+    x = rng.uniform(-0.1, 1.1, 5000)
+    x[:3] = [0.0, 1.0, np.nan]
+    g = rng.integers(0, 4, x.size)
+    got = rest.piecewise_linear_lookup(*table, g, x)
+    np.testing.assert_array_equal(got, lookup_reference(*table, g, x))
+    assert np.isnan(got[np.isin(g, empty)]).all()
+
+
 @pytest.mark.parametrize("square, on_leaves", [(False, False), (True, False), (True, True)])
 def test_rosenblatt_matches_the_lookups_it_replaces(square, on_leaves):
     """Strips by a search among the edges, or, where the edges lie on the marginal's leaves
