@@ -289,7 +289,8 @@ def pdf_summary(kind: str, measure: float, s: Any, inside: Any, p: Any,
     """(bad, zero, used, h_sum) over pdf values p / ``total`` (p (N,); numpy's division, without
     its array) at points with parameters s (N, k) and ``inside`` flags: ``bad`` counts them
     NaN, infinite or negative (every point), ``zero`` 0 at inside points; over the ``used``
-    inside points with a good value, h_sum is the sum of h = q / (q + c) with q = p J / total
+    inside points with a good value above 0 (a point of pdf 0 has probability 0 under the
+    density, and is counted in ``zero``), h_sum is the sum of h = q / (q + c) with q = p J / total
     the density in parameter space (J = ``measure``, the domain's measure per unit of s, or
     1 / (1 - s)^2 on the half line, the only domain that reads s); 0 unless c > 0.  One pass
     in C++ with a compensated sum."""

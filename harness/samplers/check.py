@@ -219,7 +219,8 @@ class SamplerTest:
                                      "expected": n * e.reshape(bins, -1).sum(axis=1)}
         tests += self._transform_tests(s if all_inside else s[inside])
         # pdf moment: sample mean of h(p(X)) against its cubature value (h summed over the
-        # inside points with a good pdf by pdf_summary above; 0 where there are none or c = 0);
+        # inside points with a good pdf above 0 by pdf_summary above, a zero pdf failing on its
+        # own; 0 where there are none or c = 0);
         # the variance adds the cubature error and a rounding floor (a constant pdf makes h constant)
         e1, e2, e1_err = self.h_moments
         h_mean = h_sum / used if self.c > 0 and used else 0.0
