@@ -20,7 +20,7 @@ __all__ = [
     "rosenblatt", "piecewise_linear_lookup", "transform_statistics", "cramer_von_mises_sum", "pdf_summary",
     "all_float32", "dither_float32", "finite_rows", "pdf_mismatches", "float64_rows", "float32_columns",
     "take_rows", "nan_rows", "float32_unit_rows", "cap_to_world", "cap_to_hemisphere", "cap_density",
-    "RowLookup", "weight_agreement",
+    "rect_to_square", "rect_to_world", "rect_density", "RowLookup", "weight_agreement",
 ]
 
 #: The sampling domains of the sampler check, in the order the core numbers them.
@@ -118,6 +118,48 @@ def cap_density(h: Any, p: Any, scale: float) -> np.ndarray:
     (harness.adapters.mitsuba.cap.CapView.pdf) in one pass in C++."""
     a = np.ascontiguousarray(h, dtype=np.float64).reshape(-1, 3)
     return _core.cap_density(a, np.ascontiguousarray(p, dtype=np.float64).reshape(-1), float(scale))
+
+
+def _rectangle_frame(frame: tuple) -> list:
+    """A rectangle light's frame (to_corner, e0, e1, normal, dual, height, area) as the core
+    takes it: four 3-vectors, the dual basis (2, 3) and two numbers, contiguous float64."""
+    *vectors, height, area = frame
+    if len(vectors) != 5:
+        raise ValueError("'frame' must be (to_corner, e0, e1, normal, dual, height, area)")
+    arrays = [np.ascontiguousarray(v, dtype=np.float64).reshape(-1) for v in vectors]
+    return [*arrays, float(height), float(area)]
+
+
+def rect_to_square(d: Any, frame: tuple, slack: float) -> np.ndarray:
+    """Points s (N, 2) of a rectangle light's square where the rays from its reference point
+    along the world directions d (N, 3) hit its plane (``frame``: to_corner = corner - ref,
+    e0, e1, the unit normal n, the dual basis (f0, f1) of (e0, e1), height = <n, corner -
+    ref>, area = |e0 x e1|): t = height / <d, n>, o = (ref - corner) + t d, s_i = <o, f_i>,
+    each within ``slack`` of [0, 1] clamped onto it; (-1, -1) where t > 0 fails (the ray
+    misses the plane in front of ref); NaN rows stay NaN.  In C++ on all threads, numpy's
+    expression left to right (harness.adapters.mitsuba.rectangle.Rectangle.to_square)."""
+    a = np.ascontiguousarray(d, dtype=np.float64)
+    return _core.rect_to_square(a, *_rectangle_frame(frame), float(slack))
+
+
+def rect_to_world(s: Any, frame: tuple) -> np.ndarray:
+    """Unit world directions (N, 3) from a rectangle light's reference point towards the
+    points P(s) = corner + s0 e0 + s1 e1 of s (N, 2) (``frame`` as :func:`rect_to_square`):
+    w / sqrt(w0^2 + w1^2 + w2^2), w = (corner - ref) + s0 e0 + s1 e1.  In C++ on all
+    threads (Rectangle.to_world)."""
+    a = np.ascontiguousarray(s, dtype=np.float64)
+    return _core.rect_to_world(a, *_rectangle_frame(frame))
+
+
+def rect_density(s: Any, p: Any, frame: tuple) -> np.ndarray:
+    """(N,): the world pdf values p (N,) rounded to float32 times the map's Jacobian J(s) =
+    area |<w, n>| / (dist2 sqrt(dist2)) (w = P(s) - ref, dist2 = <w, w>: steradians per unit
+    area of the square) rounded to float32, multiplied in float32 and widened, at the points
+    s (N, 2) inside [0, 1]^2, else 0: the density of the Mitsuba adapter's rectangle map
+    (harness.adapters.mitsuba.rectangle.RectangleView.pdf) in one pass in C++."""
+    a = np.ascontiguousarray(s, dtype=np.float64)
+    return _core.rect_density(a, np.ascontiguousarray(p, dtype=np.float64).reshape(-1),
+                              *_rectangle_frame(frame))
 
 
 #: ``RowLookup(x)`` over rows x (N, k), k = 1 to 3 (read in place, kept alive by the lookup):

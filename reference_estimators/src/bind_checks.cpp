@@ -76,22 +76,38 @@ struct BoundTransform {
     const PiecewiseLinearTable *conditional_table() const { return conditional ? conditional->table.get() : nullptr; }
 };
 
-// The rows x (N, 3) through one of the cap's maps (cap_to_world, cap_to_hemisphere):
-// map(a, e, out) writes rows a .. e - 1 of the result, chunks on all threads (each row from
-// that row alone), the frame (axis, t, b) checked first.
+// Rows of x (N, dim_in) through map(a, e, out) into N rows of dim_out (0: (N,)), chunks on all
+// threads (each row from that row alone).
 template <class Map>
-OutArray cap_rows(const InArray &x, const char *arg, const InArray &axis, const InArray &t, const InArray &b,
-                  Map map) {
-    const size_t n = check_points(x, 3, arg);
-    if (axis.size() != 3 || t.size() != 3 || b.size() != 3)
-        throw nb::value_error("'axis', 't' and 'b' must be 3-vectors");
+OutArray map_rows(const InArray &x, int dim_in, const char *arg, size_t dim_out, Map map) {
+    const size_t n = check_points(x, dim_in, arg);
     double *out;
-    OutArray rows = new_array(n, 3, &out);
+    OutArray rows = new_array(n, dim_out, &out);
     {
         nb::gil_scoped_release g;
         for_chunks(n, kCubatureChunk, [&](size_t, size_t a, size_t e, int) { map(a, e, out); });
     }
     return rows;
+}
+
+// The rows x (N, 3) through one of the cap's maps (cap_to_world, cap_to_hemisphere): map_rows,
+// the frame (axis, t, b) checked first.
+template <class Map>
+OutArray cap_rows(const InArray &x, const char *arg, const InArray &axis, const InArray &t, const InArray &b,
+                  Map map) {
+    if (axis.size() != 3 || t.size() != 3 || b.size() != 3)
+        throw nb::value_error("'axis', 't' and 'b' must be 3-vectors");
+    return map_rows(x, 3, arg, 3, map);
+}
+
+// The rectangle light's frame (rect_to_square, rect_to_world, rect_density) from its
+// 3-vectors and the dual basis (2, 3), checked.
+RectangleFrame rectangle_frame(const InArray &to_corner, const InArray &e0, const InArray &e1, const InArray &normal,
+                               const InArray &dual, double height, double area) {
+    if (to_corner.size() != 3 || e0.size() != 3 || e1.size() != 3 || normal.size() != 3)
+        throw nb::value_error("'to_corner', 'e0', 'e1' and 'normal' must be 3-vectors");
+    if (dual.size() != 6) throw nb::value_error("'dual' must hold the two dual basis vectors (2, 3)");
+    return {to_corner.data(), e0.data(), e1.data(), normal.data(), dual.data(), height, area};
 }
 
 // (s, inside) of domain_params for points x on domain `kind`, on all threads in fixed chunks
@@ -195,19 +211,39 @@ void bind_checks(nb::module_ &m) {
        "Hemisphere points (N, 3) of world directions d (N, 3) through the equal-area map of the cap about `axis` "
        "(frame t, b, axis) with cosine `cos_alpha`, scale = 1 - cos_alpha; within rim_slack below the rim: on it.");
     m.def("cap_density", [](InArray h, InArray p, double scale) {
-        const size_t n = check_points(h, 3, "h");
-        if (p.ndim() != 1 || p.size() != n) throw nb::value_error("'p' must hold one value per row of 'h'");
-        double *out;
-        OutArray oa = new_array(n, 0, &out);
-        {
-            nb::gil_scoped_release g;
-            for_chunks(n, kCubatureChunk, [&](size_t, size_t a, size_t e, int) {
-                cap_density(h.data(), p.data(), a, e, scale, out);
-            });
-        }
-        return oa;
+        if (p.ndim() != 1 || p.size() != check_points(h, 3, "h"))
+            throw nb::value_error("'p' must hold one value per row of 'h'");
+        return map_rows(h, 3, "h", 0, [&](size_t a, size_t e, double *out) {
+            cap_density(h.data(), p.data(), a, e, scale, out);
+        });
     }, "h"_a, "p"_a, "scale"_a, "(N,): float32(p) * float32(scale), widened, where the row of h (N, 3) is finite "
        "with h_z >= 0, else 0.");
+    m.def("rect_to_square", [](InArray d, InArray to_corner, InArray e0, InArray e1, InArray normal, InArray dual,
+                               double height, double area, double slack) {
+        const RectangleFrame f = rectangle_frame(to_corner, e0, e1, normal, dual, height, area);
+        return map_rows(d, 3, "d", 2,
+                        [&](size_t a, size_t e, double *out) { rect_to_square(d.data(), a, e, f, slack, out); });
+    }, "d"_a, "to_corner"_a, "e0"_a, "e1"_a, "normal"_a, "dual"_a, "height"_a, "area"_a, "slack"_a,
+       "Points (N, 2) of the rectangle light's square where the rays from ref along d (N, 3) hit its plane "
+       "(harness.adapters.mitsuba.rectangle.Rectangle.to_square).");
+    m.def("rect_to_world", [](InArray s, InArray to_corner, InArray e0, InArray e1, InArray normal, InArray dual,
+                              double height, double area) {
+        const RectangleFrame f = rectangle_frame(to_corner, e0, e1, normal, dual, height, area);
+        return map_rows(s, 2, "s", 3, [&](size_t a, size_t e, double *out) { rect_to_world(s.data(), a, e, f, out); });
+    }, "s"_a, "to_corner"_a, "e0"_a, "e1"_a, "normal"_a, "dual"_a, "height"_a, "area"_a,
+       "Unit world directions (N, 3) from ref towards the points s (N, 2) of the rectangle light "
+       "(Rectangle.to_world).");
+    m.def("rect_density", [](InArray s, InArray p, InArray to_corner, InArray e0, InArray e1, InArray normal,
+                             InArray dual, double height, double area) {
+        const RectangleFrame f = rectangle_frame(to_corner, e0, e1, normal, dual, height, area);
+        if (p.ndim() != 1 || p.size() != check_points(s, 2, "s"))
+            throw nb::value_error("'p' must hold one value per row of 's'");
+        return map_rows(s, 2, "s", 0, [&](size_t a, size_t e, double *out) {
+            rect_density(s.data(), p.data(), a, e, f, out);
+        });
+    }, "s"_a, "p"_a, "to_corner"_a, "e0"_a, "e1"_a, "normal"_a, "dual"_a, "height"_a, "area"_a,
+       "(N,): float32(p) * float32(J(s)), widened, at the points s (N, 2) inside [0, 1]^2, else 0 "
+       "(RectangleView.pdf's density).");
     m.def("grid_histogram", [](InArray s, BoolArray inside, const std::vector<int64_t> &shape) {
         if (shape.empty() || shape.size() > 2 || shape[0] < 1 || (shape.size() == 2 && shape[1] < 1))
             throw nb::value_error("'shape' must be one or two positive cell counts");

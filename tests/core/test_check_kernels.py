@@ -495,6 +495,103 @@ def test_cap_density_is_numpys_float32_product_where_the_point_is_on_the_hemisph
     np.testing.assert_array_equal(rest.cap_density(h, p, 0.3).view(np.uint64), want.view(np.uint64))
 
 
+# --- the rectangle light's map (Mitsuba area lights) -----------------------------------------
+def rectangle_frame(ref=(0.6, -0.4, 0.3)):
+    """A tilted parallelogram's frame as harness.adapters.mitsuba.rectangle.Rectangle builds it."""
+    from harness.adapters.mitsuba.rectangle import Rectangle
+
+    return Rectangle(ref, (-1.0, 1.0, 1.2), (2.0, 0.1, -0.3), (0.2, -1.8, 0.1)).frame
+
+
+def rect_square_reference(d, frame, slack):
+    """Rectangle.to_square's definition in numpy, left to right."""
+    to_corner, e0, e1, n, dual, height, area = frame
+    dn = d[:, 0] * n[0] + d[:, 1] * n[1] + d[:, 2] * n[2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = height / dn
+        hit = t > 0
+        tt = np.where(hit, t, 0.0)
+        o = [-to_corner[k] + tt * d[:, k] for k in range(3)]
+    s = np.stack([o[0] * f[0] + o[1] * f[1] + o[2] * f[2] for f in dual], axis=1)
+    with np.errstate(invalid="ignore"):
+        s = np.where((s >= -slack) & (s <= 1 + slack), np.clip(s, 0.0, 1.0), s)
+    s[~hit] = -1.0
+    s[np.isnan(d).any(axis=1)] = np.nan
+    return s
+
+
+def rect_vectors(s, frame):
+    to_corner, e0, e1 = frame[:3]
+    return [to_corner[k] + s[:, 0] * e0[k] + s[:, 1] * e1[k] for k in range(3)]
+
+
+def test_rect_to_square_is_its_numpy_definition_bit_for_bit():
+    """Rays that hit the plane, miss it (behind ref, parallel), land within the slack of an
+    edge (clamped onto it) or beyond it (kept), NaN and zero rows; several chunks."""
+    frame = rectangle_frame()
+    rng = np.random.default_rng(21)
+    s_true = rng.uniform(-0.2, 1.2, (N, 2))
+    s_true[:6] = [[0.0, 0.5], [1.0, 0.5], [-5e-7, 0.2], [1 + 5e-7, 0.9], [-2e-6, 0.5], [0.5, 1 + 3e-6]]
+    d = rect_world_reference(s_true, frame)
+    d[6:9] = -d[6:9]                                    # away from the plane
+    d[9] = np.cross(frame[1], frame[2])                 # along the normal, one way or the other
+    d[10] = np.cross(frame[3], frame[1])                # parallel to the plane
+    d[11:14] = [[np.nan, 0, 1], [0, 0, 0], [np.inf, 0, 0]]
+    got = rest.rect_to_square(d, frame, 1e-6)
+    with np.errstate(invalid="ignore"):
+        want = rect_square_reference(d, frame, 1e-6)
+    np.testing.assert_array_equal(got.view(np.uint64), want.view(np.uint64))
+    np.testing.assert_allclose(got[:4], [[0.0, 0.5], [1.0, 0.5], [0.0, 0.2], [1.0, 0.9]], rtol=0, atol=1e-12)
+    assert got[2, 0] == 0.0 and got[3, 0] == 1.0       # within the slack: onto the edge exactly
+    assert got[4, 0] < 0 and got[5, 1] > 1 and (got[6:9] == -1).all() and np.isnan(got[11]).all()
+    far = np.all((np.abs(s_true) > 1e-5) & (np.abs(s_true - 1) > 1e-5), axis=1)   # from the slack's band
+    far[:14] = False
+    np.testing.assert_allclose(got[far], s_true[far], rtol=0, atol=1e-12)   # the map inverts to_world
+    with pytest.raises(ValueError, match="'d' must have shape"):
+        rest.rect_to_square(d[:, :2], frame, 1e-6)
+    with pytest.raises(ValueError, match="3-vectors"):
+        rest.rect_to_square(d, (frame[0][:2], *frame[1:]), 1e-6)
+
+
+def rect_world_reference(s, frame):
+    w = rect_vectors(s, frame)
+    length = np.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+    return np.stack(w, axis=1) / length[:, None]
+
+
+def test_rect_to_world_is_its_numpy_definition_bit_for_bit():
+    frame = rectangle_frame()
+    s = np.random.default_rng(22).uniform(-0.1, 1.1, (N, 2))
+    s[:3] = [[0.0, 0.0], [1.0, 1.0], [np.nan, 0.5]]
+    got = rest.rect_to_world(s, frame)
+    np.testing.assert_array_equal(got.view(np.uint64), rect_world_reference(s, frame).view(np.uint64))
+    with pytest.raises(ValueError, match="'s' must have shape"):
+        rest.rect_to_world(s[:, :1], frame)
+
+
+def test_rect_density_is_numpys_float32_product_inside_the_square():
+    """float32(p) * float32(J(s)), J = area |<w, n>| / (dist2 sqrt(dist2)); 0 outside [0, 1]^2
+    and at NaN points; NaN, infinite and huge p as numpy rounds them."""
+    frame = rectangle_frame()
+    rng = np.random.default_rng(23)
+    s = rng.uniform(-0.05, 1.05, (N, 2))
+    s[:4] = [[0.0, 1.0], [np.nan, 0.5], [0.5, -0.0], [np.inf, 0.5]]
+    p = rng.random(N) * 10.0 ** rng.integers(-40, 40, N)
+    p[4:8] = [np.nan, np.inf, -1.0, 1e300]
+    area, n = frame[6], frame[3]
+    inside = (s[:, 0] >= 0) & (s[:, 0] <= 1) & (s[:, 1] >= 0) & (s[:, 1] <= 1)
+    w = rect_vectors(np.where(inside[:, None], s, 0.5), frame)
+    dist2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
+    jac = area * np.abs(w[0] * n[0] + w[1] * n[1] + w[2] * n[2]) / (dist2 * np.sqrt(dist2))
+    with np.errstate(over="ignore", invalid="ignore"):
+        want = np.where(inside, (p.astype(np.float32) * jac.astype(np.float32)).astype(float), 0.0)
+    got = rest.rect_density(s, p, frame)
+    np.testing.assert_array_equal(got.view(np.uint64), want.view(np.uint64))
+    assert got[1] == 0 and got[3] == 0 and got[2] > 0
+    with pytest.raises(ValueError, match="one value per row"):
+        rest.rect_density(s, p[:-1], frame)
+
+
 def test_row_lookup_finds_the_first_equal_row_as_numpy_compares():
     """Duplicated rows (the first is found), zeros of either sign alike, NaN rows matching
     nothing, rows absent, every width 1 to 3; a brute-force search as the reference."""

@@ -34,6 +34,7 @@ import numpy as np
 import reference_estimators as rest
 
 from harness.adapters.mitsuba.batch import UNIT_SLACK
+from harness.adapters.mitsuba.views import FEW_ROWS, MappedView
 
 __all__ = ["Cap", "CapView", "bounding_cap", "box_cap"]
 
@@ -43,6 +44,8 @@ _RIM_SLACK = 2e-7
 
 class Cap:
     """The cap {d : <d, axis> >= cos_alpha} and its equal-area map onto the hemisphere z >= 0."""
+
+    domain = "hemisphere"   # the map's: the check's domain there
 
     def __init__(self, axis: Sequence[float], cos_alpha: float):
         a = np.asarray(axis, dtype=float)
@@ -76,68 +79,37 @@ class Cap:
     def spec(self) -> dict[str, object]:
         return {"axis": self.axis.tolist(), "cos_alpha": self.cos_alpha}
 
+    def view(self, sampler: Any) -> CapView:
+        """``sampler`` seen through this map, as the check tests it."""
+        return CapView(sampler, self)
 
-#: Rows up to which ``CapView.pdf`` looks each one up among the last draw's points (a user's
-#: query, an example); larger calls are the cubature's nodes or the draw itself.
-_FEW_ROWS = 4096
 
+class CapView(MappedView):
+    """``sampler`` (world directions, pdf per steradian) seen through ``cap``'s map
+    (:class:`~harness.adapters.mitsuba.views.MappedView`): ``sample(u)`` gives points of the
+    hemisphere (NaN rows kept), ``pdf(h)`` the density per unit area of the hemisphere, the
+    world pdf times 1 - cos alpha (0 below the horizon), ``domain`` "hemisphere".
 
-class CapView:
-    """``sampler`` (world directions, pdf per steradian) seen through ``cap``'s map: ``sample(u)``
-    gives points of the hemisphere (NaN rows kept), ``pdf(h)`` the density per unit area of
-    the hemisphere, the world pdf times 1 - cos alpha (0 below the horizon), ``domain``
-    "hemisphere".
-
-    The map's float64 round trip loses the float32 direction Mitsuba returned (its length is
-    1 only within float32 rounding), and at a light's rim one ulp decides whether the ray
-    traced back hits the light.  So ``pdf`` at the points of the last draw (all its rows, or
-    the rows it produced, in its order, as the check passes them; or any few of them) is
-    evaluated at the world directions returned for them, exactly; elsewhere (cubature nodes)
-    at the float32 rounding of the mapped-back direction.  The density is the world pdf times
-    the map's constant Jacobian in float32, the world pdf's own precision, so that the
-    cubature stops at its rounding (harness.samplers.cubature.rounding_floor)."""
+    Off the draw (cubature nodes) the pdf is evaluated at the float32 rounding of the
+    mapped-back direction.  The density is the world pdf times the map's constant Jacobian in
+    float32, the world pdf's own precision, so that the cubature stops at its rounding
+    (harness.samplers.cubature.rounding_floor)."""
 
     domain = "hemisphere"
+    point_dim = 3
 
     def __init__(self, sampler: Any, cap: Cap):
-        self.sampler, self.cap, self.udim = sampler, cap, sampler.udim
-        self._drawn = np.empty((0, 3))      # the last draw's points (NaN rows: not produced)
-        self._world = np.empty((0, 3))      # and the world directions returned for them
-        self._produced = np.zeros(0, dtype=bool)
-        self._produced_count = 0
-        self._lookup: Any = None            # the draw's rows, for a few-row lookup (RowLookup)
+        self.cap = cap
+        super().__init__(sampler)
 
-    def sample(self, u: np.ndarray) -> np.ndarray:
-        world = np.asarray(self.sampler.sample(u), dtype=float)
-        h = self.cap.to_hemisphere(world)
-        h.flags.writeable = False   # the draw as pdf() recognises it (_same_memory): never changed in place
-        self._drawn, self._world = h, world
-        self._produced = rest.finite_rows(h)
-        self._produced_count = int(self._produced.sum())
-        self._lookup = rest.RowLookup(h)
-        return h
+    def to_domain(self, world: np.ndarray) -> np.ndarray:
+        return self.cap.to_hemisphere(world)
 
-    def _world_of_drawn(self, h: np.ndarray) -> np.ndarray | None:
-        """The world directions returned for h if h is the last draw (whole, or its produced
-        rows), else None."""
-        if h.shape == self._drawn.shape and (_same_memory(h, self._drawn)
-                                             or np.array_equal(h, self._drawn, equal_nan=True)):
-            return self._world
-        produced = self._produced_count   # counted once a draw: the cubature asks this of every call
-        if h.shape[0] == produced and produced and np.array_equal(h, self._drawn[self._produced]):
-            return self._world[self._produced]
-        return None
+    def to_world(self, h: np.ndarray) -> np.ndarray:
+        return self.cap.to_world(h)
 
-    def pdf(self, h: np.ndarray) -> np.ndarray:
-        h = np.asarray(h, dtype=float).reshape(-1, 3)
-        world = self._world_of_drawn(h)
-        if world is None:
-            world = self.cap.to_world(h)
-            if self._lookup is not None and h.shape[0] <= _FEW_ROWS:   # a few rows: any drawn among them
-                i = self._lookup.find(h)
-                drawn = i >= 0
-                world[drawn] = self._world[i[drawn]]
-        return rest.cap_density(h, self.sampler.pdf(world), self.cap.scale)
+    def density(self, h: np.ndarray, world_pdf: np.ndarray) -> np.ndarray:
+        return rest.cap_density(h, world_pdf, self.cap.scale)
 
     def float32_directions(self, lo: np.ndarray, hi: np.ndarray,
                            nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
@@ -146,8 +118,8 @@ class CapView:
         columns in the core's interleaved order, and a per-node ok): ``pdf``'s, the same bits,
         in one pass (:func:`reference_estimators.cubature_cap_float32_directions`); the
         ``directions`` of :class:`~harness.samplers.domains.Float32DirectionPdf`.  None for up
-        to _FEW_ROWS nodes: ``pdf`` then looks them up among the draw's points, as before."""
-        if lo.shape[0] * np.size(nodes) ** 2 <= _FEW_ROWS:
+        to FEW_ROWS nodes: ``pdf`` then looks them up among the draw's points, as before."""
+        if lo.shape[0] * np.size(nodes) ** 2 <= FEW_ROWS:
             return None
         c = self.cap
         return rest.cubature_cap_float32_directions(lo, hi, nodes, c.axis, c.t, c.b, c.cos_alpha, c.scale,
@@ -160,14 +132,6 @@ class CapView:
         product, widened where it is summed)."""
         p = np.asarray(self.sampler.float32_pdf(columns), dtype=np.float32)
         return p * np.float32(self.cap.scale)
-
-
-def _same_memory(a: np.ndarray, b: np.ndarray) -> bool:
-    """Whether a and b are the same values in the same memory (the check's points passed back
-    as drawn, a view of the very array, which sample() made read-only): then equal without a
-    comparison (a million directions compared took 0.06 s of an area light's check)."""
-    return (a.dtype == b.dtype and a.strides == b.strides
-            and a.__array_interface__["data"][0] == b.__array_interface__["data"][0])
 
 
 def bounding_cap(ref: Sequence[float], center: Sequence[float], radius: float) -> Cap | None:

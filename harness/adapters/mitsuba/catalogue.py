@@ -218,16 +218,17 @@ def _documented_failures(failing: set[str], must: set[str], may: set[str], sampl
 def wrong_catalogue(*, variant: str = "llvm_ad_rgb") -> list[CatalogueEntry]:
     """Planted faults every check must catch, each kind by its check (faults.py; an entry's
     ``fails`` names it: "chi2" for a pdf fault, "weight", "reported").
-    pdf (chi-square): a pdf 0.5 % too large or too small (BSDFs with and without failed
-    samples, envmap, twosided from below); the pdf of GGX alpha 0.1 claimed for samples of
-    alpha 0.11 (conductor and distribution) and of 0.01 for 0.011; Beckmann's pdf for GGX
-    samples; the envmap's pdf with the sun 1 degree away; a mask's pdf() without its
-    opacity; HG's pdf with g 1 % off (0.909 for 0.9, 0.303 for 0.3); a bitmap light's
-    nearest-filtered pdf for its bilinear samples; a sphere light's pdf for a radius 1 %
-    larger.  weight: missing cos theta_o; 0.1 % too large (BSDF, envmap, phase function,
-    area light).  reported pdf: a blendbsdf's sampled lobe's pdf instead of the mixture's;
-    a mask's opacity left out; HG's pdf with wi's sign flipped; an area light's density per
-    unit area instead of per solid angle (rectangle and sphere)."""
+    pdf (chi-square): a pdf 0.5 % too large or too small (BSDFs with and without failed samples,
+    envmap, twosided from below); the pdf of GGX alpha 0.1 claimed for samples of alpha 0.11
+    (conductor and distribution) and of 0.01 for 0.011; Beckmann's pdf for GGX samples; the
+    envmap's pdf with the sun 1 degree away; a mask's pdf() without its opacity; HG's pdf with g
+    1 % off (0.909 for 0.9, 0.303 for 0.3); a bitmap light's nearest-filtered pdf for its
+    bilinear samples, and for its nearest-filtered samples the pdf of the bitmap with one texel
+    twice as bright (a texel index off by one: tested in the rectangle's own square); a sphere
+    light's pdf for a radius 1 % larger.  weight: missing cos theta_o; 0.1 % too large (BSDF,
+    envmap, phase function, area light).  reported pdf: a blendbsdf's sampled lobe's pdf instead
+    of the mixture's; a mask's opacity left out; HG's pdf with wi's sign flipped; an area
+    light's density per unit area instead of per solid angle (rectangle and sphere)."""
     def entry(plugin: str, theta: float | None, make: Callable[[], Any], fault: str) -> CatalogueEntry:
         check = next((c for c in ("weight", "reported") if fault.startswith(c)), "chi2")
         return CatalogueEntry(plugin, theta, make, fault, "wrong", (check,))
@@ -250,8 +251,14 @@ def wrong_catalogue(*, variant: str = "llvm_ad_rgb") -> list[CatalogueEntry]:
     def light_fault(base: Any, shape: dict[str, Any], name: str) -> Mutant:
         return Mutant(base, name, pdf_from=area_emitter_sampler(shape, ref=base.ref, variant=variant))
 
-    def textured(filt: str) -> dict[str, Any]:
-        return rectangle_light({"type": "bitmap", "bitmap": light_bitmap(), "filter_type": filt})
+    def textured(filt: str, bitmap: np.ndarray | None = None) -> dict[str, Any]:
+        return rectangle_light({"type": "bitmap", "bitmap": light_bitmap() if bitmap is None else bitmap,
+                                "filter_type": filt})
+
+    def one_texel_brighter() -> np.ndarray:
+        img = light_bitmap()
+        img[5, 13] *= 2.0      # a bright block's texel: about 0.3 % of the light's power
+        return img
 
     plastic = {"type": "roughplastic", "distribution": "ggx", "alpha": 0.1}
     beckmann = {"type": "roughconductor", "distribution": "beckmann", "alpha": 0.1}
@@ -294,6 +301,10 @@ def wrong_catalogue(*, variant: str = "llvm_ad_rgb") -> list[CatalogueEntry]:
         entry("area rectangle bitmap bilinear samples, nearest pdf", None,
               lambda: light_fault(light(textured("bilinear")), textured("nearest"), "nearest pdf"),
               "pdf of another texture filter"),
+        entry("area rectangle bitmap nearest samples, pdf with one texel twice as bright", None,
+              lambda: light_fault(light(textured("nearest")), textured("nearest", one_texel_brighter()),
+                                  "one texel brighter"),
+              "pdf of a bitmap with one texel twice as bright"),
         entry("area sphere constant samples r=0.5, pdf r=0.505", None,
               lambda: light_fault(light(sphere_light(1.0)), sphere_light(1.0, radius=0.505),
                                   "pdf of r=0.505"),
@@ -374,8 +385,10 @@ def run_catalogue(entries: Sequence[CatalogueEntry], *, sample_count: int = 1_00
         failed_row = r.tests[r.tests["test"] == "failed samples"]
         has_weight = s.eval(np.array([[0.0, 0.0, 1.0]])) is not None
         reported = [f for f in r.failures if f.check == "reported_pdf"]
+        view = getattr(s, "view", None)   # an area light's map, where its statistical tests run
+        domain = s.domain if view is None else f"{view.domain} ({type(view).__name__.lower()})"
         row = {"label": e.label, "plugin": e.plugin, "theta": e.theta, "group": e.group, "fault": e.fault,
-               "domain": "hemisphere (cap)" if getattr(s, "cap", None) is not None else s.domain, "n": r.n,
+               "domain": domain, "n": r.n,
                "failed": int(failed_row["statistic"].iloc[0]) if len(failed_row) else 0, "delta": w.delta,
                "P": r.normalization[0], "P_err": r.normalization[1], "pvalue": r.pvalue,
                "failures": "; ".join(f"{f.check}: {f.count}" for f in r.failures

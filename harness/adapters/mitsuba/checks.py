@@ -25,9 +25,10 @@ sample.  Correct plugins stay far below it: most Mitsuba plugins compute the rep
 with ``pdf()`` itself (equal to the last bit), the others within a few ulps
 (benchmarks/mitsuba_samplers.py prints the largest relative difference of every plugin).
 
-Area lights are tested statistically in the equal-area map of the cap of directions holding
-them (:mod:`harness.adapters.mitsuba.cap`), their reported pdf on the world directions, where
-float32 ulps have their meaning.
+Area lights are tested statistically in a map of the directions towards them: a rectangle's
+own square (:mod:`harness.adapters.mitsuba.rectangle`), else the equal-area map of the cap of
+directions holding them (:mod:`harness.adapters.mitsuba.cap`); their reported pdf on the world
+directions, where float32 ulps have their meaning.
 
 Failed samples.  A sample Mitsuba could not produce (zero weight) is a NaN row of
 ``sampler.sample``; ``check_mitsuba_sampler`` is harness.samplers' check_with_missing (the
@@ -51,7 +52,6 @@ from scipy import stats
 import reference_estimators as rest
 
 from harness.adapters.mitsuba.batch import float32_pdf_of
-from harness.adapters.mitsuba.cap import CapView
 from harness.adapters.mitsuba.runtime import is_jit, jit_threads
 from harness.samplers.check import SAMPLE_CASE, check_with_missing
 from harness.samplers.domains import Domain, Float32DirectionPdf
@@ -79,15 +79,17 @@ def check_mitsuba_sampler(sampler: Any, *, sample_count: int = 1_000_000, seed: 
     A sampler's optional ``pole`` (the sphere's, :class:`~harness.samplers.domains.Domain`) and
     ``breaks`` (where its pdf may step or kink, :func:`~harness.samplers.check_sampler`), as
     an envmap's, let the cubature cut at its texel lines.
-    A sampler with a ``cap`` (an area light) is tested statistically in the cap's map
-    (``CapView``) and its reported pdf on the same draw's world directions.
+    A sampler with a ``view`` (an area light's map: a Cap or a Rectangle) is tested
+    statistically in the map (its ``view(sampler)``, with the map's ``breaks``) and its
+    reported pdf on the same draw's world directions.
     The check runs with drjit's worker threads set to the sampler's ``check_threads``
     (:class:`~harness.adapters.mitsuba.batch.MitsubaSampler`; one for most plugins), holding
     Mitsuba's variant lock (:func:`~harness.adapters.mitsuba.runtime.jit_threads`).  Its
     cubature passes the pdf the sampler's ``pdf_batch`` directions a call, and, where the
     sampler has ``float32_pdf``, as float32 columns
     (:class:`~harness.samplers.domains.Float32DirectionPdf`; an area light's through its cap's
-    map, ``CapView.float32_directions``: the same integrals, bit for bit).
+    map, ``CapView.float32_directions``: the same integrals, bit for bit; a rectangle's
+    square through ``pdf``).
     """
     if _scalar_variant(sampler):
         raise ValueError("check_mitsuba_sampler needs a JIT variant ('llvm_ad_rgb'): the cubature evaluates "
@@ -99,28 +101,31 @@ def check_mitsuba_sampler(sampler: Any, *, sample_count: int = 1_000_000, seed: 
 
 def _checked(sampler: Any, sample_count: int, seed: int, alpha: float) -> SamplerCheck:
     """check_mitsuba_sampler's checks, drjit's threads set."""
-    cap = getattr(sampler, "cap", None)
+    mapped = getattr(sampler, "view", None)
     with_pdf = getattr(sampler, "sample_with_pdf", None)
     batch = getattr(sampler, "pdf_batch", None)   # the cubature's directions a pdf call
     float32_pdf = float32_pdf_of(sampler)   # where it takes them, the cubature's nodes as float32 columns
-    if cap is None:
+    if mapped is None:
         domain = Domain(sampler.domain, pole=getattr(sampler, "pole", "z"))
         pdf = sampler.pdf if float32_pdf is None else Float32DirectionPdf(sampler.pdf, float32_pdf)
         return check_with_missing(with_pdf or sampler.sample, pdf, domain, sample_count=sample_count,
                                   seed=seed, alpha=alpha, udim=sampler.udim,
                                   breaks=getattr(sampler, "breaks", None), pdf_batch=batch)
-    view = CapView(sampler, cap)
-    pdf = view.pdf if float32_pdf is None else Float32DirectionPdf(view.pdf, view.float32_density,
-                                                                   view.float32_directions)
+    view = mapped.view(sampler)
+    directions = getattr(view, "float32_directions", None)
+    pdf = (view.pdf if float32_pdf is None or directions is None
+           else Float32DirectionPdf(view.pdf, view.float32_density, directions))
     r = check_with_missing(view.sample, pdf, view.domain, sample_count=sample_count, seed=seed,
-                           alpha=alpha, udim=sampler.udim, pdf_batch=batch)
-    if with_pdf is None:
+                           alpha=alpha, udim=sampler.udim, breaks=getattr(view, "breaks", None),
+                           pdf_batch=batch)
+    drawn = view.reported_draw()
+    if drawn is None:
         return r
-    u = rest.points(r.n, sampler.udim, seed=seed, case_id=SAMPLE_CASE)
-    x, reported = with_pdf(u)
-    f = reported_pdf_failure(x, reported, sampler.pdf)
+    x, reported, values = drawn
+    f = reported_pdf_failure(x, reported, sampler.pdf, values=values)
     if f is None:
         return r
+    u = rest.points(r.n, sampler.udim, seed=seed, case_id=SAMPLE_CASE)
     f = dataclasses.replace(f, examples=tuple({**ex, "u": u[ex["index"]].tolist()} for ex in f.examples))
     return dataclasses.replace(r, passed=False, failures=[*r.failures, f])
 
