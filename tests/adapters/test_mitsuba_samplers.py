@@ -748,6 +748,15 @@ def test_area_lights_choose_their_map():
     assert isinstance(ms.area_emitter_sampler(light("bilinear"), ref=cat.REFS[0]).view, Cap)
     assert isinstance(ms.area_emitter_sampler(em.sphere_light(1.0), ref=cat.REFS[0]).view, Cap)
     assert ms.area_emitter_sampler(em.rectangle_light(1.0), ref=(0.2, 0.3, 1.0)).view is None
+    checker = em.rectangle_light({"type": "checkerboard"})       # a texture whose grid is unknown
+    assert isinstance(ms.area_emitter_sampler(checker, ref=cat.REFS[0]).view, Cap)
+    # a Mitsuba transform as the shape's to_world: its matrix
+    with runtime.using_variant("llvm_ad_rgb") as mi:
+        moved = {**em.rectangle_light(1.0), "to_world": mi.ScalarTransform4f().translate([0.5, 0.0, 2.0])}
+    rect = ms.area_emitter_sampler(moved, ref=cat.REFS[0]).view
+    assert isinstance(rect, Rectangle)
+    np.testing.assert_allclose(rect.corner, [-0.5, -1.0, 2.0])
+    assert rect.height == pytest.approx(2.0)
     with pytest.raises(ValueError, match="'view' must be"):
         ms.area_emitter_sampler(em.rectangle_light(1.0), view="cap")
     with pytest.raises(ValueError, match="edge-on"):
