@@ -137,7 +137,7 @@ def rect_to_square(d: Any, frame: tuple, slack: float) -> np.ndarray:
     ref>, area = |e0 x e1|): t = height / <d, n>, o = (ref - corner) + t d, s_i = <o, f_i>,
     each within ``slack`` of [0, 1] clamped onto it; (-1, -1) where t > 0 fails (the ray
     misses the plane in front of ref); NaN rows stay NaN.  In C++ on all threads, numpy's
-    expression left to right (harness.adapters.mitsuba.rectangle.Rectangle.to_square)."""
+    expression left to right (harness.adapters.mitsuba.rectangle.Rectangle.to_domain)."""
     a = np.ascontiguousarray(d, dtype=np.float64)
     return _core.rect_to_square(a, *_rectangle_frame(frame), float(slack))
 
@@ -156,7 +156,7 @@ def rect_density(s: Any, p: Any, frame: tuple) -> np.ndarray:
     area |<w, n>| / (dist2 sqrt(dist2)) (w = P(s) - ref, dist2 = <w, w>: steradians per unit
     area of the square) rounded to float32, multiplied in float32 and widened, at the points
     s (N, 2) inside [0, 1]^2, else 0: the density of the Mitsuba adapter's rectangle map
-    (harness.adapters.mitsuba.rectangle.RectangleView.pdf) in one pass in C++."""
+    (harness.adapters.mitsuba.rectangle.Rectangle.density) in one pass in C++."""
     a = np.ascontiguousarray(s, dtype=np.float64)
     return _core.rect_density(a, np.ascontiguousarray(p, dtype=np.float64).reshape(-1),
                               *_rectangle_frame(frame))

@@ -225,7 +225,7 @@ void bind_checks(nb::module_ &m) {
                         [&](size_t a, size_t e, double *out) { rect_to_square(d.data(), a, e, f, slack, out); });
     }, "d"_a, "to_corner"_a, "e0"_a, "e1"_a, "normal"_a, "dual"_a, "height"_a, "area"_a, "slack"_a,
        "Points (N, 2) of the rectangle light's square where the rays from ref along d (N, 3) hit its plane "
-       "(harness.adapters.mitsuba.rectangle.Rectangle.to_square).");
+       "(harness.adapters.mitsuba.rectangle.Rectangle.to_domain).");
     m.def("rect_to_world", [](InArray s, InArray to_corner, InArray e0, InArray e1, InArray normal, InArray dual,
                               double height, double area) {
         const RectangleFrame f = rectangle_frame(to_corner, e0, e1, normal, dual, height, area);
@@ -243,7 +243,7 @@ void bind_checks(nb::module_ &m) {
         });
     }, "s"_a, "p"_a, "to_corner"_a, "e0"_a, "e1"_a, "normal"_a, "dual"_a, "height"_a, "area"_a,
        "(N,): float32(p) * float32(J(s)), widened, at the points s (N, 2) inside [0, 1]^2, else 0 "
-       "(RectangleView.pdf's density).");
+       "(Rectangle.density).");
     m.def("grid_histogram", [](InArray s, BoolArray inside, const std::vector<int64_t> &shape) {
         if (shape.empty() || shape.size() > 2 || shape[0] < 1 || (shape.size() == 2 && shape[1] < 1))
             throw nb::value_error("'shape' must be one or two positive cell counts");

@@ -230,7 +230,7 @@ struct RectangleFrame {
 };
 
 // Points s (rows a .. b - 1, 2 a row) of world directions d (3 a row) from ref
-// (Rectangle.to_square): t = height / <d, n>, the ray's point o = (ref - corner) + t d
+// (Rectangle.to_domain): t = height / <d, n>, the ray's point o = (ref - corner) + t d
 // (t = 0 where t > 0 fails), s_i = <o, f_i>, each within slack of [0, 1] clamped onto it;
 // (-1, -1) where t > 0 fails (a ray that misses the plane in front of ref), NaN for a row
 // with a NaN.
@@ -269,7 +269,7 @@ inline void rect_to_world(const double *s, size_t a, size_t b, const RectangleFr
     }
 }
 
-// RectangleView.pdf's density on the square, rows a .. b - 1: out[i] = the world pdf p[i] in
+// Rectangle.density, the density on the square, rows a .. b - 1: out[i] = the world pdf p[i] in
 // float32 times the Jacobian J(s) = area |<w, n>| / (dist2 sqrt(dist2)) (w = P(s) - ref,
 // dist2 = <w, w>) in float32, widened (numpy's float32 product), at the points s[i] inside
 // [0, 1]^2 (NaN is not), else 0.

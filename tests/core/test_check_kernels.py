@@ -504,7 +504,7 @@ def rectangle_frame(ref=(0.6, -0.4, 0.3)):
 
 
 def rect_square_reference(d, frame, slack):
-    """Rectangle.to_square's definition in numpy, left to right."""
+    """Rectangle.to_domain's definition in numpy, left to right."""
     to_corner, e0, e1, n, dual, height, area = frame
     dn = d[:, 0] * n[0] + d[:, 1] * n[1] + d[:, 2] * n[2]
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -45,7 +45,8 @@ _RIM_SLACK = 2e-7
 class Cap:
     """The cap {d : <d, axis> >= cos_alpha} and its equal-area map onto the hemisphere z >= 0."""
 
-    domain = "hemisphere"   # the map's: the check's domain there
+    domain, point_dim = "hemisphere", 3   # the check's domain in the map: (N, 3) points
+    breaks = None                          # the density's steps and kinks there: not known
 
     def __init__(self, axis: Sequence[float], cos_alpha: float):
         a = np.asarray(axis, dtype=float)
@@ -68,6 +69,17 @@ class Cap:
         (:func:`reference_estimators.cap_to_hemisphere`; numpy had cost 90 ns a direction)."""
         return rest.cap_to_hemisphere(d, self.axis, self.t, self.b, self.cos_alpha, self.scale, _RIM_SLACK)
 
+    def to_domain(self, d: np.ndarray) -> np.ndarray:
+        """:meth:`to_hemisphere`: the map as :class:`~harness.adapters.mitsuba.views.MappedView`
+        calls it."""
+        return self.to_hemisphere(d)
+
+    def density(self, h: np.ndarray, world_pdf: np.ndarray) -> np.ndarray:
+        """(N,): the density on the hemisphere at h (N, 3) of the world pdf values there: their
+        float32 rounding times 1 - cos alpha in float32, 0 below the horizon
+        (:func:`reference_estimators.cap_density`)."""
+        return rest.cap_density(h, world_pdf, self.scale)
+
     def to_world(self, x: np.ndarray) -> np.ndarray:
         """Points of the hemisphere (N, 3) (normalised first) -> world directions (N, 3); a
         point below the horizon maps outside the cap (at most to the cap's antipode).  The
@@ -88,28 +100,17 @@ class CapView(MappedView):
     """``sampler`` (world directions, pdf per steradian) seen through ``cap``'s map
     (:class:`~harness.adapters.mitsuba.views.MappedView`): ``sample(u)`` gives points of the
     hemisphere (NaN rows kept), ``pdf(h)`` the density per unit area of the hemisphere, the
-    world pdf times 1 - cos alpha (0 below the horizon), ``domain`` "hemisphere".
+    world pdf times 1 - cos alpha (0 below the horizon), ``domain`` "hemisphere"; and the
+    cubature's nodes as float32 world directions (``float32_directions``).
 
     Off the draw (cubature nodes) the pdf is evaluated at the float32 rounding of the
     mapped-back direction.  The density is the world pdf times the map's constant Jacobian in
     float32, the world pdf's own precision, so that the cubature stops at its rounding
     (harness.samplers.cubature.rounding_floor)."""
 
-    domain = "hemisphere"
-    point_dim = 3
-
     def __init__(self, sampler: Any, cap: Cap):
         self.cap = cap
-        super().__init__(sampler)
-
-    def to_domain(self, world: np.ndarray) -> np.ndarray:
-        return self.cap.to_hemisphere(world)
-
-    def to_world(self, h: np.ndarray) -> np.ndarray:
-        return self.cap.to_world(h)
-
-    def density(self, h: np.ndarray, world_pdf: np.ndarray) -> np.ndarray:
-        return rest.cap_density(h, world_pdf, self.cap.scale)
+        super().__init__(sampler, cap)
 
     def float32_directions(self, lo: np.ndarray, hi: np.ndarray,
                            nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:

@@ -32,7 +32,7 @@ import reference_estimators as rest
 
 from harness.adapters.mitsuba.views import MappedView
 
-__all__ = ["Rectangle", "RectangleView"]
+__all__ = ["Rectangle"]
 
 #: points this little outside the square (in s) are float32 rounding of the direction to an edge
 _EDGE_SLACK = 1e-6
@@ -44,7 +44,7 @@ class Rectangle:
     height): a bitmap's texel grid along s0 and s1, whose lines and centres are the density's
     ``breaks``."""
 
-    domain = "square"   # the map's: the check's domain there
+    domain, point_dim = "square", 2   # the check's domain in the map: (N, 2) points
 
     def __init__(self, ref: Sequence[float], corner: Sequence[float], e0: Sequence[float],
                  e1: Sequence[float], texels: tuple[int, int] | None = None):
@@ -83,7 +83,7 @@ class Rectangle:
         the core's kernels take it (:func:`reference_estimators.rect_to_square`)."""
         return (self.corner - self.ref, self.e0, self.e1, self.normal, self.dual, self.height, self.area)
 
-    def to_square(self, d: np.ndarray) -> np.ndarray:
+    def to_domain(self, d: np.ndarray) -> np.ndarray:
         """World directions d (N, 3) from ``ref`` -> points s (N, 2) of the square where their
         rays hit the rectangle's plane; NaN rows stay NaN; rays that miss the plane in front
         of ``ref`` give (-1, -1); within _EDGE_SLACK of the square, onto its edge.  One pass
@@ -116,36 +116,8 @@ class Rectangle:
         return {"corner": self.corner.tolist(), "e0": self.e0.tolist(), "e1": self.e1.tolist(),
                 "texels": list(self.texels) if self.texels else None}
 
-    def view(self, sampler: Any) -> RectangleView:
-        """``sampler`` seen through this map, as the check tests it."""
-        return RectangleView(sampler, self)
-
-
-class RectangleView(MappedView):
-    """``sampler`` (world directions towards the rectangle, pdf per steradian) seen through
-    ``rect``'s map (:class:`~harness.adapters.mitsuba.views.MappedView`): ``sample(u)`` gives
-    points of the square (NaN rows kept), ``pdf(s)`` the density per unit area of the square
-    (0 outside it), ``domain`` "square", ``breaks`` the rectangle's.  The density is the world
-    pdf times the Jacobian, each rounded to float32 and multiplied in float32: the world pdf's
-    own precision, so that the cubature stops at its rounding
-    (harness.samplers.cubature.rounding_floor)."""
-
-    domain = "square"
-    point_dim = 2
-
-    def __init__(self, sampler: Any, rect: Rectangle):
-        self.rect = rect
-        super().__init__(sampler)
-
-    @property
-    def breaks(self) -> tuple[np.ndarray, np.ndarray] | None:
-        return self.rect.breaks
-
-    def to_domain(self, world: np.ndarray) -> np.ndarray:
-        return self.rect.to_square(world)
-
-    def to_world(self, s: np.ndarray) -> np.ndarray:
-        return self.rect.to_world(s)
-
-    def density(self, s: np.ndarray, world_pdf: np.ndarray) -> np.ndarray:
-        return self.rect.density(s, world_pdf)
+    def view(self, sampler: Any) -> MappedView:
+        """``sampler`` seen through this map, as the check tests it: points of the square,
+        ``pdf`` the density per unit area of the square (0 outside it), ``breaks`` the
+        rectangle's (:class:`~harness.adapters.mitsuba.views.MappedView`)."""
+        return MappedView(sampler, self)

@@ -25,25 +25,26 @@ FEW_ROWS = 4096
 
 
 class MappedView:
-    """``sampler`` (world directions, pdf per steradian) seen through a map: ``sample(u)``
+    """``sampler`` (world directions, pdf per steradian) seen through ``mapping``: ``sample(u)``
     gives the map's points of the directions drawn (NaN rows kept), ``pdf(x)`` the density
-    per unit measure of the map's domain (``domain``, points of ``point_dim`` coordinates).
-    A subclass gives the map: ``to_domain`` (world directions (N, 3) -> points),
-    ``to_world`` (points -> world directions) and ``density`` (points and the world pdf there
-    -> the density on the domain).  ``pdf`` at the points of the last draw (all its rows, or
-    the rows it produced, in its order, as the check passes them; or any few of them) is the
-    world pdf at the directions returned for them.
+    per unit measure of the map's domain (``domain``, points of ``point_dim`` coordinates,
+    where it may step or kink: ``breaks``).  The mapping (a
+    :class:`~harness.adapters.mitsuba.cap.Cap` or a
+    :class:`~harness.adapters.mitsuba.rectangle.Rectangle`) gives ``domain``, ``point_dim``,
+    ``breaks``, ``to_domain`` (world directions (N, 3) -> points), ``to_world`` (points ->
+    world directions) and ``density`` (points and the world pdf there -> the density on the
+    domain).  ``pdf`` at the points of the last draw (all its rows, or the rows it produced, in
+    its order, as the check passes them; or any few of them) is the world pdf at the
+    directions returned for them.
 
     Where the sampler has ``sample_with_pdf``, the draw keeps the pdf each sample call
     reported, and ``pdf`` on the draw keeps the world pdf there: ``reported_draw`` hands both
     to the reported-pdf check with the draw's directions, which a second draw of the same
     uniforms had cost an area light's check (50-110 ms a million ray-traced samples)."""
 
-    domain: str
-    point_dim: int
-
-    def __init__(self, sampler: Any):
-        self.sampler, self.udim = sampler, sampler.udim
+    def __init__(self, sampler: Any, mapping: Any):
+        self.sampler, self.map, self.udim = sampler, mapping, sampler.udim
+        self.domain, self.point_dim, self.breaks = mapping.domain, mapping.point_dim, mapping.breaks
         self._drawn = np.empty((0, self.point_dim))   # the last draw's points (NaN rows: not produced)
         self._world = np.empty((0, 3))                # and the world directions returned for them
         self._produced = np.zeros(0, dtype=bool)
@@ -51,15 +52,6 @@ class MappedView:
         self._lookup: Any = None            # the draw's rows, for a few-row lookup (RowLookup)
         self._reported: np.ndarray | None = None    # the draw's reported pdf (N,), if the sampler has one
         self._world_pdf: np.ndarray | None = None   # the world pdf at the draw's directions (N,), once asked
-
-    def to_domain(self, world: np.ndarray) -> np.ndarray:
-        raise NotImplementedError
-
-    def to_world(self, x: np.ndarray) -> np.ndarray:
-        raise NotImplementedError
-
-    def density(self, x: np.ndarray, world_pdf: np.ndarray) -> np.ndarray:
-        raise NotImplementedError
 
     def sample(self, u: np.ndarray) -> np.ndarray:
         with_pdf = getattr(self.sampler, "sample_with_pdf", None)
@@ -70,7 +62,7 @@ class MappedView:
             self._reported = np.asarray(reported, dtype=float).reshape(-1)
         world = np.asarray(world, dtype=float)
         self._world_pdf = None
-        x = self.to_domain(world)
+        x = self.map.to_domain(world)
         x.flags.writeable = False   # the draw as pdf() recognises it (_same_memory): never changed in place
         self._drawn, self._world = x, world
         self._produced = rest.finite_rows(x)
@@ -99,13 +91,13 @@ class MappedView:
             else:   # the produced rows: the others' pdf is the sampler's at a NaN row, 0
                 self._world_pdf = np.zeros(self._world.shape[0])
                 self._world_pdf[self._produced] = p
-            return self.density(x, p)
-        world = self.to_world(x)
+            return self.map.density(x, p)
+        world = self.map.to_world(x)
         if self._lookup is not None and x.shape[0] <= FEW_ROWS:   # a few rows: any drawn among them
             i = self._lookup.find(x)
             drawn = i >= 0
             world[drawn] = self._world[i[drawn]]
-        return self.density(x, self.sampler.pdf(world))
+        return self.map.density(x, self.sampler.pdf(world))
 
     def reported_draw(self) -> tuple[np.ndarray, np.ndarray, np.ndarray | None] | None:
         """(the last draw's world directions (N, 3), NaN rows not produced; the pdf each
