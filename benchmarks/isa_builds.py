@@ -87,6 +87,45 @@ qs[rng.random(qs.shape) < 0.01] = np.nan
 qs[:6] = [[0, 0, 0, 0], [-0.0, 0, 0, 0], [1, np.inf, 2, 3], [np.inf] * 4, [5e-324, 0, 1e308, 1e308],
           [1, 2, 2, 1]]
 out["interpolation_bound"] = rest.interpolation_bound(qs).tobytes().hex()
+# the Rosenblatt transform's table lookups (four passes a batch of points: crowded leaves, NaN,
+# points outside [0, 1] and strips outside the table) and its statistics
+def table(strips, leaves):
+    parts = []
+    for _ in range(strips):
+        cuts = np.unique(np.r_[0.0, 1.0, rng.random(leaves - 1), 0.3 + 1e-9 * np.arange(40)])
+        mass = rng.gamma(0.5, 1.0, cuts.size - 1)
+        mass /= mass.sum()
+        parts.append((cuts[:-1], cuts[1:], np.r_[0.0, np.cumsum(mass)[:-1]], mass))
+    lo, hi, start, mass = (np.concatenate(v) for v in zip(*parts))
+    return lo, hi, start, mass, np.r_[0, np.cumsum([q[0].size for q in parts])]
+marginal, conditional = table(1, 3_000), table(32, 200)
+edges = np.r_[0.0, np.sort(rng.random(31)), 1.0]
+pts = rng.uniform(-0.05, 1.05, (70_001, 2))
+pts[:4] = [[np.nan, 0.5], [0.5, np.nan], [0.3 + 5e-9, 0.3 + 2e-9], [edges[5], 0.0]]
+out["rosenblatt"] = "".join(a.tobytes().hex() for a in rest.rosenblatt(marginal, conditional, edges, pts))
+out["lookup"] = rest.piecewise_linear_lookup(*conditional, rng.integers(-1, 34, 20_000),
+                                             rng.uniform(-0.1, 1.1, 20_000)).tobytes().hex()
+out["transform_statistics"] = "".join(
+    a.tobytes().hex() for a in rest.transform_statistics(marginal, conditional, edges, pts[4:], 64))
+# the rectangle light's map both ways and its density (a tilted parallelogram seen from off its
+# axis): rays that hit, miss and graze; points inside, on and off the square; NaN rows
+# (its frame in Python floats, the same on every machine: numpy's and LAPACK's kernels are not)
+e0, e1, corner = (2.0, 0.1, -0.3), (0.2, -1.8, 0.1), (-1.0, 1.0, 1.2)   # ref at the origin
+cross = (e0[1] * e1[2] - e0[2] * e1[1], e0[2] * e1[0] - e0[0] * e1[2], e0[0] * e1[1] - e0[1] * e1[0])
+area = sum(c * c for c in cross) ** 0.5
+n = tuple(c / area for c in cross)
+g00, g01, g11 = (sum(a * b for a, b in zip(x, y)) for x, y in ((e0, e0), (e0, e1), (e1, e1)))
+det = g00 * g11 - g01 * g01
+dual = [[(g11 * a - g01 * b) / det for a, b in zip(e0, e1)],
+        [(g00 * b - g01 * a) / det for a, b in zip(e0, e1)]]
+frame = (corner, e0, e1, n, dual, sum(a * b for a, b in zip(n, corner)), area)
+sq = rng.uniform(-0.1, 1.1, (20_003, 2))
+sq[:3] = [[np.nan, 0.5], [0.0, 1.0], [1 + 5e-7, 0.5]]
+dirs = rest.rect_to_world(sq, frame)
+dirs[3:6] = [[0.0, 0.0, -1.0], [np.nan, 0.0, 1.0], [1.0, 0.0, 0.0]]
+out["rect"] = "".join(a.tobytes().hex() for a in (
+    dirs, rest.rect_to_square(dirs, frame, 1e-6),
+    rest.rect_density(sq, rng.random(20_003) * 10.0 ** rng.uniform(-30, 30, 20_003), frame)))
 # the weight check: weights near, at and off eval / pdf; bad weights (NaN, infinite, negative,
 # -0.0 is not); zero, NaN and negative pdfs (apart: a NaN ratio makes the largest difference
 # inf); one constant weight
