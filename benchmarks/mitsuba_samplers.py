@@ -9,7 +9,8 @@ wrong_catalogue(), through
   chi2      check_mitsuba_sampler: check_sampler's tests on the directions Mitsuba produced
             plus an exact binomial test of the samples it did not produce (failed, or of a
             Dirac lobe); p-values Holm-corrected across the whole table (real and planted) at
-            family-wise alpha = 0.01; area lights in the equal-area map of their cap;
+            family-wise alpha = 0.01; area lights in their map (a rectangle's square, else the
+            equal-area map of their cap; the domain column says which);
   reported  the pdf each sample call reports against pdf() at the returned direction
             (1e-4 relative + float32 rounding of the direction: harness.adapters.mitsuba.checks);
             deterministic, no alpha;
@@ -25,8 +26,8 @@ wrong_catalogue(), through
                                                     [--only TEXT] [--group GROUP,...] [--start K]
                                                     [--no-mitsuba] [--warm-up 16384]
 
-Columns: P is the pdf's integral over the domain (cubature, ± its error bound; in the cap's map
-for area lights); 'failed' the samples Mitsuba did not produce of n ('δ' of those sampled a
+Columns: P is the pdf's integral over the domain (cubature, ± its error bound; in its map for
+area lights); 'failed' the samples Mitsuba did not produce of n ('δ' of those sampled a
 Dirac lobe, in the weight check's draw); p the check's smallest within-check Holm-adjusted
 p-value, 'adj' after Holm over the table; 'rep' the reported-pdf verdict with its mismatch
 count and the largest relative difference over the weight check's draw (every plugin: it is

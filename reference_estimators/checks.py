@@ -126,6 +126,8 @@ def _rectangle_frame(frame: tuple) -> list:
     *vectors, height, area = frame
     if len(vectors) != 5:
         raise ValueError("'frame' must be (to_corner, e0, e1, normal, dual, height, area)")
+    if np.shape(vectors[4]) != (2, 3):
+        raise ValueError(f"'dual' must be the dual basis (f0, f1), shape (2, 3), got {np.shape(vectors[4])}")
     arrays = [np.ascontiguousarray(v, dtype=np.float64).reshape(-1) for v in vectors]
     return [*arrays, float(height), float(area)]
 
@@ -135,9 +137,10 @@ def rect_to_square(d: Any, frame: tuple, slack: float) -> np.ndarray:
     along the world directions d (N, 3) hit its plane (``frame``: to_corner = corner - ref,
     e0, e1, the unit normal n, the dual basis (f0, f1) of (e0, e1), height = <n, corner -
     ref>, area = |e0 x e1|): t = height / <d, n>, o = (ref - corner) + t d, s_i = <o, f_i>,
-    each within ``slack`` of [0, 1] clamped onto it; (-1, -1) where t > 0 fails (the ray
-    misses the plane in front of ref); NaN rows stay NaN.  In C++ on all threads, numpy's
-    expression left to right (harness.adapters.mitsuba.rectangle.Rectangle.to_domain)."""
+    each within ``slack`` of [0, 1] clamped onto it; (-1, -1) where 0 < t < inf fails (the ray
+    misses the plane in front of ref, or runs along it); NaN rows stay NaN.  In C++ on all
+    threads, each value its numpy definition's (tests/core/test_check_kernels.py) left to right
+    (harness.adapters.mitsuba.rectangle.Rectangle.to_domain)."""
     a = np.ascontiguousarray(d, dtype=np.float64)
     return _core.rect_to_square(a, *_rectangle_frame(frame), float(slack))
 

@@ -219,9 +219,9 @@ inline void cap_density(const double *h, const double *p, size_t a, size_t b, do
 // The rectangle light's map (harness/adapters/mitsuba/rectangle.py): the parallelogram
 // corner + s0 e0 + s1 e1, s in [0, 1]^2, seen from ref, its unit normal n, the dual basis f
 // (rows f0, f1: f_i . e_j = delta_ij) and the plane's signed distance from ref, height =
-// <n, corner - ref>.  Each row's value is numpy's expression in Rectangle's methods, in its
-// order of operations (left to right), one pass where numpy's temporaries had cost 100-150 ns
-// a direction.
+// <n, corner - ref>.  Each row's value is its numpy definition's (tests/core/test_check_kernels.py)
+// in the same order of operations, left to right: one pass where numpy's temporaries had cost
+// 100-150 ns a direction.
 struct RectangleFrame {
     const double *to_corner;   // corner - ref
     const double *e0, *e1, *normal;
@@ -231,16 +231,16 @@ struct RectangleFrame {
 
 // Points s (rows a .. b - 1, 2 a row) of world directions d (3 a row) from ref
 // (Rectangle.to_domain): t = height / <d, n>, the ray's point o = (ref - corner) + t d
-// (t = 0 where t > 0 fails), s_i = <o, f_i>, each within slack of [0, 1] clamped onto it;
-// (-1, -1) where t > 0 fails (a ray that misses the plane in front of ref), NaN for a row
-// with a NaN.
+// (t = 0 where 0 < t < inf fails), s_i = <o, f_i>, each within slack of [0, 1] clamped onto
+// it; (-1, -1) where 0 < t < inf fails (a ray that misses the plane in front of ref, or runs
+// along it: a zero or parallel direction), NaN for a row with a NaN.
 inline void rect_to_square(const double *d, size_t a, size_t b, const RectangleFrame &f, double slack, double *s) {
     const double *n = f.normal, *c = f.to_corner;
     for (size_t i = a; i < b; ++i) {
         const double *r = d + 3 * i;
         const double dn = r[0] * n[0] + r[1] * n[1] + r[2] * n[2];
         const double t = f.height / dn;
-        const bool hit = t > 0;
+        const bool hit = t > 0 && t < __builtin_inf();
         const double tt = hit ? t : 0.0;
         const double o[3] = {-c[0] + tt * r[0], -c[1] + tt * r[1], -c[2] + tt * r[2]};
         const bool nan = r[0] != r[0] || r[1] != r[1] || r[2] != r[2];
@@ -253,7 +253,7 @@ inline void rect_to_square(const double *d, size_t a, size_t b, const RectangleF
     }
 }
 
-// The vector P(s) - ref = (corner - ref) + s0 e0 + s1 e1 of the point s (Rectangle.points).
+// The vector P(s) - ref = (corner - ref) + s0 e0 + s1 e1 of the point s.
 RE_INLINE void rect_vector(const RectangleFrame &f, double s0, double s1, double *w) {
     for (int k = 0; k < 3; ++k) w[k] = f.to_corner[k] + s0 * f.e0[k] + s1 * f.e1[k];
 }

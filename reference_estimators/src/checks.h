@@ -48,17 +48,17 @@ inline void count_cells(const double *s, size_t a, size_t b, const bool *inside,
     }
 }
 
-// Integer counts in `cells` cells of n items, on all hardware threads: count(a, b, table, chunk,
-// worker) adds the items a .. b - 1 of fixed chunk `chunk` to `table`, the thread's own (worker
-// its index); the tables' sums go to counts (float64).  Integer sums: the same whichever thread
-// counted what.
+// Integer counts in `cells` cells of n items, on all hardware threads: count(a, b, table, worker)
+// adds the items a .. b - 1 of a fixed chunk to `table`, the thread's own (worker its index);
+// the tables' sums go to counts (float64).  Integer sums: the same whichever thread counted
+// what.
 template <class Count>
 void count_on_threads(size_t n, size_t cells, double *counts, Count count) {
     std::vector<std::vector<int64_t>> tables(size_t(ThreadPool::default_threads()));
-    for_chunks(n, kCheckChunk, [&](size_t c, size_t a, size_t b, int worker) {
+    for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t b, int worker) {
         std::vector<int64_t> &table = tables[size_t(worker)];
         if (table.empty()) table.assign(cells, 0);
-        count(a, b, table.data(), c, worker);
+        count(a, b, table.data(), worker);
     });
     for (size_t j = 0; j < cells; ++j) {
         int64_t total = 0;
@@ -72,7 +72,7 @@ void count_on_threads(size_t n, size_t cells, double *counts, Count count) {
 // floor(s m) (at most m - 1).  Points outside, or with a NaN coordinate, are not counted.
 inline void grid_histogram(const double *s, size_t n, const bool *inside, int64_t m0, int64_t m1, double *counts) {
     count_on_threads(n, size_t(m0) * size_t(m1 > 0 ? m1 : 1), counts,
-                     [&](size_t a, size_t b, int64_t *table, size_t, int) {
+                     [&](size_t a, size_t b, int64_t *table, int) {
                          count_cells(s, a, b, inside, m0, m1, table);
                      });
 }
@@ -116,21 +116,20 @@ class CramerVonMisesCounts {
   public:
     // For n values (at most 2^32 - 1: 32-bit counts).
     explicit CramerVonMisesCounts(size_t n)
-        : n_(n), tables_(size_t(ThreadPool::default_threads())), nan_in_((n + kCheckChunk - 1) / kCheckChunk, 0) {
+        : n_(n), tables_(size_t(ThreadPool::default_threads())), nan_in_(tables_.size(), 0) {
         if (n > UINT32_MAX) throw std::length_error("the Cramer-von Mises sum takes at most 2^32 - 1 values");
         int bits = 10;
         while (bits < 22 && double(int64_t(1) << bits) < 64.0 * std::sqrt(double(n))) ++bits;
         K_ = int64_t(1) << bits;
     }
 
-    // Counts values a .. b - 1 (u[i * stride]) of fixed chunk `chunk` (kCheckChunk values) on
-    // worker `worker` of the thread pool.
-    void count(const double *u, size_t stride, size_t a, size_t b, size_t chunk, int worker) {
+    // Counts values a .. b - 1 (u[i * stride]) on worker `worker` of the thread pool.
+    void count(const double *u, size_t stride, size_t a, size_t b, int worker) {
         std::vector<uint32_t> &table = tables_[size_t(worker)];
         if (table.empty()) table.assign(size_t(K_), 0);
         for (size_t i = a; i < b; ++i) {
             const double v = u[i * stride];
-            if (v != v) { nan_in_[chunk] = 1; return; }
+            if (v != v) { nan_in_[size_t(worker)] = 1; return; }
             ++table[size_t(cell(clamped(v)))];
         }
     }
@@ -151,7 +150,7 @@ class CramerVonMisesCounts {
     // each worker's counts, owned by this object: the pool serves other callers between its
     // jobs, so a table kept by the worker's thread could be reset under the merge
     std::vector<std::vector<uint32_t>> tables_;
-    std::vector<unsigned char> nan_in_;   // per chunk: a NaN value seen
+    std::vector<unsigned char> nan_in_;   // per worker: a NaN value seen
 };
 
 inline CramerVonMisesSum CramerVonMisesCounts::sum(const double *u, size_t stride) const {
@@ -205,7 +204,7 @@ inline CramerVonMisesSum cramer_von_mises_sum(const double *u, size_t stride, si
     static_assert(kCheckChunk % 1024 == 0, "a chunk holds whole blocks of the sums");
     CramerVonMisesCounts counts(n);
     for_chunks(n, kCheckChunk,
-               [&](size_t c, size_t a, size_t b, int worker) { counts.count(u, stride, a, b, c, worker); });
+               [&](size_t, size_t a, size_t b, int worker) { counts.count(u, stride, a, b, worker); });
     return counts.sum(u, stride);
 }
 
@@ -226,7 +225,7 @@ inline void transform_statistics(const PiecewiseLinearTable &marginal, const Pie
     const int64_t strips = k == 2 ? int64_t(nedges) - 1 : 1;
     double *u[2] = {scratch(0, n), k == 2 ? scratch(1, n) : nullptr};
     std::vector<CramerVonMisesCounts> cvm(k, CramerVonMisesCounts(n));
-    count_on_threads(n, size_t(strips * bins), counts, [&](size_t a, size_t b, int64_t *cells, size_t c, int worker) {
+    count_on_threads(n, size_t(strips * bins), counts, [&](size_t a, size_t b, int64_t *cells, int worker) {
         thread_local std::vector<int64_t> strip;
         strip.resize(kCheckChunk);
         transform(s, k, a, b, u[0], u[1], 1, strip.data());
@@ -240,7 +239,7 @@ inline void transform_statistics(const PiecewiseLinearTable &marginal, const Pie
         }
         // the sums' first pass while the chunk's u is in cache (a pass of its own over u had
         // cost the statistics a tenth of their time)
-        for (size_t col = 0; col < k; ++col) cvm[col].count(u[col], 1, a, b, c, worker);
+        for (size_t col = 0; col < k; ++col) cvm[col].count(u[col], 1, a, b, worker);
     });
     for (size_t col = 0; col < k; ++col) sums[col] = cvm[col].sum(u[col], 1);
 }

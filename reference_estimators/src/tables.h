@@ -125,6 +125,7 @@ class PiecewiseLinearTable {
     // x's).  Empty where strip 0 is empty or fn is not constant on some leaf's span.
     template <class Fn>
     std::vector<int64_t> per_leaf(Fn fn) const {
+        if (strips_ < 1) return {};
         const int64_t first = offsets_[0], end = offsets_[1];
         if (end <= first) return {};
         std::vector<int64_t> of(leaves_.size(), fn(__builtin_nan("")));
@@ -155,6 +156,12 @@ class PiecewiseLinearTable {
         int64_t first[kBatch], strip[kBatch];   // pass 1: subs_ slot (-1: NaN leaf), strip; then begin, end
         uint32_t found[kBatch];
         const uint32_t nan_leaf = uint32_t(leaves_.size() - 1);
+        if (strips_ < 1) {   // no strip to look up: every point's value is the NaN leaf's (the passes
+                             // below read strip 0's index in place of a bad point's)
+            for (size_t j = 0; j < n; ++j) out[j * ostride] = value(nan_leaf, x[j * xstride]);
+            if (kLeaves) std::fill(leaves, leaves + n, int64_t(nan_leaf));
+            return;
+        }
         for (size_t a = 0; a < n; a += kBatch) {
             const size_t m = std::min(kBatch, n - a);
             for (size_t j = 0; j < m; ++j) sub_bucket(g ? g[a + j] : 0, x[(a + j) * xstride], first[j], strip[j]);

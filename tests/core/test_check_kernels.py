@@ -509,7 +509,7 @@ def rect_square_reference(d, frame, slack):
     dn = d[:, 0] * n[0] + d[:, 1] * n[1] + d[:, 2] * n[2]
     with np.errstate(divide="ignore", invalid="ignore"):
         t = height / dn
-        hit = t > 0
+        hit = (t > 0) & (t < np.inf)
         tt = np.where(hit, t, 0.0)
         o = [-to_corner[k] + tt * d[:, k] for k in range(3)]
     s = np.stack([o[0] * f[0] + o[1] * f[1] + o[2] * f[2] for f in dual], axis=1)
@@ -544,6 +544,7 @@ def test_rect_to_square_is_its_numpy_definition_bit_for_bit():
     np.testing.assert_allclose(got[:4], [[0.0, 0.5], [1.0, 0.5], [0.0, 0.2], [1.0, 0.9]], rtol=0, atol=1e-12)
     assert got[2, 0] == 0.0 and got[3, 0] == 1.0       # within the slack: onto the edge exactly
     assert got[4, 0] < 0 and got[5, 1] > 1 and (got[6:9] == -1).all() and np.isnan(got[11]).all()
+    assert (got[12:14] == -1).all()          # a zero direction (t infinite) and an infinite one: no hit
     far = np.all((np.abs(s_true) > 1e-5) & (np.abs(s_true - 1) > 1e-5), axis=1)   # from the slack's band
     far[:14] = False
     np.testing.assert_allclose(got[far], s_true[far], rtol=0, atol=1e-12)   # the map inverts to_world
@@ -551,6 +552,8 @@ def test_rect_to_square_is_its_numpy_definition_bit_for_bit():
         rest.rect_to_square(d[:, :2], frame, 1e-6)
     with pytest.raises(ValueError, match="3-vectors"):
         rest.rect_to_square(d, (frame[0][:2], *frame[1:]), 1e-6)
+    with pytest.raises(ValueError, match="shape \\(2, 3\\)"):
+        rest.rect_to_square(d, (*frame[:4], frame[4].T, *frame[5:]), 1e-6)
 
 
 def rect_world_reference(s, frame):
@@ -979,6 +982,22 @@ def test_piecewise_linear_lookup_gives_nan_in_an_empty_strip(empty):
     got = rest.piecewise_linear_lookup(*table, g, x)
     np.testing.assert_array_equal(got, lookup_reference(*table, g, x))
     assert np.isnan(got[np.isin(g, empty)]).all()
+
+
+def test_a_table_without_strips_gives_nan_and_reads_nothing():
+    """offsets [0]: no strip, no leaf.  Every lookup is NaN, as for a strip outside a table;
+    the transform through such a marginal too (its four passes read strip 0's index, which a
+    table without strips does not have)."""
+    empty = tuple(np.zeros(0) for _ in range(4)) + (np.zeros(1, dtype=np.int64),)
+    x = np.array([0.0, 0.5, 1.0, np.nan])
+    assert np.isnan(rest.piecewise_linear_lookup(*empty, np.zeros(4, dtype=np.int64), x)).all()
+    rng = np.random.default_rng(12)
+    conditional, edges = random_table(rng, 4, 10), np.array([0.0, 0.25, 0.5, 0.75, 1.0])
+    s = rng.random((100, 2))
+    u, _ = rest.rosenblatt(empty, conditional, edges, s)
+    assert np.isnan(u[:, 0]).all()
+    sums, counts = rest.transform_statistics(empty, None, np.array([0.0, 1.0]), s[:, :1], 8)
+    assert np.isnan(sums).all() and counts.sum() == 0
 
 
 @pytest.mark.parametrize("square, on_leaves", [(False, False), (True, False), (True, True)])

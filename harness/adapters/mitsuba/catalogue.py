@@ -359,8 +359,9 @@ def run_catalogue(entries: Sequence[CatalogueEntry], *, sample_count: int = 1_00
 
     One row per entry: label, plugin, theta, group, fault, domain, n, failed (samples not
     produced: failed or of a Dirac lobe), delta (of those, Dirac-lobe samples, counted by the
-    weight check's draw), P and P_err (the pdf's integral over the domain, in the cap's map
-    for area lights, and its cubature error bound), pvalue, adjusted, chi2 ('pass' / 'FAIL'),
+    weight check's draw), P and P_err (the pdf's integral over the domain, in its map for area
+    lights (the domain then says which: "square (rectangle)", "hemisphere (cap)"), and its
+    cubature error bound), pvalue, adjusted, chi2 ('pass' / 'FAIL'),
     failures (deterministic, but the reported pdf's), reported ('pass' / 'FAIL'),
     reported_mismatches, reported_max_rel (largest |reported / pdf() - 1| over the weight
     check's draw, every entry), weight ('pass' / 'FAIL' / 'n/a' for microfacet
@@ -385,8 +386,8 @@ def run_catalogue(entries: Sequence[CatalogueEntry], *, sample_count: int = 1_00
         failed_row = r.tests[r.tests["test"] == "failed samples"]
         has_weight = s.eval(np.array([[0.0, 0.0, 1.0]])) is not None
         reported = [f for f in r.failures if f.check == "reported_pdf"]
-        view = getattr(s, "view", None)   # an area light's map, where its statistical tests run
-        domain = s.domain if view is None else f"{view.domain} ({type(view).__name__.lower()})"
+        mapping = getattr(s, "mapping", None)   # an area light's map, where its statistical tests run
+        domain = s.domain if mapping is None else f"{mapping.domain} ({type(mapping).__name__.lower()})"
         row = {"label": e.label, "plugin": e.plugin, "theta": e.theta, "group": e.group, "fault": e.fault,
                "domain": domain, "n": r.n,
                "failed": int(failed_row["statistic"].iloc[0]) if len(failed_row) else 0, "delta": w.delta,

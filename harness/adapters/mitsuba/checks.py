@@ -79,8 +79,8 @@ def check_mitsuba_sampler(sampler: Any, *, sample_count: int = 1_000_000, seed: 
     A sampler's optional ``pole`` (the sphere's, :class:`~harness.samplers.domains.Domain`) and
     ``breaks`` (where its pdf may step or kink, :func:`~harness.samplers.check_sampler`), as
     an envmap's, let the cubature cut at its texel lines.
-    A sampler with a ``view`` (an area light's map: a Cap or a Rectangle) is tested
-    statistically in the map (its ``view(sampler)``, with the map's ``breaks``) and its
+    A sampler with a ``mapping`` (an area light's map: a Cap or a Rectangle) is tested
+    statistically in the map (``mapping.view(sampler)``, with the map's ``breaks``) and its
     reported pdf on the same draw's world directions.
     The check runs with drjit's worker threads set to the sampler's ``check_threads``
     (:class:`~harness.adapters.mitsuba.batch.MitsubaSampler`; one for most plugins), holding
@@ -101,17 +101,17 @@ def check_mitsuba_sampler(sampler: Any, *, sample_count: int = 1_000_000, seed: 
 
 def _checked(sampler: Any, sample_count: int, seed: int, alpha: float) -> SamplerCheck:
     """check_mitsuba_sampler's checks, drjit's threads set."""
-    mapped = getattr(sampler, "view", None)
+    mapping = getattr(sampler, "mapping", None)
     with_pdf = getattr(sampler, "sample_with_pdf", None)
     batch = getattr(sampler, "pdf_batch", None)   # the cubature's directions a pdf call
     float32_pdf = float32_pdf_of(sampler)   # where it takes them, the cubature's nodes as float32 columns
-    if mapped is None:
+    if mapping is None:
         domain = Domain(sampler.domain, pole=getattr(sampler, "pole", "z"))
         pdf = sampler.pdf if float32_pdf is None else Float32DirectionPdf(sampler.pdf, float32_pdf)
         return check_with_missing(with_pdf or sampler.sample, pdf, domain, sample_count=sample_count,
                                   seed=seed, alpha=alpha, udim=sampler.udim,
                                   breaks=getattr(sampler, "breaks", None), pdf_batch=batch)
-    view = mapped.view(sampler)
+    view = mapping.view(sampler)
     directions = getattr(view, "float32_directions", None)
     pdf = (view.pdf if float32_pdf is None or directions is None
            else Float32DirectionPdf(view.pdf, view.float32_density, directions))

@@ -238,13 +238,15 @@ class AreaEmitterSampler(MitsubaSampler):
     ``emitter.pdf_direction(it, ds)`` and ``emitter.eval(si)`` at the surface interaction
     of the ray from ``ref`` along a direction (see the module).
 
-    Directions, pdfs and weights are world quantities on the sphere (``domain``).  ``view``:
-    the map in which ``check_mitsuba_sampler`` runs its statistical tests, "auto" (default) a
-    rectangle's own square (:class:`~harness.adapters.mitsuba.rectangle.Rectangle`, a bitmap's
-    texel grid declared as its breaks) where its radiance is constant or a nearest-filtered
-    numpy bitmap, a sphere's cone, any other light's cone round its bounding box's corners
-    (:mod:`harness.adapters.mitsuba.cap`; None where ``ref`` is inside the box or in the
-    rectangle's plane); None (tested on the whole sphere); or a
+    Directions, pdfs and weights are world quantities on the sphere (``domain``).
+    ``mapping``: the map in which ``check_mitsuba_sampler`` runs its statistical tests, "auto"
+    (default) a rectangle's own square (:class:`~harness.adapters.mitsuba.rectangle.Rectangle`,
+    a bitmap's texel grid declared as its breaks) where its radiance is a constant (a number,
+    an RGB triple) or a nearest-filtered numpy bitmap without a ``to_uv`` and ``ref`` sees it
+    at no more than a grazing angle float32 resolves (:meth:`Rectangle.of_rectangle`); else
+    the cone of directions holding the light (:mod:`harness.adapters.mitsuba.cap`): a sphere's
+    own, any other shape's round its bounding box's corners (None where ``ref`` is inside the
+    box); None (tested on the whole sphere); or a
     :class:`~harness.adapters.mitsuba.cap.Cap` or a
     :class:`~harness.adapters.mitsuba.rectangle.Rectangle`."""
 
@@ -256,7 +258,7 @@ class AreaEmitterSampler(MitsubaSampler):
 
     def __init__(self, shape: dict[str, Any], *, ref: Sequence[float] = (0.0, 0.0, 0.0),
                  variant: str = "llvm_ad_rgb", name: str | None = None,
-                 view: Cap | Rectangle | str | None = "auto"):
+                 mapping: Cap | Rectangle | str | None = "auto"):
         if not isinstance(shape, dict) or not isinstance(shape.get("type"), str):
             raise ValueError(f"'plugin' must be a Mitsuba shape dict with a 'type' key, got {shape!r}")
         emitter = shape.get("emitter")
@@ -273,13 +275,13 @@ class AreaEmitterSampler(MitsubaSampler):
             self.plugin["to_world"] = _matrix(shape["to_world"])
         super().__init__(variant, name or self._label())
         scene, _ = self._build_checked(f"an area light on {shape['type']!r}")
-        if isinstance(view, str) and view == "auto":
-            view = self._auto_view(scene)
-        elif view is not None and not isinstance(view, (Cap, Rectangle)):
-            raise ValueError(f"'view' must be 'auto', None, a Cap or a Rectangle, got {view!r}")
-        self.view = view
+        if isinstance(mapping, str) and mapping == "auto":
+            mapping = self._auto_mapping(scene)
+        elif mapping is not None and not isinstance(mapping, (Cap, Rectangle)):
+            raise ValueError(f"'mapping' must be 'auto', None, a Cap or a Rectangle, got {mapping!r}")
+        self.mapping = mapping
 
-    def _auto_view(self, scene: Any) -> Cap | Rectangle | None:
+    def _auto_mapping(self, scene: Any) -> Cap | Rectangle | None:
         """The map the check tests this light in (see the class)."""
         kind = self.plugin["type"]
         radiance = self.plugin["emitter"]["radiance"]
@@ -289,9 +291,11 @@ class AreaEmitterSampler(MitsubaSampler):
         # a 100 : 1 texel step), which the square's CDF tables chase (54 million pdf calls,
         # 2.5 s, where the cap's map spends 33 million, 1.2 s); any other texture (a file, a
         # procedural one: its texel grid unknown) keeps the cap too
-        texture = isinstance(radiance, dict) and radiance.get("type") != "rgb"
-        nearest = self.image is not None and radiance.get("filter_type", "bilinear") == "nearest"
-        if kind == "rectangle" and (nearest or not texture):
+        constant = isinstance(radiance, (int, float)) or (isinstance(radiance, dict)
+                                                          and radiance.get("type") == "rgb")
+        nearest = (self.image is not None and radiance.get("filter_type", "bilinear") == "nearest"
+                   and "to_uv" not in radiance)
+        if kind == "rectangle" and (constant or nearest):
             texels = None if self.image is None else (self.image.shape[1], self.image.shape[0])
             rect = Rectangle.of_rectangle(self.ref, _to_world_array(self.plugin.get("to_world")), texels)
             if rect is not None:
@@ -365,20 +369,21 @@ class AreaEmitterSampler(MitsubaSampler):
             plugin["to_world"] = plugin["to_world"].tolist()
         digest = hashlib.sha256(self.image.tobytes()).hexdigest() if self.image is not None else None
         return {"plugin": plugin, "ref": list(self.ref), "image_sha256": digest,
-                "view": None if self.view is None else {"kind": type(self.view).__name__, **self.view.spec()}}
+                "mapping": None if self.mapping is None else {"kind": type(self.mapping).__name__,
+                                                              **self.mapping.spec()}}
 
 
 def area_emitter_sampler(shape: dict[str, Any], *, ref: Sequence[float] = (0.0, 0.0, 0.0),
                          variant: str = "llvm_ad_rgb", name: str | None = None,
-                         view: Cap | Rectangle | str | None = "auto") -> AreaEmitterSampler:
+                         mapping: Cap | Rectangle | str | None = "auto") -> AreaEmitterSampler:
     """Directions towards an area light on a shape (a Mitsuba shape dict with ``emitter =
     {"type": "area", "radiance": ...}``; the radiance a float, an RGB triple, a texture dict,
     or a numpy array / {"type": "bitmap", "bitmap": array, "filter_type": "nearest"}) from
     the reference point ``ref``, density per steradian (its statistical tests run in the
-    light's own square or in the equal-area map of the cap holding it unless ``view`` is None:
+    light's own square or in the equal-area map of the cap holding it unless ``mapping`` is None:
     see :class:`AreaEmitterSampler`);
     ``to_world`` may be a 4x4 nested list."""
-    return AreaEmitterSampler(shape, ref=ref, variant=variant, name=name, view=view)
+    return AreaEmitterSampler(shape, ref=ref, variant=variant, name=name, mapping=mapping)
 
 
 def rectangle_light(radiance: Any, *, center: Sequence[float] = (0.0, 0.0, 1.0), size: float = 1.0,

@@ -43,7 +43,7 @@ class Mutant:
         # the base's sphere pole and pdf breaks (an envmap's texel lines): hints to the cubature
         self.pole, self.breaks = getattr(base, "pole", "z"), getattr(self.pdf_from, "breaks", None)
         self.variant, self.kind = base.variant, base.kind
-        self.view = getattr(base, "view", None)   # an area light's: the statistical tests run in its map
+        self.mapping = getattr(base, "mapping", None)   # an area light's: its statistical tests run there
         self.check_threads = getattr(base, "check_threads", None)   # drjit's workers in a check
         self.pdf_batch = getattr(base, "pdf_batch", None)   # the cubature's directions a pdf call
 

@@ -19,7 +19,7 @@ the reference point,
 a fixed bijection of the directions that hit the rectangle onto the square: the hypothesis
 tested is the same.  A direction that misses the rectangle's plane in front of ``ref`` maps
 outside the square, (-1, -1), and is reported as outside the domain; one within float32
-rounding of an edge (1e-6 of the side) lands on it.
+rounding of an edge (:attr:`Rectangle.slack`) lands on it.
 """
 from __future__ import annotations
 
@@ -34,8 +34,13 @@ from harness.adapters.mitsuba.views import MappedView
 
 __all__ = ["Rectangle"]
 
-#: points this little outside the square (in s) are float32 rounding of the direction to an edge
+#: The least edge slack (in s): a float32 direction's rounding seen head-on and near
 _EDGE_SLACK = 1e-6
+#: Past this slack a rectangle is seen too obliquely for float32 to place its samples on the
+#: square (``of_rectangle`` declines it, and the light is tested in its cap's map)
+_MAX_SLACK = 1e-4
+#: A float32 unit direction's rounding, as an angle: each component's half ulp, 2^-24 relative
+_FLOAT32_ANGLE = 2.0**-24
 
 
 class Rectangle:
@@ -64,18 +69,29 @@ class Rectangle:
         # the dual basis in the plane: f_i . e_j = delta_ij, so s_i = (P - corner) . f_i
         self.dual = np.linalg.solve(np.array([[a @ a, a @ b], [a @ b, b @ b]]), np.stack([a, b]))
         self.texels = None if texels is None else (int(texels[0]), int(texels[1]))
+        # how far outside the square float32 rounding can put a sample on an edge: a direction's
+        # rounding, an angle of 2^-24 a component, moves its hit on the plane by dist / cos
+        # times that (cos = |height| / dist, least at the farthest corner), s by that over the
+        # side; four times the bound, at least _EDGE_SLACK (1e-6 head-on from the catalogue's
+        # points: dist 1.7-2.2, cos 0.3-0.6)
+        far = max(float(np.linalg.norm(c + i * a + j * b - r)) for i in (0, 1) for j in (0, 1))
+        side = min(float(np.linalg.norm(a)), float(np.linalg.norm(b)))
+        self.slack = max(_EDGE_SLACK, 4 * _FLOAT32_ANGLE * far * far / (abs(self.height) * side))
 
     @classmethod
     def of_rectangle(cls, ref: Sequence[float], to_world: np.ndarray | None,
                      texels: tuple[int, int] | None = None) -> Rectangle | None:
         """Mitsuba's rectangle shape with transform ``to_world`` (4 x 4; None: the identity),
-        from ``ref``; None where ``ref`` lies in its plane."""
+        from ``ref``; None where ``ref`` lies in its plane or sees it so obliquely that its
+        :attr:`slack` would pass 1e-4 of a side (a sample's float32 rounding could then put it
+        that far off the square: a light 20 sides away at a 0.1 % rise, say)."""
         m = np.eye(4) if to_world is None else np.asarray(to_world, dtype=float)
         corner = (m @ [-1.0, -1.0, 0.0, 1.0])[:3]
         try:
-            return cls(ref, corner, m[:3, 0] * 2, m[:3, 1] * 2, texels)
+            rect = cls(ref, corner, m[:3, 0] * 2, m[:3, 1] * 2, texels)
         except ValueError:
             return None
+        return rect if rect.slack <= _MAX_SLACK else None
 
     @property
     def frame(self) -> tuple:
@@ -86,10 +102,10 @@ class Rectangle:
     def to_domain(self, d: np.ndarray) -> np.ndarray:
         """World directions d (N, 3) from ``ref`` -> points s (N, 2) of the square where their
         rays hit the rectangle's plane; NaN rows stay NaN; rays that miss the plane in front
-        of ``ref`` give (-1, -1); within _EDGE_SLACK of the square, onto its edge.  One pass
+        of ``ref`` give (-1, -1); within :attr:`slack` of the square, onto its edge.  One pass
         in the core (:func:`reference_estimators.rect_to_square`; numpy had cost 0.15 s a
         million directions)."""
-        return rest.rect_to_square(d, self.frame, _EDGE_SLACK)
+        return rest.rect_to_square(d, self.frame, self.slack)
 
     def to_world(self, s: np.ndarray) -> np.ndarray:
         """Points s (N, 2) -> unit world directions (N, 3) from ``ref`` towards P(s)
@@ -114,7 +130,7 @@ class Rectangle:
 
     def spec(self) -> dict[str, object]:
         return {"corner": self.corner.tolist(), "e0": self.e0.tolist(), "e1": self.e1.tolist(),
-                "texels": list(self.texels) if self.texels else None}
+                "texels": list(self.texels) if self.texels else None, "slack": self.slack}
 
     def view(self, sampler: Any) -> MappedView:
         """``sampler`` seen through this map, as the check tests it: points of the square,
