@@ -998,6 +998,8 @@ def test_a_table_without_strips_gives_nan_and_reads_nothing():
     assert np.isnan(u[:, 0]).all()
     sums, counts = rest.transform_statistics(empty, None, np.array([0.0, 1.0]), s[:, :1], 8)
     assert np.isnan(sums).all() and counts.sum() == 0
+    u, _ = rest.rosenblatt(random_table(rng, 1, 10), empty, np.array([0.5]), s)   # as the conditional
+    assert np.isnan(u[:, 1]).all() and np.isfinite(u[:, 0]).all()
 
 
 @pytest.mark.parametrize("square, on_leaves", [(False, False), (True, False), (True, True)])

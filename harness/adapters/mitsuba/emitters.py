@@ -246,7 +246,7 @@ class AreaEmitterSampler(MitsubaSampler):
     at no more than a grazing angle float32 resolves (:meth:`Rectangle.of_rectangle`); else
     the cone of directions holding the light (:mod:`harness.adapters.mitsuba.cap`): a sphere's
     own, any other shape's round its bounding box's corners (None where ``ref`` is inside the
-    box); None (tested on the whole sphere); or a
+    box or the cone would pass a hemisphere); None (tested on the whole sphere); or a
     :class:`~harness.adapters.mitsuba.cap.Cap` or a
     :class:`~harness.adapters.mitsuba.rectangle.Rectangle`."""
 
@@ -297,7 +297,8 @@ class AreaEmitterSampler(MitsubaSampler):
                    and "to_uv" not in radiance)
         if kind == "rectangle" and (constant or nearest):
             texels = None if self.image is None else (self.image.shape[1], self.image.shape[0])
-            rect = Rectangle.of_rectangle(self.ref, _to_world_array(self.plugin.get("to_world")), texels)
+            rect = Rectangle.of_rectangle(self.ref, _to_world_array(self.plugin.get("to_world")), texels,
+                                          float32="double" not in self.variant)
             if rect is not None:
                 return rect
         with using_variant(self.variant):

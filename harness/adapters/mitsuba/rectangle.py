@@ -69,26 +69,36 @@ class Rectangle:
         # the dual basis in the plane: f_i . e_j = delta_ij, so s_i = (P - corner) . f_i
         self.dual = np.linalg.solve(np.array([[a @ a, a @ b], [a @ b, b @ b]]), np.stack([a, b]))
         self.texels = None if texels is None else (int(texels[0]), int(texels[1]))
-        # how far outside the square float32 rounding can put a sample on an edge: a direction's
-        # rounding, an angle of 2^-24 a component, moves its hit on the plane by dist / cos
-        # times that (cos = |height| / dist, least at the farthest corner), s by that over the
-        # side; four times the bound, at least _EDGE_SLACK (1e-6 head-on from the catalogue's
-        # points: dist 1.7-2.2, cos 0.3-0.6)
-        far = max(float(np.linalg.norm(c + i * a + j * b - r)) for i in (0, 1) for j in (0, 1))
-        side = min(float(np.linalg.norm(a)), float(np.linalg.norm(b)))
-        self.slack = max(_EDGE_SLACK, 4 * _FLOAT32_ANGLE * far * far / (abs(self.height) * side))
+        # how far outside the square float32 rounding can put a sample on an edge (in s, which
+        # a displacement d in the plane moves by at most |d| max|f_i|): the sampled point's own
+        # coordinates, rounded (|P| 2^-24), and the direction to it, rounded (an angle of 2^-24 a
+        # component, which moves the hit by dist / cos times that, cos = |height| / dist: dist^2
+        # / |height|, largest at the farthest corner); four times the bound, at least
+        # _EDGE_SLACK (1e-6 from the catalogue's points: dist 1.7-2.2, cos 0.3-0.6)
+        corners = [c + i * a + j * b for i in (0, 1) for j in (0, 1)]
+        far = max(float(np.linalg.norm(p - r)) for p in corners)
+        size = max(float(np.linalg.norm(p)) for p in corners)
+        shear = float(np.linalg.norm(self.dual, axis=1).max())
+        bound = _FLOAT32_ANGLE * (far * far / abs(self.height) + size) * shear
+        self.slack = max(_EDGE_SLACK, 4 * bound)
 
     @classmethod
     def of_rectangle(cls, ref: Sequence[float], to_world: np.ndarray | None,
-                     texels: tuple[int, int] | None = None) -> Rectangle | None:
+                     texels: tuple[int, int] | None = None, *, float32: bool = True) -> Rectangle | None:
         """Mitsuba's rectangle shape with transform ``to_world`` (4 x 4; None: the identity),
         from ``ref``; None where ``ref`` lies in its plane or sees it so obliquely that its
         :attr:`slack` would pass 1e-4 of a side (a sample's float32 rounding could then put it
-        that far off the square: a light 20 sides away at a 0.1 % rise, say)."""
+        that far off the square: a light 20 sides away at a 0.1 % rise, say).  ``float32``: the
+        variant's geometry is single precision, so the transform and ``ref`` are rounded to
+        float32 first, as Mitsuba holds them (in float64 the light 100 units from the origin sat
+        up to 2e-6 of a side off Mitsuba's own, beyond the slack)."""
         m = np.eye(4) if to_world is None else np.asarray(to_world, dtype=float)
+        r = np.asarray(ref, dtype=float)
+        if float32:
+            m, r = (v.astype(np.float32).astype(float) for v in (m, r))
         corner = (m @ [-1.0, -1.0, 0.0, 1.0])[:3]
         try:
-            rect = cls(ref, corner, m[:3, 0] * 2, m[:3, 1] * 2, texels)
+            rect = cls(r, corner, m[:3, 0] * 2, m[:3, 1] * 2, texels)
         except ValueError:
             return None
         return rect if rect.slack <= _MAX_SLACK else None
