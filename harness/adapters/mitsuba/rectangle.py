@@ -3,8 +3,8 @@ checking its sampler there.
 
 Seen through a cap (:mod:`harness.adapters.mitsuba.cap`), a rectangle's outline is four arcs
 across the check's cells, and a bitmap's texel lines are more curves: steps along curves,
-which the cubature resolves box by box (15-20 million pdf calls a check at 1e6 samples, a
-second of its time).  Parameterised instead by the point its direction hits,
+which the cubature resolves box by box (14-23 million pdf calls for the CDF tables alone at
+1e6 samples, about a second a check).  Parameterised instead by the point its direction hits,
 
     P(s) = corner + s0 e0 + s1 e1,   s in [0, 1]^2
 
@@ -36,8 +36,9 @@ __all__ = ["Rectangle"]
 
 #: The least edge slack (in s): a float32 direction's rounding seen head-on and near
 _EDGE_SLACK = 1e-6
-#: Past this slack a rectangle is seen too obliquely for float32 to place its samples on the
-#: square (``of_rectangle`` declines it, and the light is tested in its cap's map)
+#: Past this slack a rectangle is seen too obliquely, or lies too far from the origin, for
+#: float32 to place its samples on the square (``of_rectangle`` declines it, and the light is
+#: tested in its cap's map)
 _MAX_SLACK = 1e-4
 #: A float32 unit direction's rounding, as an angle: each component's half ulp, 2^-24 relative
 _FLOAT32_ANGLE = 2.0**-24
