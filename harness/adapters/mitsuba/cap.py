@@ -97,20 +97,17 @@ class Cap:
 
 
 class CapView(MappedView):
-    """``sampler`` (world directions, pdf per steradian) seen through ``cap``'s map
-    (:class:`~harness.adapters.mitsuba.views.MappedView`): ``sample(u)`` gives points of the
-    hemisphere (NaN rows kept), ``pdf(h)`` the density per unit area of the hemisphere, the
-    world pdf times 1 - cos alpha (0 below the horizon), ``domain`` "hemisphere"; and the
-    cubature's nodes as float32 world directions (``float32_directions``).
+    """``sampler`` (world directions, pdf per steradian) seen through a :class:`Cap`'s map,
+    ``CapView(sampler, cap)`` (:class:`~harness.adapters.mitsuba.views.MappedView`, the cap its
+    ``map``): ``sample(u)`` gives points of the hemisphere (NaN rows kept), ``pdf(h)`` the
+    density per unit area of the hemisphere, the world pdf times 1 - cos alpha (0 below the
+    horizon), ``domain`` "hemisphere"; and the cubature's nodes as float32 world directions
+    (``float32_directions``).
 
     Off the draw (cubature nodes) the pdf is evaluated at the float32 rounding of the
     mapped-back direction.  The density is the world pdf times the map's constant Jacobian in
     float32, the world pdf's own precision, so that the cubature stops at its rounding
     (harness.samplers.cubature.rounding_floor)."""
-
-    def __init__(self, sampler: Any, cap: Cap):
-        self.cap = cap
-        super().__init__(sampler, cap)
 
     def float32_directions(self, lo: np.ndarray, hi: np.ndarray,
                            nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
@@ -122,7 +119,7 @@ class CapView(MappedView):
         to FEW_ROWS nodes: ``pdf`` then looks them up among the draw's points, as before."""
         if lo.shape[0] * np.size(nodes) ** 2 <= FEW_ROWS:
             return None
-        c = self.cap
+        c = self.map
         return rest.cubature_cap_float32_directions(lo, hi, nodes, c.axis, c.t, c.b, c.cos_alpha, c.scale,
                                                     UNIT_SLACK)
 
@@ -132,7 +129,7 @@ class CapView(MappedView):
         float32, times the Jacobian in float32, as float32 (``pdf``'s density, cap_density's
         product, widened where it is summed)."""
         p = np.asarray(self.sampler.float32_pdf(columns), dtype=np.float32)
-        return p * np.float32(self.cap.scale)
+        return p * np.float32(self.map.scale)
 
 
 def bounding_cap(ref: Sequence[float], center: Sequence[float], radius: float) -> Cap | None:

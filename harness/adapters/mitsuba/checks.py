@@ -116,7 +116,7 @@ def _checked(sampler: Any, sample_count: int, seed: int, alpha: float) -> Sample
     pdf = (view.pdf if float32_pdf is None or directions is None
            else Float32DirectionPdf(view.pdf, view.float32_density, directions))
     r = check_with_missing(view.sample, pdf, view.domain, sample_count=sample_count, seed=seed,
-                           alpha=alpha, udim=sampler.udim, breaks=getattr(view, "breaks", None),
+                           alpha=alpha, udim=sampler.udim, breaks=view.breaks,
                            pdf_batch=batch)
     drawn = view.reported_draw()
     if drawn is None:
