@@ -18,8 +18,9 @@ from .arguments import stream_arg
 __all__ = [
     "CHECK_DOMAINS", "domain_params", "dithered_domain_params", "domain_points", "grid_histogram",
     "rosenblatt", "piecewise_linear_lookup", "transform_statistics", "cramer_von_mises_sum", "pdf_summary",
-    "all_float32", "dither_float32", "finite_rows", "pdf_mismatches", "float64_rows", "float32_columns",
-    "take_rows", "nan_rows", "float32_unit_rows", "cap_to_world", "cap_to_hemisphere", "cap_density",
+    "all_float32", "dither_float32", "float32_nudged", "finite_rows", "pdf_mismatches", "float64_rows",
+    "float32_columns", "take_rows", "nan_rows", "float32_unit_rows", "cap_to_world", "cap_to_hemisphere",
+    "cap_density",
     "rect_to_square", "rect_to_world", "rect_density", "RowLookup", "weight_agreement",
 ]
 
@@ -327,6 +328,18 @@ def dither_float32(v: Any, u: Any) -> np.ndarray:
     a = np.ascontiguousarray(v, dtype=np.float64)
     w = np.ascontiguousarray(u, dtype=np.float64)
     return _core.dither_float32(a.reshape(-1), w.reshape(-1)).reshape(a.shape)
+
+
+def float32_nudged(x: Any, column: int, steps: int) -> np.ndarray:
+    """(N, d) float64: the points x (N, d) rounded to float32, with column ``column`` moved by
+    |steps| float32 ulps, up for steps > 0 and down for steps < 0.  The bits of numpy's
+    x.astype(float32) with |steps| np.nextafter calls in float32 on the column, towards +-inf,
+    cast back to float64 (NaN stays NaN; the infinities hold); one pass in C++ on all threads."""
+    a = np.ascontiguousarray(x, dtype=np.float64)
+    if a.ndim != 2 or not 0 <= column < a.shape[1]:
+        raise ValueError(f"'x' must have shape (N, d) and 'column' be one of its d columns, "
+                         f"got {a.shape}, {column}")
+    return _core.float32_nudged(a, int(column), int(steps))
 
 
 def pdf_summary(kind: str, measure: float, s: Any, inside: Any, p: Any,

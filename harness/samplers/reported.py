@@ -14,7 +14,7 @@ wherever the pdf is not steep at that scale.
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 
 import numpy as np
 
@@ -28,30 +28,20 @@ __all__ = ["NUDGE_ULPS", "reported_pdf_failure", "rounding_spread"]
 NUDGE_ULPS = 4
 
 
-def _nudged(x32: np.ndarray) -> Iterator[np.ndarray]:
-    """Copies of the float32 points x32 (N, d) with one coordinate moved by NUDGE_ULPS float32
-    ulps up or down: 2 d copies, as float64."""
-    for c in range(x32.shape[1]):
-        for to in (np.inf, -np.inf):
-            y = x32.copy()
-            col = y[:, c]
-            for _ in range(NUDGE_ULPS):
-                col = np.nextafter(col, np.float32(to), dtype=np.float32)
-            y[:, c] = col
-            yield y.astype(np.float64)
-
-
 def rounding_spread(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray, at: np.ndarray) -> np.ndarray:
-    """max |f(x') - at| over the nudged copies x' of the points x ((N,) or (N, d)): what float32
+    """max |f(x') - at| over the 2 d copies x' of the points x ((N,) or (N, d)) rounded to
+    float32 with one coordinate moved by NUDGE_ULPS float32 ulps up or down: what float32
     rounding of a point can change f(x) = ``at`` by (a non-finite change counts as infinite).
     f takes points of x's shape (and may return (N,) or (N, channels), as ``at``)."""
     flat = np.asarray(x, dtype=float)
-    cols = flat.reshape(flat.shape[0], -1).astype(np.float32)
+    rows = flat.reshape(flat.shape[0], -1)
     spread = np.zeros_like(at, dtype=float)
-    for y in _nudged(cols):
-        with np.errstate(all="ignore"):
-            d = np.abs(np.asarray(f(y.reshape(flat.shape)), dtype=float) - at)
-        spread = np.maximum(spread, np.where(np.isfinite(d), d, np.inf))
+    for c in range(rows.shape[1]):
+        for steps in (NUDGE_ULPS, -NUDGE_ULPS):
+            y = rest.float32_nudged(rows, c, steps)
+            with np.errstate(all="ignore"):
+                d = np.abs(np.asarray(f(y.reshape(flat.shape)), dtype=float) - at)
+            spread = np.maximum(spread, np.where(np.isfinite(d), d, np.inf))
     return spread
 
 
@@ -86,16 +76,16 @@ def reported_pdf_failure(x: np.ndarray, reported: np.ndarray, pdf: Callable[[np.
         if p.size != n:
             raise ValueError(f"'values' must hold pdf(x) at the {n} points, got {p.size} values")
         p = p if every else p[produced]
-    bad = rest.pdf_mismatches(rs, p, rtol)    # rows of xs; rare, so the rest works on them alone
+    bad = rest.pdf_mismatches(rs, p, rtol)    # rows of xs; the rest works on them alone
+    rb, pb = rs[bad], p[bad]    # (0.8 million rows in the check of a GGX α = 0.01 lobe)
     with np.errstate(all="ignore"):
-        diff = np.abs(rs[bad] - p[bad])
-        nudge = np.isfinite(rs[bad]) & (rs[bad] >= 0) & np.isfinite(p[bad])
+        diff = np.abs(rb - pb)
+        nudge = np.isfinite(rb) & (rb >= 0) & np.isfinite(pb)
         if nudge.any():
-            sel = bad[nudge]
             flat_pdf = lambda y: np.asarray(pdf(y), dtype=float).reshape(-1)  # noqa: E731
-            spread = rounding_spread(flat_pdf, xs[sel], p[sel])
+            spread = rounding_spread(flat_pdf, xs[bad[nudge]], pb[nudge])
             still = np.ones(bad.size, dtype=bool)
-            still[nudge] = ~(diff[nudge] <= rtol * np.abs(p[sel]) + spread)
+            still[nudge] = ~(diff[nudge] <= rtol * np.abs(pb[nudge]) + spread)
             bad, diff = bad[still], diff[still]
     if not bad.size:
         return None

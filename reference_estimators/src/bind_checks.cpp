@@ -346,6 +346,22 @@ void bind_checks(nb::module_ &m) {
         return r;
     }, "v"_a, "u"_a, "The values v (flattened) each moved to below + (above - below) u, below and above half "
        "way to its float32 neighbours; v itself where that is not finite.");
+    m.def("float32_nudged", [](InArray x, size_t column, int steps) {
+        if (x.ndim() != 2 || column >= x.shape(1))
+            throw nb::value_error("'x' must be an array (N, d) and 'column' one of its columns");
+        const size_t n = x.shape(0), d = x.shape(1);
+        double *out;
+        OutArray r = new_array(n, d, &out);
+        {
+            nb::gil_scoped_release g;
+            // each row depends on itself alone: chunks on all threads
+            for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t b, int) {
+                float32_nudged(x.data(), d, column, steps, a, b, out);
+            });
+        }
+        return r;
+    }, "x"_a, "column"_a, "steps"_a,
+       "x (N, d) rounded to float32 with column `column` moved |steps| float32 ulps (up if steps > 0), as float64.");
     m.def("pdf_summary", [](int kind, double measure, InArray s, BoolArray inside, InArray p, double c, double total) {
         const CheckDomain d = check_domain(kind);
         const size_t n = check_params(s, size_t(domain_param_dim(d)));

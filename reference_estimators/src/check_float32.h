@@ -1,8 +1,8 @@
 // A float32 renderer's numbers in the sampler check: directions rounded to float32 unit
 // vectors as Mitsuba's pdf takes them (float32_unit_rows), its float32 columns as float64
 // rows and float64 rows as its float32 columns (float64_rows, float32_columns), whether values
-// are float32 (all_float32), and float32 points dithered within their rounding intervals
-// (dither_float32).
+// are float32 (all_float32), float32 points dithered within their rounding intervals
+// (dither_float32), and float32 points with one coordinate moved by whole ulps (float32_nudged).
 #pragma once
 
 #include <cmath>
@@ -188,6 +188,35 @@ inline void dither_float32(const double *v, const double *u, size_t n, double *o
         const double d = below + (above - below) * u[i];
         const uint64_t keep = ~in_range | all_ones(magnitude == kFloatMax) | all_ones((bits(d) & kMagnitude) >= kInfinity);
         out[i] = value(pick(keep, xb, bits(d)));
+    }
+}
+
+// Rows x (n, d), rows a .. b - 1, rounded to float32 with column c moved |steps| float32 ulps
+// (up if steps > 0, down if < 0), back as doubles into out (n, d): the points whose pdf the
+// reported-pdf check's rounding tolerance reads (harness.samplers.reported).  The bits of
+// numpy's |steps| nextafter calls in float32 towards +-inf (tests/core/test_check_kernels.py):
+// a step is one on the integer that orders the floats (its magnitude's bits, negated for a
+// negative float; +0 and -0 both 0, as nextafter steps from either to the same subnormal), held
+// at the infinities; a zero reached from the other side keeps the start's sign (nextafter's
+// -denorm_min up is -0); NaN stays NaN.  numpy's copy, nextafter passes and cast had cost a
+// check of a steep lobe 0.13 s for its 0.8 million mismatching samples.
+inline void float32_nudged(const double *x, size_t d, size_t c, int steps, size_t a, size_t b, double *out) {
+    constexpr int64_t kInfinity = 0x7f800000;
+    for (size_t i = a; i < b; ++i)
+        for (size_t j = 0; j < d; ++j) out[i * d + j] = double(float(x[i * d + j]));
+    for (size_t i = a; i < b; ++i) {
+        const float f = float(x[i * d + c]);
+        uint32_t fb;
+        std::memcpy(&fb, &f, 4);
+        const uint32_t sign = fb & 0x80000000u;
+        const int64_t key = sign ? -int64_t(fb & 0x7fffffffu) : int64_t(fb);
+        int64_t k = key + steps;
+        k = k > kInfinity ? kInfinity : (k < -kInfinity ? -kInfinity : k);
+        uint32_t ob = k < 0 ? (0x80000000u | uint32_t(-k)) : uint32_t(k);
+        if (k == 0) ob = sign;
+        float g;
+        std::memcpy(&g, &ob, 4);
+        out[i * d + c] = std::isnan(f) ? double(f) : double(g);
     }
 }
 

@@ -698,6 +698,40 @@ def test_dither_float32_matches_numpy_on_any_bits():
             np.testing.assert_array_equal(rest.dither_float32(x, u).view(np.uint64), want.view(np.uint64))
 
 
+def nudged_reference(x: np.ndarray, column: int, steps: int) -> np.ndarray:
+    with np.errstate(invalid="ignore", over="ignore"):
+        y = x.astype(np.float32)
+        col = y[:, column]
+        for _ in range(abs(steps)):
+            col = np.nextafter(col, np.float32(np.inf if steps > 0 else -np.inf), dtype=np.float32)
+        y[:, column] = col
+        return y.astype(np.float64)
+
+
+@pytest.mark.parametrize("steps", [1, 4, -1, -4, 9])
+def test_float32_nudged_matches_numpy_on_any_bits(steps):
+    """The reported-pdf check's nudged points: numpy's float32 nextafter steps, bit for bit,
+    on random bit patterns, float32 values of every exponent, the subnormals next to both zeros
+    (a step across zero: nextafter's -2^-149 up is -0.0, -0.0 up is +2^-149), float32's ends
+    and the infinities, over more rows than a chunk; a column out of range refused."""
+    rng = np.random.default_rng(17)
+    tiny = 2.0**-149 * np.arange(-10, 11)
+    special = np.concatenate([tiny, [-0.0], F32_EDGES, -(2.0**-149) * np.arange(1, 10)])
+    floats = rng.integers(0, 2**32, size=CHUNKS, dtype=np.uint64).astype(np.uint32).view(np.float32)
+    with np.errstate(invalid="ignore"):
+        wide = floats.astype(np.float64)
+    doubles = rng.integers(0, 2**64, size=5000, dtype=np.uint64).view(np.float64)
+    column = np.concatenate([special, wide, doubles])
+    x = np.stack([column, rng.permutation(column), rng.permutation(column)], axis=1)
+    for c in range(3):
+        got, want = rest.float32_nudged(x, c, steps), nudged_reference(x, c, steps)
+        np.testing.assert_array_equal(np.isnan(got), np.isnan(want))    # NaN payloads aside
+        bits = lambda v: np.where(np.isnan(v), 0, v.view(np.uint64))  # noqa: E731
+        np.testing.assert_array_equal(bits(got), bits(want))
+    with pytest.raises(ValueError, match="column"):
+        rest.float32_nudged(x, 3, steps)
+
+
 @pytest.mark.parametrize("n", [1, 7, 65_536, 65_537, 140_001])
 @pytest.mark.parametrize("kind", ["interval", "hemisphere"])
 def test_dither_uniforms_drawn_in_the_pass_are_those_of_points(kind, n):
