@@ -42,7 +42,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from mitsuba_samplers import mitsuba_chi2  # noqa: E402
-from uniform_mc import best_of  # noqa: E402
+from uniform_mc import best_of, cpu_line  # noqa: E402
 
 import reference_estimators as rest  # noqa: E402
 
@@ -165,13 +165,31 @@ def main() -> None:
         if missing:
             parser.error(f"no catalogue entry's label contains {missing}")
         entries = [e for e in entries if any(w in e.label for w in wanted)]
+    print(f"CPU: {cpu_line()}")
     print(f"{N:.0e} samples, seed 0, llvm_ad_rgb, best of {args.repeat}; seconds")
     cols = ["mitsuba", "ours", "sample", "pdf", "tables", "points", "own", "floor"]
     print(f"{'entry':50s}" + "".join(f"{c:>9s}" for c in cols) + f"{'table evals':>13s}{'other evals':>13s}")
+    rows = []
     for e in entries:
         row = measure(e, args.repeat)
+        rows.append(row)
         print(f"{e.label[:50]:50s}" + "".join(f"{row.get(c, 0.0):9.3f}" for c in cols)
               + f"{row['table evals']:13d}{row['other evals']:13d}", flush=True)
+    print(summary(rows))
+
+
+def summary(rows: list[dict[str, float]]) -> str:
+    """The issue's targets over the plugins measured: each column's median and sum, and how
+    many plugins' own work is within 50 ms and whole check within 1x and 2x Mitsuba's test."""
+    def col(c: str) -> np.ndarray:
+        return np.array([r.get(c, 0.0) for r in rows])
+    mitsuba, ours, own = col("mitsuba"), col("ours"), col("own")
+    lines = [f"{len(rows)} plugins; median / sum (s):"]
+    lines += [f"  {c:8s} {np.median(col(c)):.3f} / {col(c).sum():.2f}"
+              for c in ("mitsuba", "ours", "own", "tables")]
+    lines.append(f"  own work <= 50 ms: {int((own <= 0.05).sum())}; whole check <= Mitsuba's test: "
+                 f"{int((ours <= mitsuba).sum())}, <= 2x: {int((ours <= 2 * mitsuba).sum())}")
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":
