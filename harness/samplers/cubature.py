@@ -172,11 +172,7 @@ def box_integrals(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.
     halved along the axis that changed most, and so on (up to ``max_depth`` splits or
     ``max_evals`` evaluations), unless the change is within ``floor`` (relative) of the
     box's integral: the density's own rounding (:func:`rounding_floor`), which no split
-    can reduce.  A box whose change lies within 8 floors of its integral and has not shrunk
-    tenfold since the split that made it stops there as if at the depth limit: a float32
-    density's rounding noise moves an integral by a fixed fraction of it, so its changes only
-    halve with the box, where a smooth density's shrink some 2^8 times (an environment map's
-    tables had spent half their 90 million pdf calls chasing that noise to the depth limit).  Splitting along one axis at a time follows a lobe that is
+    can reduce.  Splitting along one axis at a time follows a lobe that is
     thin in one direction only.  The error of a box that converged is the change of its last
     split: honest for smooth parts (the rule's error shrinks some 2^8 times a halving there).
     A box that stopped at ``max_depth`` or ``max_evals`` without converging holds a
