@@ -123,7 +123,7 @@ class BoxRefinement {
             const double moved = change[i * k_ + b];
             const double limit = nan_max(tol_[size_t(owner_[i])] * share_[i], floor_ * std::fabs(w[0]));
             const bool converged = moved <= limit;
-            const bool done = converged || last || stalled(moved, w[0], history_[2 * i]);
+            const bool done = converged || last;
             keep[i] = !done;
             if (!done) continue;
             if (extrapolate_ && !converged) {
@@ -175,20 +175,6 @@ class BoxRefinement {
     }
 
   private:
-    // Whether a box whose split moved its integral w by `moved`, within kStallFloors times q's
-    // rounding floor of |w|, stops there as if at the depth limit: its change has not shrunk
-    // below kStallRatio times that of the split that made it (`parent`; NaN at depth 0, never
-    // stalled).  A smooth density's change shrinks some 2^8 times a halving; a float32 density's
-    // rounding noise moves a box's integral by a fixed fraction of it, so its change only halves
-    // with the box, and refining on chases noise to the depth limit (an environment map's
-    // tables spent half their 90 million pdf calls at depths 6-8 of boxes by its sun) for a
-    // sum of bare changes no smaller: the noise of the region they tile.  A step's change is
-    // the step's share of the box, far above the floor.  Never with floor 0 (a float64 pdf).
-    bool stalled(double moved, double w, double parent) const {
-        constexpr double kStallFloors = 8.0, kStallRatio = 0.1;
-        return moved <= kStallFloors * floor_ * std::fabs(w) && moved >= kStallRatio * parent;
-    }
-
     // Box i's lower (half 0) or upper part along `axis`, cut at `cut`, into lo, hi (k each).
     void half_box(size_t i, size_t axis, double cut, size_t half, double *lo, double *hi) const {
         for (size_t j = 0; j < k_; ++j) {

@@ -8,13 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from harness.samplers.cubature import (
-    FLOAT32_FLOOR,
-    box_integrals,
-    cell_integrals,
-    grouped_integrals,
-    split_points,
-)
+from harness.samplers.cubature import box_integrals, cell_integrals, grouped_integrals, split_points
 
 
 def _lobe(x: np.ndarray) -> np.ndarray:
@@ -154,11 +148,9 @@ def _halves(lo, hi, axis, cut):
 
 
 def _reference_box_integrals(q, lo, hi, tol, *, max_depth=24, max_evals=40_000_000, floor=0.0,
-                             extrapolate=True, breaks=None, stall=True):
+                             extrapolate=True, breaks=None):
     """box_integrals as numpy arrays level by level (the algorithm the core's BoxRefinement
-    runs): each box against its best split's halves, converged or halved along that axis, or
-    stopped where its change has stalled within 8 floors (``stall=False``: the refinement
-    before that stop, which chased a float32 density's noise to the depth limit)."""
+    runs): each box against its best split's halves, converged or halved along that axis."""
     from harness.samplers.cubature import _GL_W, _GL_X, tensor_rule
 
     def rule(a, b):
@@ -198,8 +190,7 @@ def _reference_box_integrals(q, lo, hi, tol, *, max_depth=24, max_evals=40_000_0
         refined, moved = np.stack(sums, axis=1)[rows, best], change[rows, best]
         diff = np.abs(refined - whole)
         converged = moved <= np.maximum(tol[owner] * share, floor * np.abs(whole[:, 0]))
-        stalled = stall & (moved <= 8 * floor * np.abs(whole[:, 0])) & (moved >= 0.1 * history[:, 0])
-        done = converged | stalled | (depth == max_depth) | (evals > max_evals)
+        done = converged | (depth == max_depth) | (evals > max_evals)
         stopped = done & ~converged
         if extrapolate and stopped.any():
             diff[stopped] *= unconverged_factor(moved[stopped], history[stopped])[:, None]
@@ -260,38 +251,6 @@ def test_box_integrals_refinement_in_the_core_is_its_numpy_definition_bit_for_bi
     for a, b in zip(want, got):
         np.testing.assert_array_equal(a.view(np.uint64), b.view(np.uint64))
     assert bad or np.all(np.isfinite(got[0]))
-
-
-def test_a_float32_densitys_rounding_noise_stops_the_refinement_where_its_changes_stall():
-    """A smooth lobe with float32-like rounding noise (3e-5 relative at each node, above the
-    float32 floor of 1.9e-6): its boxes' changes only halve with the boxes, and the refinement
-    stops them once a split has not shrunk the change tenfold, where it had chased the noise
-    to the depth limit; the integrals stay within their bounds plus the noise's own share."""
-    def smooth(x):
-        return np.exp(-((x[:, 0] - 0.3) ** 2 + (x[:, 1] - 0.6) ** 2) / 0.02)
-
-    noise = 3e-5
-
-    def q(x):   # deterministic noise: a hash of the node's coordinates
-        return smooth(x) * (1 + noise * np.sin(1e7 * x[:, 0] + 3e7 * x[:, 1]))
-
-    calls = {"new": 0, "old": 0}
-    def counted(key):
-        def f(x):
-            calls[key] += x.shape[0]
-            return q(x)
-        return f
-
-    lo = np.stack(np.meshgrid(np.arange(8) / 8, np.arange(8) / 8, indexing="ij"), axis=-1).reshape(-1, 2)
-    hi, tol = lo + 0.125, 1e-12
-    value, error = box_integrals(counted("new"), lo, hi, tol, floor=FLOAT32_FLOOR, max_depth=12)
-    _reference_box_integrals(counted("old"), lo, hi, tol, floor=FLOAT32_FLOOR, max_depth=12, stall=False)
-    assert calls["new"] < calls["old"] / 4
-    exact, _ = box_integrals(smooth, lo, hi, 1e-14, max_depth=12)
-    assert np.all(np.abs(value[:, 0] - exact[:, 0]) <= error[:, 0] + noise * exact[:, 0])
-    # and a float64 density (floor 0) is never stopped so
-    plain = _reference_box_integrals(smooth, lo, hi, 1e-14, max_depth=12, stall=False)
-    np.testing.assert_array_equal(box_integrals(smooth, lo, hi, 1e-14, max_depth=12)[0], plain[0])
 
 
 def _reference_agreement(own, parent, group, tol, floor):
