@@ -334,7 +334,8 @@ def float32_nudged(x: Any, column: int, steps: int) -> np.ndarray:
     """(N, d) float64: the points x (N, d) rounded to float32, with column ``column`` moved by
     |steps| float32 ulps, up for steps > 0 and down for steps < 0.  The bits of numpy's
     x.astype(float32) with |steps| np.nextafter calls in float32 on the column, towards +-inf,
-    cast back to float64 (NaN stays NaN; the infinities hold); one pass in C++ on all threads."""
+    cast back to float64 (NaN stays NaN; a step toward an infinity stops there, one away from it
+    leaves it for float32's largest value); one pass in C++ on all threads."""
     a = np.ascontiguousarray(x, dtype=np.float64)
     if a.ndim != 2 or not 0 <= column < a.shape[1]:
         raise ValueError(f"'x' must have shape (N, d) and 'column' be one of its d columns, "
