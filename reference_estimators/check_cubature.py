@@ -99,10 +99,8 @@ def split_points(lo: Any, hi: Any, breaks: Any) -> np.ndarray:
 #: extrapolate, breaks)`` over boxes [lo, hi] (N, k), k = 1 or 2, with the rule's integrals
 #: ``whole`` (N, m) and tolerances ``tol`` (N,), ``breaks`` a list per axis of sorted split
 #: coordinates (empty: none); then per level ``halves()`` -> (clo, chi) every box's halves
-#: along each axis (axis-major, (2 k B, k)), optionally ``probe(parts)`` -> (rows, lo, hi) the
-#: boxes whose rounding noise to measure, ``step(parts, last[, rows, up, down])`` with their
-#: integrals (2 k B, m) (and the probed boxes' rules on points nudged up and down (R, m)) ->
-#: whether boxes remain, and at the end ``result()`` -> (integrals, errors) (N, m).
+#: along each axis (axis-major, (2 k B, k)), ``step(parts, last)`` with their integrals
+#: (2 k B, m) -> whether boxes remain, and at the end ``result()`` -> (integrals, errors) (N, m).
 BoxRefinement = _core.BoxRefinement
 
 

@@ -345,12 +345,10 @@ def float32_nudged(x: Any, column: int, steps: int) -> np.ndarray:
 
 def float32_columns_nudged(columns: Any) -> np.ndarray:
     """(c, 2N) float32: float32 columns (c, N) (a float32 renderer's directions, as
-    :func:`float32_columns` gives them) each moved by the same distance either way, up in even
-    rows and down in odd ones, then (columns N .. 2N - 1) the other way.  The distance is the
-    larger of the value's two float32 spacings: one np.nextafter step each way in float32, or
-    two on the side of the smaller spacing (a power of two), so that the pair is symmetric
-    about the value; past float32's ends and for NaN the single steps.  One pass in C++ on all
-    threads, into memory the core reuses."""
+    :func:`float32_columns` gives them) moved one float32 ulp each, up in even rows and down in
+    odd ones, then (columns N .. 2N - 1) the other way: the bits of numpy's np.nextafter in
+    float32 towards +-inf (as :func:`float32_nudged`'s).  One pass in C++ on all threads, into
+    memory the core reuses."""
     a = np.ascontiguousarray(columns)
     if a.dtype != np.float32 or a.ndim != 2:
         raise ValueError(f"'columns' must be float32 of shape (c, N), got {a.dtype} {a.shape}")

@@ -172,19 +172,16 @@ def box_integrals(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.
     along the axis that changed most, and so on (up to ``max_depth`` splits or ``max_evals``
     evaluations), unless the change is within ``floor`` (relative) of the box's integral: the
     density's own rounding (:func:`rounding_floor`), which no split can reduce. Where q's values
-    carry rounding (``floor`` > 0) and q has ``nudged()``
-    (:meth:`harness.samplers.domains.ParamDensity.nudged`: its rule with every point moved by
-    a float32 spacing one way and the other, side by side), a box whose change is within 32
-    floors of its integral and has stalled (at least a tenth of its parent's change, and with
-    it at least a tenth of the two before) measures its noise, half the second difference of
-    the two nudged rules about its own: symmetric steps cancel a smooth density's first-order
-    change however steep, leaving its curvature over a spacing and what rounding does.  A
-    change within 4 times that noise is taken for noise, which halving does not reduce: the box
-    stops, its error the larger of its change and the noise, not extrapolated.  As with the
-    floor, a feature whose change is that small (a lobe no node has yet seen, where the density
-    is noisy) is then missed.  A float32 renderer's texel lookups and steep lobes had their
-    boxes chase their noise to the depth limit (an environment map's tables: 92 million pdf
-    calls, 49 million with the measure).  Splitting along one axis
+    carry rounding (``floor`` > 0) and q has ``nudged(sign)``
+    (:meth:`harness.samplers.domains.ParamDensity.nudged`: q at its points moved one float32 ulp
+    either way), a box whose change is within 32 floors of its integral and has stalled (with
+    its parent's, at least a tenth of the two before) measures its noise, half the second
+    difference of its rule on the nudged points about its own: a change within 4 times that is
+    noise, which halving does not reduce, and the box stops as if at the depth limit, its error
+    at least the noise. A smooth density's change cancels in the second difference however steep
+    (a lobe whose flank a node has not yet resolved is refined on); a float32 renderer's texel
+    lookups and steep lobes had their boxes chase the noise to the depth limit (an environment
+    map's tables: 92 million pdf calls, 52 million with the measure). Splitting along one axis
     at a time follows a lobe that is thin in one direction only. The error of a box that
     converged is the change of its last split: honest for smooth parts (the rule's error shrinks
     some 2^8 times a halving there). A box that stopped at ``max_depth`` or ``max_evals``

@@ -258,17 +258,13 @@ class ParamDensity:
                 and (self.columns is None or isinstance(self.columns, MomentColumns)))
 
     def nudged(self) -> ParamDensity:
-        """This density with :meth:`rule_integrals` giving the rule with every node moved by
-        the larger of its float32 spacings, (+, -, +) for (x, y, z), and the rule with them
-        moved the other way, side by side ((M, 2 m), one pdf call; the Jacobian stays the
-        node's).  A float32 renderer's float32 directions step one ulp each way, or two on the
-        side of the smaller spacing (:func:`reference_estimators.float32_columns_nudged`); plain
-        float64 points move by that spacing in float64.  Either way the pair is symmetric
-        about the node, so their second difference about the plain rule cancels a smooth pdf's
-        first-order change however steep, and measures the pdf's own rounding noise on a box
-        (:func:`harness.samplers.cubature.box_integrals`, where the pdf's values are float32).
-        A node on the domain's edge (z = 1, an interval's end) may move a spacing outside it:
-        a pdf that is 0 there makes the measure larger, so the box's bound too."""
+        """This density with :meth:`rule_integrals` giving the rule on every node moved by one
+        float32 ulp a coordinate, (+, -, +) for (x, y, z), and the rule with them moved the
+        other way, side by side ((M, 2 m): both ways' columns; the points rounded to float32
+        first, a float32 renderer's directions as it takes them; one pdf call; the Jacobian
+        stays the node's).  Their second difference about the plain rule measures the pdf's
+        own rounding noise on a box (:func:`harness.samplers.cubature.box_integrals`, where the
+        pdf's values are float32): a smooth pdf's change cancels there, however steep."""
         return replace(self, nudge=True)
 
     def rule_integrals(self, lo: np.ndarray, hi: np.ndarray, nodes: np.ndarray,
@@ -300,7 +296,8 @@ class ParamDensity:
         x = rest.cubature_points(dom.kind, lo, hi, nodes, (dom.lo, dom.hi), dom.pole_columns)
         jacobian = dom.jacobian_at_points(x)
         if self.nudge:
-            values = np.asarray(self.pdf(_nudged_points(x)))
+            both = rest.float32_columns_nudged(x.astype(np.float32).reshape(x.shape[0], -1).T)
+            values = np.asarray(self.pdf(both.T.astype(np.float64).reshape((-1, *x.shape[1:]))))
             half = values.shape[0] // 2
             return np.concatenate([self._integrals(lo, hi, v, jacobian, weights).reshape(lo.shape[0], -1)
                                    for v in (values[:half], values[half:])], axis=1)
@@ -322,20 +319,6 @@ class ParamDensity:
         if moments:
             return rest.cubature_moment_sums(lo, hi, q, weights, self.columns.c)
         return rest.cubature_sums(lo, hi, self._columns_of(q), weights)
-
-
-def _nudged_points(x: np.ndarray) -> np.ndarray:
-    """The float64 points x ((N, d) or (N,)) moved by the larger of their float32 spacings,
-    (+, -, +, ...) a coordinate, then the other way: (2 N, ...) in float64, so that the pair is
-    symmetric about x itself (a pdf computed in float64 from x and returned as float32 keeps no
-    first-order change; one that rounds x to float32 first sees its neighbours' values)."""
-    r = x.astype(np.float32)
-    with np.errstate(over="ignore", invalid="ignore"):
-        spacing = np.maximum(np.nextafter(r, np.float32(np.inf)).astype(np.float64) - r,
-                             r - np.nextafter(r, np.float32(-np.inf)).astype(np.float64))
-    signs = np.where(np.arange(x.shape[1] if x.ndim == 2 else 1) % 2 == 0, 1.0, -1.0)
-    step = spacing * (signs if x.ndim == 2 else signs[0])
-    return np.concatenate([x + step, x - step])
 
 
 def _azimuth(phi: np.ndarray) -> np.ndarray:

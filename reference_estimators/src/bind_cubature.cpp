@@ -170,8 +170,7 @@ void bind_cubature(nb::module_ &m) {
        "middle, else the middle (breaks sorted).");
     nb::class_<BoxRefinement>(m, "BoxRefinement",
         "The bookkeeping of box_integrals' adaptive refinement (harness/samplers/cubature.py): halves() the "
-        "boxes' halves along each axis, probe(parts) the boxes whose rounding noise to measure, step(parts, last, "
-        "rows, up, down) the decision on their integrals, result() the sums.")
+        "boxes' halves along each axis, step(parts, last) the decision on their integrals, result() the sums.")
         .def("__init__", [](BoxRefinement *self, InArray lo, InArray hi, InArray whole, InArray tol, double floor,
                             bool extrapolate, std::vector<std::vector<double>> breaks) {
             const size_t k = check_boxes(lo, hi), n = lo.shape(0);

@@ -224,34 +224,19 @@ inline void float32_nudged(const double *x, size_t d, size_t c, int steps, size_
     for (size_t i = a; i < b; ++i) out[i * d + c] = double(float32_stepped(float(x[i * d + c]), steps));
 }
 
-// f moved by the same distance either way, the larger of its two float32 spacings: one ulp up
-// and one down, or two on the side of the smaller spacing (a power of two: 1.0f's ulp up is
-// twice its ulp down), into up and down.  The pair is then symmetric about f, so that a smooth
-// function's first-order change cancels in their second difference.  Past float32's ends (an
-// infinity a step away) and for NaN, the plain one-ulp steps.
-inline void float32_symmetric_steps(float f, float &up, float &down) {
-    up = float32_stepped(f, 1);
-    down = float32_stepped(f, -1);
-    const double above = double(up) - double(f), below = double(f) - double(down);
-    if (!(std::isfinite(above) && std::isfinite(below))) return;
-    if (above > below) down = float32_stepped(f, -2);
-    else if (below > above) up = float32_stepped(f, 2);
-}
-
-// Float32 columns (c, n), values a .. b - 1 of each, each moved both ways by
-// float32_symmetric_steps into out (c rows of 2n): value i of row r at out[r * 2n + i] moved
-// up for even r and down for odd r, and at out[r * 2n + n + i] the other way.  The sampler
-// check's measure of a float32 pdf's rounding noise on a box
-// (harness.samplers.domains.ParamDensity.nudged: both ways in one pdf call); numpy's
-// nextafter took 10 ns a value there.
+// Float32 columns (c, n), values a .. b - 1 of each, each moved one ulp both ways into out
+// (c rows of 2n): value i of row r at out[r * 2n + i] moved up for even r and down for odd r,
+// and at out[r * 2n + n + i] the other way (float32_stepped).  The sampler check's measure of
+// a float32 pdf's rounding noise on a box (harness.samplers.domains.ParamDensity.nudged: both
+// ways in one pdf call); numpy's nextafter took 10 ns a value there.
 inline void float32_columns_nudged(const float *columns, size_t c, size_t n, size_t a, size_t b, float *out) {
-    for (size_t r = 0; r < c; ++r)
+    for (size_t r = 0; r < c; ++r) {
+        const int up = r % 2 == 0 ? 1 : -1;
         for (size_t i = a; i < b; ++i) {
-            float up, down;
-            float32_symmetric_steps(columns[r * n + i], up, down);
-            out[r * 2 * n + i] = r % 2 == 0 ? up : down;
-            out[r * 2 * n + n + i] = r % 2 == 0 ? down : up;
+            out[r * 2 * n + i] = float32_stepped(columns[r * n + i], up);
+            out[r * 2 * n + n + i] = float32_stepped(columns[r * n + i], -up);
         }
+    }
 }
 
 }  // namespace re

@@ -97,14 +97,12 @@ class BoxRefinement {
     // The boxes whose rounding noise the caller is to measure before step() (rows, ascending):
     // with q's rounding floor above 0, those the split has not converged whose change, parts
     // (as step() takes them) against their rule, is within kProbeFloors floors of their
-    // integral and has stalled: it is at least kStallRatio times its parent's change, and the
-    // sum of the two at least kStallRatio times the sum of the two before (the pairs of
-    // unconverged_factor, which even out splits alternating between axes; none before depth
-    // 2).  A smooth box's changes shrink some 2^8 times a halving (a pair's too), and it is
-    // not measured; a float32 density's noise only halves with the box, as does the change of
-    // a lobe the rule has not yet resolved, which the measure tells apart (step()) where the
-    // density's noise is far below the lobe's change: a feature whose change is within 4 times
-    // the noise is taken for noise, as one within the floor is taken for rounding.
+    // integral and has stalled: the sum of it and its parent's change is at least kStallRatio
+    // times the sum of the two before (the pairs of unconverged_factor, which even out splits
+    // alternating between axes; none before depth 2).  A smooth box's changes shrink some 2^8
+    // times a halving, and it is not measured; a float32 density's noise only halves with the
+    // box, as does the change of a lobe the rule has not yet resolved, which the measure then
+    // tells apart (step()).
     std::vector<int64_t> probe(const double *parts) const {
         std::vector<int64_t> rows;
         if (!(floor_ > 0)) return rows;
@@ -113,7 +111,7 @@ class BoxRefinement {
         for (size_t i = 0; i < B; ++i) {
             const double moved = change[best_axis(parts, i, change.data())];
             const double c1 = history_[2 * i], c2 = history_[2 * i + 1];
-            const bool stalled = moved >= kStallRatio * c1 && moved + c1 >= kStallRatio * (c1 + c2);
+            const bool stalled = moved + c1 >= kStallRatio * (c1 + c2);
             if (!(moved <= limit(i)) && moved <= kProbeFloors * floor_ * std::fabs(whole_[i * m_]) && stalled)
                 rows.push_back(int64_t(i));
         }
@@ -164,13 +162,10 @@ class BoxRefinement {
             keep[i] = !done;
             if (!done) continue;
             // a box stopped on its noise is uncertain by that much at least, in every column
-            // (the sampler check's columns made of q, h q and h^2 q, are at most q), and its
-            // changes are no geometric tail: not extrapolated (a pair ratio near 1 would make
-            // them 99 times the change)
-            const bool on_noise = noisy && !converged;
-            if (on_noise)
+            // (the columns made of q have values at most q's: the moment columns h q, h^2 q)
+            if (noisy && !converged)
                 for (size_t c = 0; c < m; ++c) diff[c] = nan_max(diff[c], noise[i]);
-            if (extrapolate_ && !converged && !on_noise) {
+            if (extrapolate_ && !converged) {
                 const double factor = unconverged_factor(moved, history_[2 * i], history_[2 * i + 1]);
                 for (size_t c = 0; c < m; ++c) diff[c] *= factor;
             }

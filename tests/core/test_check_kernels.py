@@ -732,41 +732,28 @@ def test_float32_nudged_matches_numpy_on_any_bits(steps):
         rest.float32_nudged(x, 3, steps)
 
 
-def symmetric_steps_reference(f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """numpy's float32 nextafter once each way, twice on the side of the smaller spacing."""
-    with np.errstate(invalid="ignore", over="ignore"):
-        up = np.nextafter(f, np.float32(np.inf))
-        down = np.nextafter(f, np.float32(-np.inf))
-        above, below = up.astype(float) - f, f - down.astype(float)
-        ok = np.isfinite(above) & np.isfinite(below)
-        down = np.where(ok & (above > below), np.nextafter(down, np.float32(-np.inf)), down)
-        up = np.where(ok & (below > above), np.nextafter(up, np.float32(np.inf)), up)
-    return up, down
-
-
 @pytest.mark.parametrize("rows", [1, 2, 3])
 def test_float32_columns_nudged_matches_numpy_on_any_bits(rows):
-    """The cubature's noise measure's points: each float32 column moved by the same distance
-    either way (one ulp, two on the side of the smaller spacing at a power of two), up in even
-    rows and down in odd ones, then the other way: numpy's float32 nextafter steps, bit for bit
-    (random bit patterns, both zeros, the subnormals next to them, powers of two, float32's
-    ends, the infinities), over more values than a chunk; anything but float32 (c, N) refused."""
+    """The cubature's noise measure's points: each float32 column moved one ulp up in even rows
+    and down in odd ones, then the other way, numpy's float32 nextafter bit for bit (random
+    bit patterns, both zeros, the subnormals next to them, float32's ends, the infinities),
+    over more values than a chunk; anything but float32 (c, N) refused."""
     rng = np.random.default_rng(18)
-    special = np.array([0.0, -0.0, 2.0**-149, -(2.0**-149), np.inf, -np.inf, 1.0, -1.0, 2.0**-126, 0.5,
+    special = np.array([0.0, -0.0, 2.0**-149, -(2.0**-149), np.inf, -np.inf, 1.0, -1.0,
                         float(np.finfo(np.float32).max), -float(np.finfo(np.float32).max)], dtype=np.float32)
     bits = rng.integers(0, 2**32, size=(rows, CHUNKS), dtype=np.uint64).astype(np.uint32)
     columns = bits.view(np.float32)
     columns[:, :special.size] = special
     got = rest.float32_columns_nudged(columns)
-    pairs = [symmetric_steps_reference(columns[r]) for r in range(rows)]
-    want = np.concatenate([np.stack([pairs[r][(r % 2 == 0) != first] for r in range(rows)])
-                           for first in (True, False)], axis=1)
+    def stepped(r: int, up: bool) -> np.ndarray:
+        with np.errstate(invalid="ignore", over="ignore"):
+            return np.nextafter(columns[r], np.float32(np.inf if (r % 2 == 0) == up else -np.inf))
+
+    want = np.concatenate([np.stack([stepped(r, up) for r in range(rows)]) for up in (True, False)], axis=1)
     assert got.shape == (rows, 2 * CHUNKS) and got.dtype == np.float32
     np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
     np.testing.assert_array_equal(np.where(np.isnan(got), 0, got.view(np.uint32)),
                                   np.where(np.isnan(want), 0, want.view(np.uint32)))
-    one = rest.float32_columns_nudged(np.ones((1, 1), dtype=np.float32))    # 1 + 2^-23, 1 - 2^-23
-    assert one[0, 0] - 1 == 1 - one[0, 1] == 2.0**-23
     for bad in (columns.view(np.uint32).astype(np.float64), columns[0]):
         with pytest.raises(ValueError, match="float32"):
             rest.float32_columns_nudged(bad)

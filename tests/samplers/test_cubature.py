@@ -160,9 +160,7 @@ def _reference_box_integrals(q, lo, hi, tol, *, max_depth=24, max_evals=40_000_0
     stopped where its change is within 4 times its noise, half the second difference of its
     rule on ``noisy`` (q at points nudged both ways, side by side: box_integrals' q.nudged())
     about its own, measured on the unconverged boxes whose change is within 32 floors of their
-    integral and has stalled (at least a tenth of its parent's, and with it at least a tenth of
-    the two changes before); a box stopped on its noise keeps an error of at least the noise,
-    not extrapolated."""
+    integral and has stalled (with its parent's, at least a tenth of the two changes before)."""
     from harness.samplers.cubature import _GL_W, _GL_X, tensor_rule
 
     def rule(a, b):
@@ -205,8 +203,7 @@ def _reference_box_integrals(q, lo, hi, tol, *, max_depth=24, max_evals=40_000_0
         last = depth == max_depth or evals > max_evals
         noise = np.zeros(lo.shape[0])
         if noisy is not None and floor > 0 and not last:
-            stalled = ((moved >= 0.1 * history[:, 0])
-                       & (moved + history[:, 0] >= 0.1 * (history[:, 0] + history[:, 1])))
+            stalled = moved + history[:, 0] >= 0.1 * (history[:, 0] + history[:, 1])
             rows = np.flatnonzero(~converged & (moved <= 32 * floor * np.abs(whole[:, 0])) & stalled)
             if rows.size:
                 evals += 2 * rows.size * 4**k
@@ -216,8 +213,8 @@ def _reference_box_integrals(q, lo, hi, tol, *, max_depth=24, max_evals=40_000_0
                 noise[rows] = np.abs((up - whole[rows, 0]) + (down - whole[rows, 0])) / 2
         noisy_stop = (noise > 0) & (moved <= 4 * noise)
         done = converged | last | noisy_stop
-        on_noise = noisy_stop & ~converged     # error at least the noise, not extrapolated
-        stopped = done & ~converged & ~on_noise
+        stopped = done & ~converged
+        on_noise = noisy_stop & ~converged
         diff[on_noise] = np.maximum(diff[on_noise], noise[on_noise, None])
         if extrapolate and stopped.any():
             diff[stopped] *= unconverged_factor(moved[stopped], history[stopped])[:, None]
@@ -280,8 +277,7 @@ class _Rounded:
                                      {"max_depth": 0}, {"max_evals": 0}, {"bad": True},
                                      {"floor": 1e-5, "noise": 1e-4}, {"floor": 1e-5, "noise": 1e-4,
                                                                       "columns": 2},
-                                     {"floor": 1e-5, "noise": 1e-4, "extrapolate": False},
-                                     {"floor": 1e-5, "noise": 1e-4, "max_evals": 100_000}])
+                                     {"floor": 1e-5, "noise": 1e-4, "extrapolate": False}])
 def test_box_integrals_refinement_in_the_core_is_its_numpy_definition_bit_for_bit(k, options):
     """Every decision of the refinement (the split axis, convergence at the tolerance or q's
     rounding floor, the depth and evaluation limits, the unconverged boxes' extrapolated error,
@@ -374,12 +370,11 @@ class _Float32Lobe:
         return _Both(_Float32Lobe(1), _Float32Lobe(-1))
 
 
-def test_a_steep_noise_free_float32_lobe_is_refined_as_without_the_noise_measure():
-    """A noise-free float32 lobe (width 1e-3, most of the box's mass) so steep that an ulp
-    moves its flank by 1e-4 of its value: the boxes the measure would probe find its
-    second difference at the values' own rounding, far below their change, or are not probed
-    (their change shrinks): the same bits as the refinement without the measure, the lobe's
-    integral within its bound."""
+def test_a_lobe_not_yet_resolved_is_refined_whatever_the_rounding_noise():
+    """A box whose change sits a few floors above q's rounding because its rule has not yet
+    seen a narrow lobe (9 % of the box, its change 3e-6 relative at the first split and 6e-6 at
+    the second) is no rounding noise: its nudged rule moves by an ulp of the values, so it is
+    refined as without the measure, the same bits, and the lobe is found."""
     lo, hi = np.array([[0.875]]), np.array([[1.0]])
     q = _Float32Lobe()
     value, error = box_integrals(q, lo, hi, 1e-9, floor=FLOAT32_FLOOR)
@@ -415,27 +410,6 @@ def test_the_noise_measure_cancels_a_steep_float32_lobes_own_change(kappa):
     one_sided = np.abs(up - rule)
     noise = np.abs((up - rule) + (down - rule)) / 2
     assert np.all(one_sided > 0.5 * kappa * 6e-8 * rule) and np.all(noise < one_sided / 300)
-
-
-def test_the_noise_measure_of_a_float64_path_pdf_is_symmetric_about_its_points():
-    """A pdf on float64 points (ParamDensity's plain path) computed in float64 and returned as
-    float32 (so its rounding floor is float32's): the nudged points are x plus and minus the
-    larger float32 spacing, in float64, so the pair's second difference keeps the lobe's
-    curvature and the output's rounding (below 1e-6 of the rule here), not the first-order
-    change of x's own rounding (2 f' (float32(x) - x), 1e-5 of the rule on this flank)."""
-    from harness.samplers.cubature import _GL_W, _GL_X
-    from harness.samplers.domains import Domain, ParamDensity
-
-    def lobe(x):
-        return np.exp(-(((x - 0.5) / 1e-3) ** 2)).astype(np.float32).astype(float)
-
-    q = ParamDensity(Domain("interval"), lobe)
-    lo = 0.5 + np.arange(10)[:, None] * 2e-4
-    hi = lo + 2e-4
-    rule = q.rule_integrals(lo, hi, _GL_X, _GL_W)[:, 0]
-    up, down = q.nudged().rule_integrals(lo, hi, _GL_X, _GL_W).T
-    assert np.all(np.abs((up - rule) + (down - rule)) / 2 < 1e-6 * rule)
-    assert np.all(np.abs(up - rule) > 10 * np.abs((up - rule) + (down - rule)) / 2)
 
 
 def _reference_agreement(own, parent, group, tol, floor):
