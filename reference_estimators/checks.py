@@ -18,9 +18,9 @@ from .arguments import stream_arg
 __all__ = [
     "CHECK_DOMAINS", "domain_params", "dithered_domain_params", "domain_points", "grid_histogram",
     "rosenblatt", "piecewise_linear_lookup", "transform_statistics", "cramer_von_mises_sum", "pdf_summary",
-    "all_float32", "dither_float32", "float32_nudged", "float32_columns_nudged", "finite_rows",
-    "pdf_mismatches", "float64_rows", "float32_columns", "take_rows", "nan_rows", "float32_unit_rows",
-    "cap_to_world", "cap_to_hemisphere", "cap_density",
+    "all_float32", "dither_float32", "float32_nudged", "finite_rows", "pdf_mismatches", "float64_rows",
+    "float32_columns", "take_rows", "nan_rows", "float32_unit_rows", "cap_to_world", "cap_to_hemisphere",
+    "cap_density",
     "rect_to_square", "rect_to_world", "rect_density", "RowLookup", "weight_agreement",
 ]
 
@@ -341,18 +341,6 @@ def float32_nudged(x: Any, column: int, steps: int) -> np.ndarray:
         raise ValueError(f"'x' must have shape (N, d) and 'column' be one of its d columns, "
                          f"got {a.shape}, {column}")
     return _core.float32_nudged(a, int(column), int(steps))
-
-
-def float32_columns_nudged(columns: Any) -> np.ndarray:
-    """(c, 2N) float32: float32 columns (c, N) (a float32 renderer's directions, as
-    :func:`float32_columns` gives them) moved one float32 ulp each, up in even rows and down in
-    odd ones, then (columns N .. 2N - 1) the other way: the bits of numpy's np.nextafter in
-    float32 towards +-inf (as :func:`float32_nudged`'s).  One pass in C++ on all threads, into
-    memory the core reuses."""
-    a = np.ascontiguousarray(columns)
-    if a.dtype != np.float32 or a.ndim != 2:
-        raise ValueError(f"'columns' must be float32 of shape (c, N), got {a.dtype} {a.shape}")
-    return _core.float32_columns_nudged(a)
 
 
 def pdf_summary(kind: str, measure: float, s: Any, inside: Any, p: Any,

@@ -225,9 +225,9 @@ def box_integrals(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.
     state = rest.BoxRefinement(lo, hi, whole, tol, floor, extrapolate, axes)
     evals = ncell * 4**k
     nudged = getattr(q, "nudged", None)
-    # q's rule at points nudged by a rounding both ways (side by side), where q's values are
-    # float32 (floor > 0)
-    noisy = nudged() if nudged is not None and floor > 0 else None
+    # q at points nudged by a rounding either way, where q's values are float32 (floor > 0)
+    noisy = (nudged(1), nudged(-1)) if nudged is not None and floor > 0 else None
+    noisy = None if noisy is None or None in noisy else noisy
     for depth in range(max_depth + 1):
         clo, chi = state.halves()
         evals += clo.shape[0] * 4**k
@@ -241,9 +241,8 @@ def box_integrals(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.
             rows, plo, phi = state.probe(parts)
             if rows.size:
                 evals += 2 * rows.size * 4**k
-                both = _rule(noisy, plo, phi).reshape(rows.size, -1)
-                m = both.shape[1] // 2
-                probed = {"rows": rows, "up": both[:, :m], "down": both[:, m:]}
+                up, down = (_rule(n, plo, phi).reshape(rows.size, -1) for n in noisy)
+                probed = {"rows": rows, "up": up, "down": down}
         if not state.step(parts, last, **probed):
             break
     return state.result()

@@ -362,20 +362,6 @@ void bind_checks(nb::module_ &m) {
         return r;
     }, "x"_a, "column"_a, "steps"_a,
        "x (N, d) rounded to float32 with column `column` moved |steps| float32 ulps (up if steps > 0), as float64.");
-    m.def("float32_columns_nudged", [](nb::ndarray<const float, nb::ndim<2>, nb::c_contig, nb::device::cpu> columns) {
-        const size_t c = columns.shape(0), n = columns.shape(1);
-        nb::capsule owner;
-        float *out = output_buffer<float>(c * 2 * n, owner);   // reused memory, as float32_columns'
-        {
-            nb::gil_scoped_release g;
-            for_chunks(n, kCheckChunk, [&](size_t, size_t a, size_t b, int) {
-                float32_columns_nudged(columns.data(), c, n, a, b, out);
-            });
-        }
-        return nb::ndarray<nb::numpy, float, nb::ndim<2>>(out, {c, 2 * n}, owner);
-    }, "columns"_a.noconvert(),
-       "(c, 2N) float32: the columns (c, N) moved one float32 ulp, up in even rows and down in odd ones, then the "
-       "other way.");
     m.def("pdf_summary", [](int kind, double measure, InArray s, BoolArray inside, InArray p, double c, double total) {
         const CheckDomain d = check_domain(kind);
         const size_t n = check_params(s, size_t(domain_param_dim(d)));

@@ -2,8 +2,7 @@
 // vectors as Mitsuba's pdf takes them (float32_unit_rows), its float32 columns as float64
 // rows and float64 rows as its float32 columns (float64_rows, float32_columns), whether values
 // are float32 (all_float32), float32 points dithered within their rounding intervals
-// (dither_float32), and float32 points moved by whole ulps (float32_nudged,
-// float32_columns_nudged).
+// (dither_float32), and float32 points with one coordinate moved by whole ulps (float32_nudged).
 #pragma once
 
 #include <cmath>
@@ -192,50 +191,32 @@ inline void dither_float32(const double *v, const double *u, size_t n, double *o
     }
 }
 
-// f moved |steps| float32 ulps, up if steps > 0, down if < 0: the bits of numpy's |steps|
-// nextafter calls in float32 towards +-inf (tests/core/test_check_kernels.py).  A step is one
-// on the integer that orders the floats (its magnitude's bits, negated for a negative float;
-// +0 and -0 both 0, as nextafter steps from either to the same subnormal), held at the
-// infinities; a zero reached from the other side keeps the start's sign (nextafter's
-// -denorm_min up is -0); NaN stays NaN.
-inline float float32_stepped(float f, int steps) {
-    constexpr int64_t kInfinity = 0x7f800000;
-    uint32_t fb;
-    std::memcpy(&fb, &f, 4);
-    const uint32_t sign = fb & 0x80000000u;
-    const int64_t key = sign ? -int64_t(fb & 0x7fffffffu) : int64_t(fb);
-    int64_t k = key + steps;
-    k = k > kInfinity ? kInfinity : (k < -kInfinity ? -kInfinity : k);
-    uint32_t ob = k < 0 ? (0x80000000u | uint32_t(-k)) : uint32_t(k);
-    if (k == 0) ob = sign;
-    float g;
-    std::memcpy(&g, &ob, 4);
-    return std::isnan(f) ? f : g;
-}
-
 // Rows x (n, d), rows a .. b - 1, rounded to float32 with column c moved |steps| float32 ulps
-// (float32_stepped), back as doubles into out (n, d): the points whose pdf the reported-pdf
-// check's rounding tolerance reads (harness.samplers.reported).  numpy's copy, nextafter
-// passes and cast had cost a check of a steep lobe 0.13 s for its 0.8 million mismatching
-// samples.
+// (up if steps > 0, down if < 0), back as doubles into out (n, d): the points whose pdf the
+// reported-pdf check's rounding tolerance reads (harness.samplers.reported).  The bits of
+// numpy's |steps| nextafter calls in float32 towards +-inf (tests/core/test_check_kernels.py):
+// a step is one on the integer that orders the floats (its magnitude's bits, negated for a
+// negative float; +0 and -0 both 0, as nextafter steps from either to the same subnormal), held
+// at the infinities; a zero reached from the other side keeps the start's sign (nextafter's
+// -denorm_min up is -0); NaN stays NaN.  numpy's copy, nextafter passes and cast had cost a
+// check of a steep lobe 0.13 s for its 0.8 million mismatching samples.
 inline void float32_nudged(const double *x, size_t d, size_t c, int steps, size_t a, size_t b, double *out) {
+    constexpr int64_t kInfinity = 0x7f800000;
     for (size_t i = a; i < b; ++i)
         for (size_t j = 0; j < d; ++j) out[i * d + j] = double(float(x[i * d + j]));
-    for (size_t i = a; i < b; ++i) out[i * d + c] = double(float32_stepped(float(x[i * d + c]), steps));
-}
-
-// Float32 columns (c, n), values a .. b - 1 of each, each moved one ulp both ways into out
-// (c rows of 2n): value i of row r at out[r * 2n + i] moved up for even r and down for odd r,
-// and at out[r * 2n + n + i] the other way (float32_stepped).  The sampler check's measure of
-// a float32 pdf's rounding noise on a box (harness.samplers.domains.ParamDensity.nudged: both
-// ways in one pdf call); numpy's nextafter took 10 ns a value there.
-inline void float32_columns_nudged(const float *columns, size_t c, size_t n, size_t a, size_t b, float *out) {
-    for (size_t r = 0; r < c; ++r) {
-        const int up = r % 2 == 0 ? 1 : -1;
-        for (size_t i = a; i < b; ++i) {
-            out[r * 2 * n + i] = float32_stepped(columns[r * n + i], up);
-            out[r * 2 * n + n + i] = float32_stepped(columns[r * n + i], -up);
-        }
+    for (size_t i = a; i < b; ++i) {
+        const float f = float(x[i * d + c]);
+        uint32_t fb;
+        std::memcpy(&fb, &f, 4);
+        const uint32_t sign = fb & 0x80000000u;
+        const int64_t key = sign ? -int64_t(fb & 0x7fffffffu) : int64_t(fb);
+        int64_t k = key + steps;
+        k = k > kInfinity ? kInfinity : (k < -kInfinity ? -kInfinity : k);
+        uint32_t ob = k < 0 ? (0x80000000u | uint32_t(-k)) : uint32_t(k);
+        if (k == 0) ob = sign;
+        float g;
+        std::memcpy(&g, &ob, 4);
+        out[i * d + c] = std::isnan(f) ? double(f) : double(g);
     }
 }
 

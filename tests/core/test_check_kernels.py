@@ -732,33 +732,6 @@ def test_float32_nudged_matches_numpy_on_any_bits(steps):
         rest.float32_nudged(x, 3, steps)
 
 
-@pytest.mark.parametrize("rows", [1, 2, 3])
-def test_float32_columns_nudged_matches_numpy_on_any_bits(rows):
-    """The cubature's noise measure's points: each float32 column moved one ulp up in even rows
-    and down in odd ones, then the other way, numpy's float32 nextafter bit for bit (random
-    bit patterns, both zeros, the subnormals next to them, float32's ends, the infinities),
-    over more values than a chunk; anything but float32 (c, N) refused."""
-    rng = np.random.default_rng(18)
-    special = np.array([0.0, -0.0, 2.0**-149, -(2.0**-149), np.inf, -np.inf, 1.0, -1.0,
-                        float(np.finfo(np.float32).max), -float(np.finfo(np.float32).max)], dtype=np.float32)
-    bits = rng.integers(0, 2**32, size=(rows, CHUNKS), dtype=np.uint64).astype(np.uint32)
-    columns = bits.view(np.float32)
-    columns[:, :special.size] = special
-    got = rest.float32_columns_nudged(columns)
-    def stepped(r: int, up: bool) -> np.ndarray:
-        with np.errstate(invalid="ignore", over="ignore"):
-            return np.nextafter(columns[r], np.float32(np.inf if (r % 2 == 0) == up else -np.inf))
-
-    want = np.concatenate([np.stack([stepped(r, up) for r in range(rows)]) for up in (True, False)], axis=1)
-    assert got.shape == (rows, 2 * CHUNKS) and got.dtype == np.float32
-    np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
-    np.testing.assert_array_equal(np.where(np.isnan(got), 0, got.view(np.uint32)),
-                                  np.where(np.isnan(want), 0, want.view(np.uint32)))
-    for bad in (columns.view(np.uint32).astype(np.float64), columns[0]):
-        with pytest.raises(ValueError, match="float32"):
-            rest.float32_columns_nudged(bad)
-
-
 @pytest.mark.parametrize("n", [1, 7, 65_536, 65_537, 140_001])
 @pytest.mark.parametrize("kind", ["interval", "hemisphere"])
 def test_dither_uniforms_drawn_in_the_pass_are_those_of_points(kind, n):

@@ -158,7 +158,7 @@ def _reference_box_integrals(q, lo, hi, tol, *, max_depth=24, max_evals=40_000_0
     """box_integrals as numpy arrays level by level (the algorithm the core's BoxRefinement
     runs): each box against its best split's halves, converged or halved along that axis, or
     stopped where its change is within 4 times its noise, half the second difference of its
-    rule on ``noisy`` (q at points nudged both ways, side by side: box_integrals' q.nudged())
+    rule on ``noisy`` (q at points nudged either way: box_integrals' q.nudged(1), q.nudged(-1))
     about its own, measured on the unconverged boxes whose change is within 32 floors of their
     integral and has stalled (with its parent's, at least a tenth of the two changes before)."""
     from harness.samplers.cubature import _GL_W, _GL_X, tensor_rule
@@ -208,8 +208,8 @@ def _reference_box_integrals(q, lo, hi, tol, *, max_depth=24, max_evals=40_000_0
             if rows.size:
                 evals += 2 * rows.size * 4**k
                 w = _GL_W if k == 1 else np.outer(_GL_W, _GL_W).reshape(-1)
-                both = tensor_rule(noisy, lo[rows], hi[rows], _GL_X, w).reshape(rows.size, -1)
-                up, down = both[:, 0], both[:, both.shape[1] // 2]
+                up, down = (tensor_rule(n, lo[rows], hi[rows], _GL_X, w).reshape(rows.size, -1)[:, 0]
+                            for n in noisy)
                 noise[rows] = np.abs((up - whole[rows, 0]) + (down - whole[rows, 0])) / 2
         noisy_stop = (noise > 0) & (moved <= 4 * noise)
         done = converged | last | noisy_stop
@@ -243,21 +243,10 @@ def _step_and_singularity(x: np.ndarray) -> np.ndarray:
         return (1 + 8 * (x[:, 0] > 0.41)) * (0.1 + x[:, 1] ** -0.9) + np.exp(-((x[:, 0] - 0.3) ** 2) / 2e-5)
 
 
-class _Both:
-    """Two functions' values side by side (N, 2 m): what ParamDensity.nudged() integrates."""
-
-    def __init__(self, up, down):
-        self.up, self.down = up, down
-
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        a, b = self.up(x), self.down(x)
-        return np.column_stack([a.reshape(a.shape[0], -1), b.reshape(b.shape[0], -1)])
-
-
 class _Rounded:
     """f with a float32 renderer's kind of noise: relative ``noise`` times a hash of the point
     (``phase`` moves it, as nudging the point's float32 direction does), with ``nudged()``
-    as :class:`harness.samplers.domains.ParamDensity` has it (both ways side by side)."""
+    as :class:`harness.samplers.domains.ParamDensity` has it."""
 
     def __init__(self, f, noise: float, phase: float = 0.0):
         self.f, self.noise, self.phase = f, noise, phase
@@ -267,8 +256,8 @@ class _Rounded:
         hashed = np.sin(1e7 * x[:, 0] + 3e7 * x[:, -1] + self.phase)
         return v * (1 + self.noise * (hashed if v.ndim == 1 else hashed[:, None]))
 
-    def nudged(self):
-        return _Both(*(_Rounded(self.f, self.noise, self.phase + s) for s in (1, -1)))
+    def nudged(self, sign: int):
+        return _Rounded(self.f, self.noise, self.phase + sign)
 
 
 @pytest.mark.parametrize("k", [1, 2])
@@ -297,7 +286,7 @@ def test_box_integrals_refinement_in_the_core_is_its_numpy_definition_bit_for_bi
     # with noise, q measures it on boxes near the floor (q.nudged()), and some stop on it
     q = _Rounded(f, noise) if noise else f
     if noise:
-        options["noisy"] = q.nudged()
+        options["noisy"] = (q.nudged(1), q.nudged(-1))
 
     rng = np.random.default_rng(7)
     lo = np.floor(rng.random((40, k)) * 8) / 8             # boxes of the grid of eighths, some repeated
@@ -315,18 +304,18 @@ def test_box_integrals_refinement_in_the_core_is_its_numpy_definition_bit_for_bi
 
 
 class _Counting:
-    """q counting its evaluations into ``calls`` (its nudged() too: two a point)."""
+    """q counting the points it is called on into ``calls`` (its nudged() too)."""
 
-    def __init__(self, q, calls: dict, key: str, per: int = 1):
-        self.q, self.calls, self.key, self.per = q, calls, key, per
+    def __init__(self, q, calls: dict, key: str):
+        self.q, self.calls, self.key = q, calls, key
         calls.setdefault(key, 0)
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
-        self.calls[self.key] += self.per * x.shape[0]
+        self.calls[self.key] += x.shape[0]
         return self.q(x)
 
-    def nudged(self):
-        return _Counting(self.q.nudged(), self.calls, self.key, per=2)
+    def nudged(self, sign: int):
+        return _Counting(self.q.nudged(sign), self.calls, self.key)
 
 
 def test_rounding_noise_stops_the_boxes_whose_change_it_explains():
@@ -353,8 +342,8 @@ def test_rounding_noise_stops_the_boxes_whose_change_it_explains():
 
 class _Float32Lobe:
     """A noise-free float32 density: 1 + a lobe of width 1e-3 at 0.98294, computed in float32
-    at the point rounded to float32 (nudged(): at the point moved one float32 ulp either way,
-    side by side: on the lobe's flank 1e-4 of its value, a steep lobe's change, not noise)."""
+    at the point rounded to float32 (nudged(sign): at the point moved one float32 ulp that way:
+    on the lobe's flank 1e-4 of its value, a steep lobe's change, not noise)."""
 
     def __init__(self, sign: int = 0):
         self.sign = sign
@@ -366,8 +355,8 @@ class _Float32Lobe:
         lobe = np.exp(-(((s - np.float32(0.98294)) / np.float32(1e-3)) ** 2))
         return (1 + np.float32(4e2) * lobe).astype(float)
 
-    def nudged(self):
-        return _Both(_Float32Lobe(1), _Float32Lobe(-1))
+    def nudged(self, sign: int):
+        return _Float32Lobe(sign)
 
 
 def test_a_lobe_not_yet_resolved_is_refined_whatever_the_rounding_noise():
@@ -405,11 +394,12 @@ def test_the_noise_measure_cancels_a_steep_float32_lobes_own_change(kappa):
     lo = np.column_stack([np.arange(10) * 0.2 / kappa, np.full(10, 0.1)])   # across the lobe near the pole
     hi = lo + [0.2 / kappa, 0.05]
     w = np.outer(_GL_W, _GL_W).reshape(-1)
-    rule = q.rule_integrals(lo, hi, _GL_X, w)[:, 0]
-    up, down = q.nudged().rule_integrals(lo, hi, _GL_X, w).T     # both ways side by side
+    rule, up, down = (d.rule_integrals(lo, hi, _GL_X, w) for d in (q, q.nudged(1), q.nudged(-1)))
     one_sided = np.abs(up - rule)
     noise = np.abs((up - rule) + (down - rule)) / 2
     assert np.all(one_sided > 0.5 * kappa * 6e-8 * rule) and np.all(noise < one_sided / 300)
+    with pytest.raises(ValueError, match="sign"):
+        q.nudged(0)
 
 
 def _reference_agreement(own, parent, group, tol, floor):
