@@ -73,25 +73,18 @@ class _Counted:
     parameter points, or integrating itself over boxes (``rule_integrals``, which the
     cubature uses where q has it: :class:`harness.samplers.domains.ParamDensity`)."""
 
-    def __init__(self, q: Callable[[np.ndarray], np.ndarray], into: _Counted | None = None):
+    def __init__(self, q: Callable[[np.ndarray], np.ndarray]):
         self.q, self.evals = q, 0
-        self.into = into if into is not None else self     # whose count this one's calls add to
         self.pdf_batch = getattr(q, "pdf_batch", None)   # q's points a call, as the cubature asks q
 
     def __call__(self, sp: np.ndarray) -> np.ndarray:
-        self.into.evals += sp.shape[0]
+        self.evals += sp.shape[0]
         return self.q(sp)
 
     def rule_integrals(self, lo: np.ndarray, hi: np.ndarray, nodes: np.ndarray,
                        weights: np.ndarray) -> np.ndarray:
-        self.into.evals += weights.size * lo.shape[0]
+        self.evals += weights.size * lo.shape[0]
         return tensor_rule(self.q, lo, hi, nodes, weights)
-
-    def nudged(self, sign: int) -> _Counted | None:
-        """q's nudged density (:meth:`harness.samplers.domains.ParamDensity.nudged`), counted
-        into this count; None where q has none (a plain function)."""
-        nudged = getattr(self.q, "nudged", None)
-        return None if nudged is None else _Counted(nudged(sign), into=self.into)
 
 
 def tabulate(q: Callable[[np.ndarray], np.ndarray], k: int, axis: int, pieces: np.ndarray, leaves: int,

@@ -167,33 +167,24 @@ def box_integrals(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.
     (arrays (B, k) inside [0, 1]^k), and their error bounds: arrays (B, m).
 
     Each box is integrated by the 4-point tensor rule on itself and on its two halves along
-    every axis; where the best split still changes the integral (component 0) by more than the
-    box's share of its tolerance ``tol`` (absolute, per box or one for all), the box is halved
-    along the axis that changed most, and so on (up to ``max_depth`` splits or ``max_evals``
-    evaluations), unless the change is within ``floor`` (relative) of the box's integral: the
-    density's own rounding (:func:`rounding_floor`), which no split can reduce. Where q's values
-    carry rounding (``floor`` > 0) and q has ``nudged(sign)``
-    (:meth:`harness.samplers.domains.ParamDensity.nudged`: q at its points moved one float32 ulp
-    either way), a box whose change is within 32 floors of its integral and has stalled (with
-    its parent's, at least a tenth of the two before) measures its noise, half the second
-    difference of its rule on the nudged points about its own: a change within 4 times that is
-    noise, which halving does not reduce, and the box stops as if at the depth limit, its error
-    at least the noise. A smooth density's change cancels in the second difference however steep
-    (a lobe whose flank a node has not yet resolved is refined on); a float32 renderer's texel
-    lookups and steep lobes had their boxes chase the noise to the depth limit (an environment
-    map's tables: 92 million pdf calls, 52 million with the measure). Splitting along one axis
-    at a time follows a lobe that is thin in one direction only. The error of a box that
-    converged is the change of its last split: honest for smooth parts (the rule's error shrinks
-    some 2^8 times a halving there). A box that stopped at ``max_depth`` or ``max_evals``
-    without converging (or on its noise) holds a singularity, a step or noise, where the change
-    of the last split understates what remains: at x^-a the changes shrink by r = 2^(a-1) a
-    halving, and the error left after the last is r / (1 - r) times its change (2.4 times at a =
-    1/2, 14 times at a = 0.9: a correct sampler of x^-0.9 failed its normalisation test on every
-    seed with the bare change). So its error is extrapolated from the changes of its last three
-    splits, as a geometric tail (``extrapolate=False``: the bare change, for a caller that
-    refines such boxes further itself and measures its effort by those changes). The bookkeeping
-    of each level runs in the core (:class:`reference_estimators.BoxRefinement`, which states
-    the extrapolation); q is called here, once a level on every box's halves along every axis.
+    every axis; where the best split still changes the integral (component 0) by more than
+    the box's share of its tolerance ``tol`` (absolute, per box or one for all), the box is
+    halved along the axis that changed most, and so on (up to ``max_depth`` splits or
+    ``max_evals`` evaluations), unless the change is within ``floor`` (relative) of the
+    box's integral: the density's own rounding (:func:`rounding_floor`), which no split
+    can reduce.  Splitting along one axis at a time follows a lobe that is
+    thin in one direction only.  The error of a box that converged is the change of its last
+    split: honest for smooth parts (the rule's error shrinks some 2^8 times a halving there).
+    A box that stopped at ``max_depth`` or ``max_evals`` without converging holds a
+    singularity or a step, where the change of the last split understates what remains: at
+    x^-a the changes shrink by r = 2^(a-1) a halving, and the error left after the last is
+    r / (1 - r) times its change (2.4 times at a = 1/2, 14 times at a = 0.9: a correct
+    sampler of x^-0.9 failed its normalisation test on every seed with the bare change).  So
+    its error is extrapolated from the changes of its last three splits, as a geometric tail
+    (``extrapolate=False``: the bare change, for a caller that refines such boxes further
+    itself and measures its effort by those changes).  The bookkeeping of each level runs in
+    the core (:class:`reference_estimators.BoxRefinement`, which states the extrapolation);
+    q is called here, once a level on every box's halves along every axis.
 
     ``breaks``: per axis, the sorted coordinates where q may step or kink (an environment
     map's texel edges; None: none declared); a box with one inside is split there rather than
@@ -224,25 +215,10 @@ def box_integrals(q: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.
             for axis in range(k)]
     state = rest.BoxRefinement(lo, hi, whole, tol, floor, extrapolate, axes)
     evals = ncell * 4**k
-    nudged = getattr(q, "nudged", None)
-    # q at points nudged by a rounding either way, where q's values are float32 (floor > 0)
-    noisy = (nudged(1), nudged(-1)) if nudged is not None and floor > 0 else None
-    noisy = None if noisy is None or None in noisy else noisy
     for depth in range(max_depth + 1):
         clo, chi = state.halves()
         evals += clo.shape[0] * 4**k
         parts = _rule(q, clo, chi)
-        parts = parts.reshape(parts.shape[0], -1)
-        last = depth == max_depth or evals > max_evals
-        probed: dict[str, np.ndarray] = {}
-        if noisy is not None and not last:
-            # the boxes near the floor measure q's rounding noise on themselves (the rules on
-            # points nudged either way): a change within a few times it stops them
-            rows, plo, phi = state.probe(parts)
-            if rows.size:
-                evals += 2 * rows.size * 4**k
-                up, down = (_rule(n, plo, phi).reshape(rows.size, -1) for n in noisy)
-                probed = {"rows": rows, "up": up, "down": down}
-        if not state.step(parts, last, **probed):
+        if not state.step(parts.reshape(parts.shape[0], -1), depth == max_depth or evals > max_evals):
             break
     return state.result()

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -240,7 +240,6 @@ class ParamDensity:
     pdf: Callable[[np.ndarray], np.ndarray]
     columns: Callable[[np.ndarray], np.ndarray] | None = None
     pdf_batch: int | None = None    # points a call of pdf in the cubature's rule (None: its default)
-    nudge: int = 0                  # the rule's points moved by a float32 ulp, this way (:meth:`nudged`)
 
     def values(self, x: np.ndarray) -> np.ndarray:
         """q (or its columns) at domain points x."""
@@ -251,22 +250,6 @@ class ParamDensity:
 
     def __call__(self, s: np.ndarray) -> np.ndarray:
         return self.values(self.dom.to_points(s))
-
-    def _float32_rule(self) -> bool:
-        """Whether :meth:`rule_integrals` evaluates a float32 renderer's pdf on float32 columns."""
-        return (isinstance(self.pdf, Float32DirectionPdf) and self.dom.point_dim == 3
-                and (self.columns is None or isinstance(self.columns, MomentColumns)))
-
-    def nudged(self, sign: int) -> ParamDensity:
-        """This density with :meth:`rule_integrals` evaluating the pdf at every node moved by
-        one float32 ulp a coordinate, ``sign`` (+1 or -1) times (+, -, +) for (x, y, z) (rounded
-        to float32 first: a float32 renderer's directions as it takes them); the Jacobian stays
-        the node's.  The two ways' rules about the plain one measure the pdf's own rounding
-        noise on a box (:func:`harness.samplers.cubature.box_integrals`, where the pdf's values
-        are float32): their second difference cancels a smooth pdf's change, however steep."""
-        if sign not in (1, -1):
-            raise ValueError(f"'sign' must be 1 or -1, got {sign!r}")
-        return replace(self, nudge=sign)
 
     def rule_integrals(self, lo: np.ndarray, hi: np.ndarray, nodes: np.ndarray,
                        weights: np.ndarray) -> np.ndarray:
@@ -279,20 +262,18 @@ class ParamDensity:
         dom = self.dom
         # (q alone or its moment columns, which the core makes from any order; other columns
         # are made in numpy from box-major values)
-        if self._float32_rule():
+        if isinstance(self.pdf, Float32DirectionPdf) and dom.point_dim == 3 and (
+                self.columns is None or isinstance(self.columns, MomentColumns)):
             directions = self.pdf.directions
             columns, ok = (rest.cubature_float32_directions(dom.kind, lo, hi, nodes, dom.pole_columns,
                                                             FLOAT32_UNIT_SLACK)
                            if directions is None else directions(lo, hi, nodes) or (None, None))
             if ok is not None and ok.all():   # unit vectors all (nodes' are; else the float64 path says why)
-                if self.nudge:
-                    columns = _nudged(np.array(columns, dtype=np.float32), self.nudge)
                 values = self.pdf.float32_columns(columns)   # in the columns' interleaved order
                 jacobian = dom.jacobian_at_points(None)
                 return self._integrals(lo, hi, values, jacobian, weights, interleaved=True)
         x = rest.cubature_points(dom.kind, lo, hi, nodes, (dom.lo, dom.hi), dom.pole_columns)
-        at = _nudged(x.astype(np.float32).T, self.nudge).T.astype(np.float64) if self.nudge else x
-        return self._integrals(lo, hi, self.pdf(at), dom.jacobian_at_points(x), weights)
+        return self._integrals(lo, hi, self.pdf(x), dom.jacobian_at_points(x), weights)
 
     def _integrals(self, lo: np.ndarray, hi: np.ndarray, pdf: np.ndarray, jacobian: np.ndarray | float,
                    weights: np.ndarray, interleaved: bool = False) -> np.ndarray:
@@ -310,17 +291,6 @@ class ParamDensity:
         if moments:
             return rest.cubature_moment_sums(lo, hi, q, weights, self.columns.c)
         return rest.cubature_sums(lo, hi, self._columns_of(q), weights)
-
-
-def _nudged(columns: np.ndarray, sign: int) -> np.ndarray:
-    """Float32 coordinates, one per row of ``columns`` ((d, N), or (N,) for one), each moved
-    one ulp, ``sign`` times up in even rows and down in odd ones, in place:
-    :meth:`ParamDensity.nudged`."""
-    rows = columns.reshape(-1, columns.shape[-1])
-    for c in range(rows.shape[0]):
-        up = (c % 2 == 0) == (sign > 0)
-        rows[c] = np.nextafter(rows[c], np.float32(np.inf if up else -np.inf))
-    return columns
 
 
 def _azimuth(phi: np.ndarray) -> np.ndarray:

@@ -4,11 +4,9 @@
 // cubature's and the CDF tables' (grouped_agreement, LeafQuarters) and the rule's weighted
 // sums.  Arrays are validated here (shapes, sorted breaks; indices by the kernels, where they
 // read them), so no call can read out of bounds.
-#include <nanobind/stl/optional.h>
 #include <nanobind/stl/vector.h>
 
 #include <algorithm>
-#include <optional>
 #include <vector>
 
 #include "bind_common.h"
@@ -190,36 +188,12 @@ void bind_cubature(nb::module_ &m) {
             }
             return nb::make_tuple(a, b);
         }, "(clo, chi): every box's two halves along each axis, axis-major, (2 k B, k) each.")
-        .def("probe", [](const BoxRefinement &r, InArray parts) {
+        .def("step", [](BoxRefinement &r, InArray parts, bool last) {
             if (parts.ndim() != 2 || parts.shape(0) != 2 * r.k() * r.boxes() || parts.shape(1) != r.m())
                 throw nb::value_error("'parts' must hold the integrals over halves()' boxes, (2 k B, m)");
-            std::vector<int64_t> rows;
-            {
-                nb::gil_scoped_release g;
-                rows = r.probe(parts.data());
-            }
-            const size_t k = r.k();
-            double *lo, *hi;
-            OutArray a = new_array(rows.size(), k, &lo), b = new_array(rows.size(), k, &hi);
-            for (size_t j = 0; j < rows.size(); ++j) r.bounds(size_t(rows[j]), lo + j * k, hi + j * k);
-            return nb::make_tuple(index_array(rows), a, b);
-        }, "parts"_a, "(rows, lo, hi): the unconverged boxes whose change is within 32 rounding floors of their "
-                      "integral and has stalled, for the caller to measure their noise (step's `up`, `down`).")
-        .def("step", [](BoxRefinement &r, InArray parts, bool last, std::optional<I64Array> rows,
-                        std::optional<InArray> up, std::optional<InArray> down) {
-            if (parts.ndim() != 2 || parts.shape(0) != 2 * r.k() * r.boxes() || parts.shape(1) != r.m())
-                throw nb::value_error("'parts' must hold the integrals over halves()' boxes, (2 k B, m)");
-            auto fits = [&](const std::optional<InArray> &a) {
-                return a && a->ndim() == 2 && a->shape(0) == rows->size() && a->shape(1) == r.m();
-            };
-            if (rows ? !(fits(up) && fits(down)) : (up || down))
-                throw nb::value_error("'rows' (R,), 'up' and 'down' (R, m) must be given together");
             nb::gil_scoped_release g;
-            return rows ? r.step(parts.data(), last, rows->data(), up->data(), down->data(), rows->size())
-                        : r.step(parts.data(), last);
-        }, "parts"_a, "last"_a, "rows"_a.noconvert() = nb::none(), "up"_a = nb::none(), "down"_a = nb::none(),
-           "Finishes the converged boxes (all when `last`), and those of `rows` whose change is within 4 times "
-           "their noise, |(up - rule) + (down - rule)| / 2; whether boxes remain.")
+            return r.step(parts.data(), last);
+        }, "parts"_a, "last"_a, "Finishes the converged boxes (all when `last`); whether boxes remain.")
         .def("result", [](const BoxRefinement &r) {
             double *value, *error;
             OutArray a = new_array(r.cells(), r.m(), &value), b = new_array(r.cells(), r.m(), &error);

@@ -49,8 +49,7 @@ inline double nan_max(double a, double b) { return a != a ? a : (b != b ? b : (a
 // The refinement of boxes [lo, hi] (k = 1 or 2 coordinates) of values with m columns, level
 // by level: halves() gives every box's two halves along each axis (axis-major: axis 0's
 // 2B rows, then axis 1's), the caller integrates them, step() takes those integrals, finishes
-// the boxes that converged (or all, at the last level; or, where the caller measured the noise
-// of probe()'s boxes, those whose change is that noise) and keeps the others' best halves as
+// the boxes that converged (or all, at the last level) and keeps the others' best halves as
 // the next level's boxes.  result() sums each original box's finished parts in the order they
 // finished (numpy's bincount).
 class BoxRefinement {
@@ -94,61 +93,27 @@ class BoxRefinement {
         halved_ = true;
     }
 
-    // The boxes whose rounding noise the caller is to measure before step() (rows, ascending):
-    // with q's rounding floor above 0, those the split has not converged whose change, parts
-    // (as step() takes them) against their rule, is within kProbeFloors floors of their
-    // integral and has stalled: the sum of it and its parent's change is at least kStallRatio
-    // times the sum of the two before (the pairs of unconverged_factor, which even out splits
-    // alternating between axes; none before depth 2).  A smooth box's changes shrink some 2^8
-    // times a halving, and it is not measured; a float32 density's noise only halves with the
-    // box, as does the change of a lobe the rule has not yet resolved, which the measure then
-    // tells apart (step()).
-    std::vector<int64_t> probe(const double *parts) const {
-        std::vector<int64_t> rows;
-        if (!(floor_ > 0)) return rows;
-        const size_t B = boxes();
-        std::vector<double> change(k_);
-        for (size_t i = 0; i < B; ++i) {
-            const double moved = change[best_axis(parts, i, change.data())];
-            const double c1 = history_[2 * i], c2 = history_[2 * i + 1];
-            const bool stalled = moved + c1 >= kStallRatio * (c1 + c2);
-            if (!(moved <= limit(i)) && moved <= kProbeFloors * floor_ * std::fabs(whole_[i * m_]) && stalled)
-                rows.push_back(int64_t(i));
-        }
-        return rows;
-    }
-
-    // Box `row`'s bounds into lo, hi (k each).
-    void bounds(size_t row, double *lo, double *hi) const {
-        for (size_t j = 0; j < k_; ++j) lo[j] = lo_[row * k_ + j], hi[j] = hi_[row * k_ + j];
-    }
-
     // parts (k * 2B rows of m): the integrals over halves()' boxes, in its order.  `last`:
-    // finish every box (the depth or evaluation limit).  rows (count, ascending, below B), up
-    // and down (count x m): the rule's integrals over those boxes (probe()'s; none: count 0) of
-    // q at its points moved by a rounding one way and the other.  The box's noise is half
-    // their second difference about its rule, |(up - w) + (down - w)| / 2 (column 0): a smooth
-    // q's first-order change, however steep (an unresolved lobe's flank under a node), cancels
-    // there, leaving what rounding does that no smooth function does.  A box whose change is
-    // within kNoiseMultiple times its noise stops as at the depth limit, its error at least the
-    // noise: halving does not reduce noise.  Returns whether boxes remain.
-    bool step(const double *parts, bool last, const int64_t *rows = nullptr, const double *up = nullptr,
-              const double *down = nullptr, size_t count = 0) {
+    // finish every box (the depth or evaluation limit).  Returns whether boxes remain.
+    bool step(const double *parts, bool last) {
         if (!halved_) throw std::logic_error("step() takes the integrals over halves()' boxes: call halves() first");
-        const size_t B = boxes(), m = m_;
-        std::vector<double> noise(B, 0.0);
-        for (size_t r = 0; r < count; ++r) {
-            if (rows[r] < 0 || uint64_t(rows[r]) >= B) throw std::invalid_argument("a probed row outside the boxes");
-            const double w = whole_[size_t(rows[r]) * m];
-            noise[size_t(rows[r])] = std::fabs((up[r * m] - w) + (down[r * m] - w)) / 2;
-        }
         halved_ = false;
+        const size_t B = boxes(), m = m_;
         std::vector<double> change(k_ * B), refined(m), diff(m);
         std::vector<size_t> best(B);
         std::vector<unsigned char> keep(B);
         for (size_t i = 0; i < B; ++i) {
             const double *w = &whole_[i * m];
-            const size_t b = best_axis(parts, i, &change[i * k_]);
+            for (size_t axis = 0; axis < k_; ++axis) {
+                const double *p = parts + (axis * 2 * B + 2 * i) * m;
+                change[i * k_ + axis] = std::fabs((p[0] + p[m]) - w[0]);
+            }
+            // numpy's argmax: the first maximum, or the first NaN
+            size_t b = 0;
+            if (k_ == 2) {
+                const double c0 = change[i * k_], c1 = change[i * k_ + 1];
+                b = c0 != c0 ? 0 : (c1 != c1 ? 1 : (c1 > c0 ? 1 : 0));
+            }
             best[i] = b;
             const double *p = parts + (b * 2 * B + 2 * i) * m;
             for (size_t c = 0; c < m; ++c) {
@@ -156,15 +121,11 @@ class BoxRefinement {
                 diff[c] = std::fabs(refined[c] - w[c]);
             }
             const double moved = change[i * k_ + b];
-            const bool converged = moved <= limit(i);
-            const bool noisy = noise[i] > 0 && moved <= kNoiseMultiple * noise[i];
-            const bool done = converged || last || noisy;
+            const double limit = nan_max(tol_[size_t(owner_[i])] * share_[i], floor_ * std::fabs(w[0]));
+            const bool converged = moved <= limit;
+            const bool done = converged || last;
             keep[i] = !done;
             if (!done) continue;
-            // a box stopped on its noise is uncertain by that much at least, in every column
-            // (the columns made of q have values at most q's: the moment columns h q, h^2 q)
-            if (noisy && !converged)
-                for (size_t c = 0; c < m; ++c) diff[c] = nan_max(diff[c], noise[i]);
             if (extrapolate_ && !converged) {
                 const double factor = unconverged_factor(moved, history_[2 * i], history_[2 * i + 1]);
                 for (size_t c = 0; c < m; ++c) diff[c] *= factor;
@@ -214,30 +175,6 @@ class BoxRefinement {
     }
 
   private:
-    // probe()'s window, in floors of a box's integral, and how many times the measured noise a
-    // change may be and still be noise (a change and the second difference each differ from
-    // the rule by about the noise of a rule's sum; 4 leaves a real change that size refining)
-    static constexpr double kProbeFloors = 32.0, kStallRatio = 0.1, kNoiseMultiple = 4.0;
-
-    // Box i's convergence limit: its share of its tolerance, or q's rounding floor of |whole|.
-    double limit(size_t i) const {
-        return nan_max(tol_[size_t(owner_[i])] * share_[i], floor_ * std::fabs(whole_[i * m_]));
-    }
-
-    // The changes of box i's integral (column 0) when split along each axis, from parts (as
-    // step() takes them), into change (k), and the axis of the largest: numpy's argmax, the
-    // first maximum, or the first NaN.
-    size_t best_axis(const double *parts, size_t i, double *change) const {
-        const size_t B = boxes(), m = m_;
-        for (size_t axis = 0; axis < k_; ++axis) {
-            const double *p = parts + (axis * 2 * B + 2 * i) * m;
-            change[axis] = std::fabs((p[0] + p[m]) - whole_[i * m]);
-        }
-        if (k_ == 1) return 0;
-        const double c0 = change[0], c1 = change[1];
-        return c0 != c0 ? 0 : (c1 != c1 ? 1 : (c1 > c0 ? 1 : 0));
-    }
-
     // Box i's lower (half 0) or upper part along `axis`, cut at `cut`, into lo, hi (k each).
     void half_box(size_t i, size_t axis, double cut, size_t half, double *lo, double *hi) const {
         for (size_t j = 0; j < k_; ++j) {

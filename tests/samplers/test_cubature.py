@@ -8,13 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from harness.samplers.cubature import (
-    FLOAT32_FLOOR,
-    box_integrals,
-    cell_integrals,
-    grouped_integrals,
-    split_points,
-)
+from harness.samplers.cubature import box_integrals, cell_integrals, grouped_integrals, split_points
 
 
 def _lobe(x: np.ndarray) -> np.ndarray:
@@ -154,13 +148,9 @@ def _halves(lo, hi, axis, cut):
 
 
 def _reference_box_integrals(q, lo, hi, tol, *, max_depth=24, max_evals=40_000_000, floor=0.0,
-                             extrapolate=True, breaks=None, noisy=None):
+                             extrapolate=True, breaks=None):
     """box_integrals as numpy arrays level by level (the algorithm the core's BoxRefinement
-    runs): each box against its best split's halves, converged or halved along that axis, or
-    stopped where its change is within 4 times its noise, half the second difference of its
-    rule on ``noisy`` (q at points nudged either way: box_integrals' q.nudged(1), q.nudged(-1))
-    about its own, measured on the unconverged boxes whose change is within 32 floors of their
-    integral and has stalled (with its parent's, at least a tenth of the two changes before)."""
+    runs): each box against its best split's halves, converged or halved along that axis."""
     from harness.samplers.cubature import _GL_W, _GL_X, tensor_rule
 
     def rule(a, b):
@@ -200,22 +190,8 @@ def _reference_box_integrals(q, lo, hi, tol, *, max_depth=24, max_evals=40_000_0
         refined, moved = np.stack(sums, axis=1)[rows, best], change[rows, best]
         diff = np.abs(refined - whole)
         converged = moved <= np.maximum(tol[owner] * share, floor * np.abs(whole[:, 0]))
-        last = depth == max_depth or evals > max_evals
-        noise = np.zeros(lo.shape[0])
-        if noisy is not None and floor > 0 and not last:
-            stalled = moved + history[:, 0] >= 0.1 * (history[:, 0] + history[:, 1])
-            rows = np.flatnonzero(~converged & (moved <= 32 * floor * np.abs(whole[:, 0])) & stalled)
-            if rows.size:
-                evals += 2 * rows.size * 4**k
-                w = _GL_W if k == 1 else np.outer(_GL_W, _GL_W).reshape(-1)
-                up, down = (tensor_rule(n, lo[rows], hi[rows], _GL_X, w).reshape(rows.size, -1)[:, 0]
-                            for n in noisy)
-                noise[rows] = np.abs((up - whole[rows, 0]) + (down - whole[rows, 0])) / 2
-        noisy_stop = (noise > 0) & (moved <= 4 * noise)
-        done = converged | last | noisy_stop
+        done = converged | (depth == max_depth) | (evals > max_evals)
         stopped = done & ~converged
-        on_noise = noisy_stop & ~converged
-        diff[on_noise] = np.maximum(diff[on_noise], noise[on_noise, None])
         if extrapolate and stopped.any():
             diff[stopped] *= unconverged_factor(moved[stopped], history[stopped])[:, None]
         finished.append((owner[done], refined[done], diff[done]))
@@ -243,50 +219,25 @@ def _step_and_singularity(x: np.ndarray) -> np.ndarray:
         return (1 + 8 * (x[:, 0] > 0.41)) * (0.1 + x[:, 1] ** -0.9) + np.exp(-((x[:, 0] - 0.3) ** 2) / 2e-5)
 
 
-class _Rounded:
-    """f with a float32 renderer's kind of noise: relative ``noise`` times a hash of the point
-    (``phase`` moves it, as nudging the point's float32 direction does), with ``nudged()``
-    as :class:`harness.samplers.domains.ParamDensity` has it."""
-
-    def __init__(self, f, noise: float, phase: float = 0.0):
-        self.f, self.noise, self.phase = f, noise, phase
-
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        v = self.f(x)
-        hashed = np.sin(1e7 * x[:, 0] + 3e7 * x[:, -1] + self.phase)
-        return v * (1 + self.noise * (hashed if v.ndim == 1 else hashed[:, None]))
-
-    def nudged(self, sign: int):
-        return _Rounded(self.f, self.noise, self.phase + sign)
-
-
 @pytest.mark.parametrize("k", [1, 2])
 @pytest.mark.parametrize("options", [{}, {"extrapolate": False}, {"max_depth": 3}, {"max_evals": 30_000},
                                      {"floor": 1e-5}, {"breaks": "step"}, {"columns": 3}, {"tol": "per box"},
-                                     {"max_depth": 0}, {"max_evals": 0}, {"bad": True},
-                                     {"floor": 1e-5, "noise": 1e-4}, {"floor": 1e-5, "noise": 1e-4,
-                                                                      "columns": 2},
-                                     {"floor": 1e-5, "noise": 1e-4, "extrapolate": False}])
+                                     {"max_depth": 0}, {"max_evals": 0}, {"bad": True}])
 def test_box_integrals_refinement_in_the_core_is_its_numpy_definition_bit_for_bit(k, options):
     """Every decision of the refinement (the split axis, convergence at the tolerance or q's
     rounding floor, the depth and evaluation limits, the unconverged boxes' extrapolated error,
     splits at declared breaks, the sums in finishing order, NaN and infinite integrals,
     zero-width boxes) as the numpy algorithm makes it."""
     options = dict(options)
-    columns, bad, noise = options.pop("columns", 1), options.pop("bad", False), options.pop("noise", 0.0)
+    columns, bad = options.pop("columns", 1), options.pop("bad", False)
     if options.get("breaks") == "step":
         options["breaks"] = [np.array([0.25, 0.41, 0.7]), None][:k]
 
-    def f(x):
+    def q(x):
         v = _step_and_singularity(x if k == 2 else np.column_stack([x[:, 0], x[:, 0]]))
         if bad:   # NaN in a band, infinite on a line: boxes whose changes are NaN or infinite
             v = np.where(np.abs(x[:, 0] - 0.6) < 0.01, np.nan, np.where(x[:, 0] == 0.8125, np.inf, v))
         return v if columns == 1 else np.column_stack([v ** (j + 1) / 10**j for j in range(columns)])
-
-    # with noise, q measures it on boxes near the floor (q.nudged()), and some stop on it
-    q = _Rounded(f, noise) if noise else f
-    if noise:
-        options["noisy"] = (q.nudged(1), q.nudged(-1))
 
     rng = np.random.default_rng(7)
     lo = np.floor(rng.random((40, k)) * 8) / 8             # boxes of the grid of eighths, some repeated
@@ -294,112 +245,12 @@ def test_box_integrals_refinement_in_the_core_is_its_numpy_definition_bit_for_bi
     hi = lo + 0.125
     hi[3] = lo[3]                                            # a box of zero width
     tol = rng.random(40) * 1e-5 if options.pop("tol", None) == "per box" else 1e-6
-    noisy = options.pop("noisy", None)
     with np.errstate(invalid="ignore"):
-        want = _reference_box_integrals(q, lo, hi, tol, noisy=noisy, **options)
+        want = _reference_box_integrals(q, lo, hi, tol, **options)
         got = box_integrals(q, lo, hi, tol, **options)
     for a, b in zip(want, got):
         np.testing.assert_array_equal(a.view(np.uint64), b.view(np.uint64))
     assert bad or np.all(np.isfinite(got[0]))
-
-
-class _Counting:
-    """q counting the points it is called on into ``calls`` (its nudged() too)."""
-
-    def __init__(self, q, calls: dict, key: str):
-        self.q, self.calls, self.key = q, calls, key
-        calls.setdefault(key, 0)
-
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        self.calls[self.key] += x.shape[0]
-        return self.q(x)
-
-    def nudged(self, sign: int):
-        return _Counting(self.q.nudged(sign), self.calls, self.key)
-
-
-def test_rounding_noise_stops_the_boxes_whose_change_it_explains():
-    """A smooth lobe with float32-like rounding noise (3e-5 relative a node, above the float32
-    floor of 1.9e-6): its boxes' changes only halve with the boxes, so refining chased the
-    noise to the depth limit; measured on each box near the floor (its rule on nudged points),
-    the noise stops them, for 1/14 of the pdf calls, the 64 boxes' total within its bound and
-    each within twice its own (noise bounds no box exactly: 5 of 64 are off by up to 1.53
-    times their bounds, where chasing the noise left 31 off by up to 5.8 times)."""
-    def smooth(x):
-        return np.exp(-((x[:, 0] - 0.3) ** 2 + (x[:, 1] - 0.6) ** 2) / 0.02)
-
-    lo = np.stack(np.meshgrid(np.arange(8) / 8, np.arange(8) / 8, indexing="ij"), axis=-1).reshape(-1, 2)
-    hi, calls = lo + 0.125, {}
-    q = _Counting(_Rounded(smooth, 3e-5), calls, "probed")
-    value, error = box_integrals(q, lo, hi, 1e-12, floor=FLOAT32_FLOOR, max_depth=12)
-    _reference_box_integrals(_Counting(_Rounded(smooth, 3e-5), calls, "not"), lo, hi, 1e-12,
-                             floor=FLOAT32_FLOOR, max_depth=12)
-    assert calls["probed"] < calls["not"] / 10
-    exact, _ = box_integrals(smooth, lo, hi, 1e-14, max_depth=12)   # the noise's integral: ~1e-11 of it
-    off = np.abs(value[:, 0] - exact[:, 0])
-    assert off.sum() <= error[:, 0].sum() and np.all(off <= 2 * error[:, 0])
-
-
-class _Float32Lobe:
-    """A noise-free float32 density: 1 + a lobe of width 1e-3 at 0.98294, computed in float32
-    at the point rounded to float32 (nudged(sign): at the point moved one float32 ulp that way:
-    on the lobe's flank 1e-4 of its value, a steep lobe's change, not noise)."""
-
-    def __init__(self, sign: int = 0):
-        self.sign = sign
-
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        s = x[:, 0].astype(np.float32)
-        if self.sign:
-            s = np.nextafter(s, np.float32(np.inf * self.sign))
-        lobe = np.exp(-(((s - np.float32(0.98294)) / np.float32(1e-3)) ** 2))
-        return (1 + np.float32(4e2) * lobe).astype(float)
-
-    def nudged(self, sign: int):
-        return _Float32Lobe(sign)
-
-
-def test_a_lobe_not_yet_resolved_is_refined_whatever_the_rounding_noise():
-    """A box whose change sits a few floors above q's rounding because its rule has not yet
-    seen a narrow lobe (9 % of the box, its change 3e-6 relative at the first split and 6e-6 at
-    the second) is no rounding noise: its nudged rule moves by an ulp of the values, so it is
-    refined as without the measure, the same bits, and the lobe is found."""
-    lo, hi = np.array([[0.875]]), np.array([[1.0]])
-    q = _Float32Lobe()
-    value, error = box_integrals(q, lo, hi, 1e-9, floor=FLOAT32_FLOOR)
-    plain = _reference_box_integrals(q, lo, hi, 1e-9, floor=FLOAT32_FLOOR)
-    np.testing.assert_array_equal(value.view(np.uint64), plain[0].view(np.uint64))
-    exact = 0.125 + 4e2 * 1e-3 * math.sqrt(math.pi) / 2 * (math.erf((1 - 0.98294) / 1e-3)
-                                                           + math.erf((0.98294 - 0.875) / 1e-3))
-    assert abs(value[0, 0] - exact) <= error[0, 0] + 1e-6 * exact
-
-
-@pytest.mark.parametrize("kappa", [1e3, 1e4, 1e5])
-def test_the_noise_measure_cancels_a_steep_float32_lobes_own_change(kappa):
-    """ParamDensity.nudged: the rules on a float32 renderer's directions moved one ulp either
-    way.  On a lobe so steep that an ulp of z moves it kappa 6e-8 (6e-5 to 6e-3 relative),
-    each one-sided rule moves by that much, a change the refinement must follow, not noise;
-    half their second difference about the plain rule is the lobe's curvature over an ulp,
-    (kappa 6e-8)^2 / 2, at least 300 times smaller."""
-    from harness.samplers import Float32DirectionPdf
-    from harness.samplers.cubature import _GL_W, _GL_X
-    from harness.samplers.domains import Domain, ParamDensity
-
-    k = np.float32(kappa)
-    def lobe(c):   # about +z, in float32
-        return k / np.float32(2 * math.pi) * np.exp(k * (c[2] - np.float32(1)))
-
-    pdf = Float32DirectionPdf(lambda v: lobe(v.astype(np.float32).T).astype(float), lobe)
-    q = ParamDensity(Domain("sphere"), pdf)
-    lo = np.column_stack([np.arange(10) * 0.2 / kappa, np.full(10, 0.1)])   # across the lobe near the pole
-    hi = lo + [0.2 / kappa, 0.05]
-    w = np.outer(_GL_W, _GL_W).reshape(-1)
-    rule, up, down = (d.rule_integrals(lo, hi, _GL_X, w) for d in (q, q.nudged(1), q.nudged(-1)))
-    one_sided = np.abs(up - rule)
-    noise = np.abs((up - rule) + (down - rule)) / 2
-    assert np.all(one_sided > 0.5 * kappa * 6e-8 * rule) and np.all(noise < one_sided / 300)
-    with pytest.raises(ValueError, match="sign"):
-        q.nudged(0)
 
 
 def _reference_agreement(own, parent, group, tol, floor):
