@@ -15,6 +15,7 @@ import pytest
 from scipy import stats as sps
 
 from harness.adapters import image_faults, renderer
+from harness.adapters.base import RenderError
 from harness.stats.images import Reference, pixel_bias_test, relmse
 from harness.suite.parse import SuiteError, load_suite
 from harness.suite.readers import load
@@ -247,6 +248,74 @@ def test_xml_scene_file(tmp_path):
     assert fp["environment"]["file"] == str(xml.resolve())   # where it lies: the key's, not the seeds'
     with pytest.raises(ValueError, match="'width'"):
         renderer("mitsuba", {"scene": str(xml), "width": 8})
+
+
+SCENE_WITH_FILES = """\
+    <scene version="3.0.0">
+      <default name="mesh" value="tri.obj"/>
+      <path value="textures"/>
+      <sensor type="perspective">
+        <transform name="to_world"><lookat origin="0,0,3" target="0,0,0" up="0,1,0"/></transform>
+        <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/>
+          <rfilter type="box"/></film>
+      </sensor>
+      <include filename="parts/light.xml"/>
+      <shape type="obj"><string name="filename" value="$mesh"/>
+        <bsdf type="diffuse"><texture type="bitmap" name="reflectance">
+          <string name="filename" value="albedo.exr"/></texture></bsdf>
+      </shape>
+    </scene>"""
+
+
+def test_the_files_a_scene_reads_are_in_its_key_and_reload_it(tmp_path):
+    """A mesh, textures (one found through a <path> tag) and an included file that reads the
+    environment map from the scene's folder: each one's digest is in the renderer's
+    environment, so editing one re-renders on the same seeds, and the loaded scene is reloaded."""
+    from harness.adapters.mitsuba.runtime import activate
+    from harness.suite.parse import loads_suite
+    from harness.suite.plan import render_key, render_stream
+
+    (tmp_path / "parts").mkdir()
+    (tmp_path / "textures").mkdir()
+    xml = tmp_path / "scene.xml"
+    xml.write_text(textwrap.dedent(SCENE_WITH_FILES))
+    (tmp_path / "parts" / "light.xml").write_text(
+        '<scene version="3.0.0"><emitter type="envmap"><string name="filename" value="sky.exr"/>'
+        "</emitter></scene>")
+    (tmp_path / "tri.obj").write_text("v -2 -2 0\nv 2 -2 0\nv 0 2 0\nvt 0 0\nvt 1 0\nvt 0.5 1\n"
+                                      "f 1/1 2/2 3/3\n")
+
+    def write_exr(path, value):
+        activate("scalar_rgb").Bitmap(np.full((4, 8, 3), value, dtype=np.float32)).write(str(path))
+
+    write_exr(tmp_path / "sky.exr", 1.0)
+    write_exr(tmp_path / "textures" / "albedo.exr", 0.5)
+    r = renderer("mitsuba", {"scene": str(xml), "integrator": "direct"})
+    before, image = r.fingerprint(), r.render(16, 3).image
+    reads = before["environment"]["reads"]
+    assert sorted(reads) == ["albedo.exr", "parts/light.xml", "sky.exr", "tri.obj"]
+    assert all(isinstance(d, str) and len(d) == 24 for d in reads.values())
+
+    write_exr(tmp_path / "textures" / "albedo.exr", 0.25)   # a darker triangle
+    after = r.fingerprint()
+    assert {k for k in reads if after["environment"]["reads"][k] != reads[k]} == {"albedo.exr"}
+    assert after["scene"] == before["scene"]
+    suite = loads_suite('[[render]]\nadapter = "mitsuba"\nscene = "furnace"\n')
+    assert render_key(suite, after) != render_key(suite, before)          # rendered again ...
+    assert render_stream(suite, after) == render_stream(suite, before)    # ... on the same seeds
+    darker = r.render(16, 3).image                                        # the scene was reloaded
+    assert darker.mean() < image.mean() and not np.array_equal(darker, image)
+
+    (tmp_path / "tri.obj").unlink()
+    assert renderer("mitsuba", {"scene": "furnace"}).fingerprint()["environment"].get("reads") is None
+    with pytest.raises(RenderError, match=r"Mitsuba cannot load .*scene\.xml: .*tri\.obj"):
+        r.render(16, 3)   # Mitsuba's loader reports the missing mesh
+    assert r.fingerprint()["environment"]["reads"]["tri.obj"] is None
+    with pytest.raises(ValueError, match=r"^'scene': Mitsuba cannot load .*scene\.xml: .*tri\.obj"):
+        renderer("mitsuba", {"scene": str(xml)})   # the scene's key named, not the integrator's
+    xml.write_text("<scene version=")
+    with pytest.raises(ValueError, match=r"'scene': cannot read .*scene\.xml as XML"):
+        r.fingerprint()
 
 
 def test_suite_errors_name_file_line_and_key(tmp_path):

@@ -38,8 +38,9 @@ from typing import Any
 
 import numpy as np
 
-from harness.adapters.base import ENVIRONMENT, Render
+from harness.adapters.base import ENVIRONMENT, Render, RenderError
 from harness.adapters.mitsuba.runtime import VARIANT_LOCK, activate
+from harness.adapters.mitsuba.scene_files import scene_files, scene_references, stamp
 
 __all__ = ["MitsubaRenderer", "make_renderer", "SCENES"]
 
@@ -106,6 +107,8 @@ class MitsubaRenderer:
         self.max_depth, self.width, self.height = max_depth, width, height
         self._scene = self._integrator = None
         self._warm: set[int] = set()
+        self._files: list[Path] = []   # a scene file and the files it reads, as loaded
+        self._stamp: tuple = ()
 
     # --- protocol ----------------------------------------------------------------------------
     def render(self, spp: int, seed: int) -> Render:
@@ -131,13 +134,16 @@ class MitsubaRenderer:
         return None if value is None else np.full((self.height, self.width, 3), value)
 
     def fingerprint(self) -> dict[str, Any]:
-        """The settings (a scene file by its content) and the environment: Mitsuba's version and
-        where the scene file lies (part of the store key, not of the seeds)."""
+        """The settings (a scene file by its content) and the environment: Mitsuba's version,
+        where the scene file lies and the digests of the files it reads (meshes, textures,
+        included XML: :func:`~harness.adapters.mitsuba.scene_files.scene_files`), part of the
+        store key, not of the seeds (an edited mesh is rendered again, on the same seeds)."""
         mi = _mi()
         scene, environment = self.scene_name, {"mitsuba": mi.__version__}
         if self._is_file:
             scene = {"sha256": hashlib.sha256(Path(scene).read_bytes()).hexdigest()}
             environment["file"] = str(Path(self.scene_name).resolve())
+            environment["reads"] = scene_files(Path(self.scene_name))
         return {"adapter": "mitsuba", "scene": scene, "integrator": self.integrator_type,
                 "variant": self.variant, "max_depth": self.max_depth, "width": self.width,
                 "height": self.height, ENVIRONMENT: environment}
@@ -155,11 +161,22 @@ class MitsubaRenderer:
         return self.scene_name not in SCENES
 
     def _activate(self):
-        """Sets this renderer's variant (process-global in Mitsuba) and loads the scene once."""
+        """Sets this renderer's variant (process-global in Mitsuba) and loads the scene once
+        (a scene file again when it or a file it reads changed since: its fingerprint did)."""
         mi = activate(self.variant)
+        if self._scene is not None and self._is_file and stamp(self._files) != self._stamp:
+            self._scene = None
+            self._warm.clear()
         if self._scene is None:
             if self._is_file:
-                self._scene = mi.load_file(self.scene_name)
+                path = Path(self.scene_name)
+                self._files = [path, *(p for p in scene_references(path).values() if p is not None)]
+                self._stamp = stamp(self._files)
+                try:
+                    self._scene = mi.load_file(self.scene_name)
+                except RuntimeError as e:   # Mitsuba's parser: a missing mesh, a bad plugin
+                    first = str(e).splitlines()[0]
+                    raise RenderError(f"Mitsuba cannot load {self.scene_name}: {first}") from e
             else:
                 self._scene = mi.load_dict(_scene_dict(self.scene_name, self.width, self.height))
             integ: dict[str, Any] = {"type": self.integrator_type}
@@ -209,6 +226,8 @@ def make_renderer(spec: dict[str, Any]) -> MitsubaRenderer:
     try:
         with VARIANT_LOCK:
             r._activate()
+    except RenderError as e:  # the scene file's (its own XML, a mesh it reads, ...)
+        raise ValueError(f"'scene': {e}") from e
     except Exception as e:  # Mitsuba's own message: unknown plugin, bad XML, ...
         key = "integrator" if "integrator" in str(e).lower() or "plugin" in str(e).lower() else "scene"
         raise ValueError(f"'{key}': Mitsuba cannot load it: {str(e).splitlines()[0]}") from e
