@@ -140,7 +140,8 @@ def rect_to_square(d: Any, frame: tuple, slack: float) -> np.ndarray:
     ref>, area = |e0 x e1|): t = height / <d, n>, o = (ref - corner) + t d, s_i = <o, f_i>,
     each within ``slack`` of [0, 1] clamped onto it; (-1, -1) where 0 < t < inf fails (the ray
     misses the plane in front of ref, or runs along it); NaN rows stay NaN.  In C++ on all
-    threads, each value its numpy definition's (tests/core/test_check_kernels.py) left to right
+    threads, each value its numpy definition's
+    (tests/core/test_check_kernels_area_light_maps.py) left to right
     (harness.adapters.mitsuba.rectangle.Rectangle.to_domain)."""
     a = np.ascontiguousarray(d, dtype=np.float64)
     return _core.rect_to_square(a, *_rectangle_frame(frame), float(slack))
@@ -340,6 +341,8 @@ def float32_nudged(x: Any, column: int, steps: int) -> np.ndarray:
     if a.ndim != 2 or not 0 <= column < a.shape[1]:
         raise ValueError(f"'x' must have shape (N, d) and 'column' be one of its d columns, "
                          f"got {a.shape}, {column}")
+    if not -2**31 <= int(steps) < 2**31:   # the core's int32 (float32 has 2^32 values in all)
+        raise ValueError(f"'steps' must be in [-2^31, 2^31), got {steps}")
     return _core.float32_nudged(a, int(column), int(steps))
 
 

@@ -284,7 +284,7 @@ def check_sampler(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.ndarray
     quadrature error: a pdf 0.5 % too large fails here, deterministically).
 
     Then statistical tests, combined by Holm at ``alpha`` (the false-alarm rate;
-    tests/samplers/test_sampler_check.py measures it over 200 seeds per correct sampler):
+    tests/samplers/test_sampler_check_verdicts.py measures it over 200 seeds per correct sampler):
       chi-square, coarse grid   what a sampler gets wrong over large regions;
       chi-square, fine grid     narrow features: a wrong lobe width, a band 10 % too dense;
       marginals (1-D, fine)     along each axis at 128/256 bins (4096 on an interval), what

@@ -155,7 +155,7 @@ inline bool all_float32(const double *v, size_t n) {
 // neighbours (v rounded to float32 first), for n values; v itself where that is not finite (v
 // NaN, infinite, or beyond the float32 range or at its end, where a neighbour is infinite).
 // The sampler check's dithering of float32 points: the bits of numpy's nextafter
-// expression (tests/core/test_check_kernels.py, dither_reference), in one pass where numpy's
+// expression (tests/core/test_check_kernels_float32.py, dither_reference), in one pass where numpy's
 // eight took 0.1 s a million directions.
 //
 // Written for GCC to vectorise it (1.5 -> 0.4 ns a value; nextafterf and a step of the
@@ -194,7 +194,7 @@ inline void dither_float32(const double *v, const double *u, size_t n, double *o
 // Rows x (n, d), rows a .. b - 1, rounded to float32 with column c moved |steps| float32 ulps
 // (up if steps > 0, down if < 0), back as doubles into out (n, d): the points whose pdf the
 // reported-pdf check's rounding tolerance reads (harness.samplers.reported).  The bits of
-// numpy's |steps| nextafter calls in float32 towards +-inf (tests/core/test_check_kernels.py):
+// numpy's |steps| nextafter calls in float32 towards +-inf (tests/core/test_check_kernels_float32.py):
 // a step is one on the integer that orders the floats (its magnitude's bits, negated for a
 // negative float; +0 and -0 both 0, as nextafter steps from either to the same subnormal), held
 // at the infinities; a zero reached from the other side keeps the start's sign (nextafter's

@@ -1,7 +1,7 @@
 """The Mitsuba samplers the harness checks (:func:`catalogue`), the planted faults every check
 must catch (:func:`wrong_catalogue`), and :func:`run_catalogue`, which runs the checks of
 ``harness.adapters.mitsuba.checks`` on a list of them (benchmarks/mitsuba_samplers.py,
-tests/adapters/test_mitsuba_samplers.py): the chi-square (failed samples allowed for), the
+tests/adapters/test_mitsuba_catalogue.py): the chi-square (failed samples allowed for), the
 reported-pdf check (the pdf each sample call reports against pdf()) and the weight check.
 """
 from __future__ import annotations

@@ -2,7 +2,7 @@
 why, as measured: :data:`FINDINGS`, the checks each such plugin fails at 1e6 samples (seed 0)
 with the reason and the sample count from which it shows, and :data:`CHANCE`, the further
 checks a few of them may fail depending on the draw or the CPU.  The catalogue attaches them
-to its entries; tests/adapters/test_mitsuba_samplers.py holds the plugins to them.
+to its entries; tests/adapters/test_mitsuba_catalogue.py holds the plugins to them.
 """
 from __future__ import annotations
 

@@ -1,0 +1,85 @@
+"""check_sampler's domains by name, its argument errors, and the check-sampler command line."""
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from harness.samplers import Domain, as_domain, check_sampler
+from tests.samplers.zoo_samplers import CORRECT, correct
+
+
+def test_domains_by_name():
+    assert as_domain("disk") == Domain("disk")
+    assert as_domain(("interval", -1, 2)) == Domain("interval", -1.0, 2.0)
+    d = Domain("hemisphere")
+    s = np.array([[0.3, 0.2], [0.9, 0.7]])
+    back, inside = d.to_params(d.to_points(s))
+    np.testing.assert_allclose(back, s)
+    assert inside.all()
+
+
+@pytest.mark.parametrize("kwargs, error, message", [
+    ({"domain": "cube"}, ValueError,
+     r"'domain' must be one of \('interval', 'half_line', 'square', 'disk', 'hemisphere', 'sphere'\)"),
+    ({"domain": ("interval", 2, 1)}, ValueError, r"\('interval', a, b\) with a < b"),
+    ({"sample_count": 10}, ValueError, r"'sample_count' must be at least 1000, got 10"),
+    ({"alpha": 0.0}, ValueError, r"'alpha' must be in \(0, 1\)"),
+])
+def test_bad_arguments(kwargs, error, message):
+    s = correct(CORRECT[0])
+    args = {"domain": s.domain, **kwargs}
+    with pytest.raises(error, match=message):
+        check_sampler(s.sample, s.pdf, **args)
+
+
+def test_wrong_point_shapes_are_named():
+    with pytest.raises(ValueError,
+                       match=r"<lambda> returned points of shape \(5000, 2\) for uniforms of shape "
+                             r"\(5000, 2\); expected shape \(5000, 3\) on the hemisphere"):
+        check_sampler(lambda u: u, lambda x: np.ones(len(x)), "hemisphere", sample_count=5000)
+
+
+def test_cli_check_sampler(tmp_path):
+    mod = tmp_path / "my_sampler.py"
+    mod.write_text("import numpy as np, math\n"
+                   "import reference_estimators as rest\n"
+                   "_s = rest.sampler('ggx', alpha=0.1)\n"
+                   "def good():\n    return (lambda u: _s.sample(u)[0], _s.pdf, 'hemisphere')\n"
+                   "def bad():\n"
+                   "    return (lambda u: _s.sample(u)[0], lambda w: 1.01 * _s.pdf(w), 'hemisphere')\n"
+                   "class Turned:\n"   # GGX about +y, on the sphere with its pole at +y
+                   "    domain, pole = 'sphere', 'y'\n"
+                   "    def sample(self, u):\n        return _s.sample(u)[0][:, [1, 2, 0]]\n"
+                   "    def pdf(self, w):\n        return _s.pdf(w[:, [2, 0, 1]])\n"
+                   "class BadBreaks(Turned):\n    breaks = ([2.0], None)\n")
+    (tmp_path / "raises.py").write_text("raise RuntimeError('no GPU here')\n")
+    harness = str(Path(sys.executable).with_name("harness"))
+
+    def run(*args: str) -> subprocess.CompletedProcess:  # as a user runs it: in the repository, no PYTHONPATH
+        return subprocess.run([harness, "check-sampler", *args], capture_output=True, text=True, cwd=tmp_path,
+                              timeout=300)
+
+    for target in ("my_sampler:good", "./my_sampler.py:good"):
+        r = run(target, "--samples", "200000")
+        assert r.returncode == 0 and "PASSED" in r.stdout, r.stdout + r.stderr
+        assert "summary: 1 passed, 0 failed" in r.stdout, r.stdout + r.stderr
+    r = run("my_sampler:bad", "--samples", "200000")
+    assert r.returncode == 1 and "normalization" in r.stdout and "1.010000" in r.stdout
+    r = run("my_sampler:Turned", "--samples", "200000")
+    assert r.returncode == 0 and "PASSED" in r.stdout, r.stdout + r.stderr
+    r = run("my_sampler:BadBreaks", "--samples", "200000")
+    assert r.returncode == 2 and "harness: 'breaks'[0]: 1 of 1 coordinates are not finite numbers in [0, 1]" \
+        in r.stderr and "Traceback" not in r.stderr, r.stderr
+    for target, said in [("my_sampler:nope", "'my_sampler:nope': my_sampler has no attribute 'nope'"),
+                         ("nothere:good", "'nothere:good': cannot import 'nothere'"),
+                         ("./nothere.py:good", "'./nothere.py:good': no file"),
+                         ("raises:good",
+                          "'raises:good': importing 'raises' raised RuntimeError: no GPU here"),
+                         ("my_sampler", "'my_sampler': expected module:attribute")]:
+        r = run(target)
+        assert r.returncode == 2 and f"harness: cannot load {said}" in r.stderr, r.stderr
+        assert "Traceback" not in r.stderr
