@@ -16,6 +16,10 @@ normalisation, fewer than 1000 samples produced: findings, see benchmarks/mitsub
 the median seconds a check; P, the pdf's integral (the cubature's, seed 0).  A plugin
 documented to fail the chi-square (its ``fails``, or ``may_fail``: a Mitsuba finding, from
 its ``fails_from`` samples on) rejects by design; its row says so.  llvm_ad_rgb on the CPU.
+drjit's worker count is set to the plugin's ``check_threads`` once for all its seeds
+(runtime.jit_threads; each check's own setting then finds it so), not changed and restored
+twice a seed: drjit's pool has hung once here when it shrank (README, "drjit's kernels run on
+one worker thread").
 """
 from __future__ import annotations
 
@@ -27,7 +31,7 @@ from scipy import stats
 
 from harness.adapters.mitsuba.catalogue import catalogue
 from harness.adapters.mitsuba.checks import check_mitsuba_sampler
-from harness.adapters.mitsuba.runtime import use_libllvm
+from harness.adapters.mitsuba.runtime import jit_threads, use_libllvm
 
 
 def main() -> None:
@@ -49,10 +53,13 @@ def main() -> None:
         sampler = e.make()
         rejected = missing = other = 0
         seconds = []
-        for seed in range(args.seeds):
-            start = time.perf_counter()
-            r = check_mitsuba_sampler(sampler, sample_count=n, seed=seed, alpha=args.alpha)
-            seconds.append(time.perf_counter() - start)
+        with jit_threads(sampler.check_threads):
+            results = []
+            for seed in range(args.seeds):
+                start = time.perf_counter()
+                results.append(check_mitsuba_sampler(sampler, sample_count=n, seed=seed, alpha=args.alpha))
+                seconds.append(time.perf_counter() - start)
+        for r in results:
             failed_samples = r.tests["test"] == "failed samples"
             statistical = bool((r.tests["adjusted"][~failed_samples] <= args.alpha).any())
             # too few samples to test is a deterministic failure (its table holds that row alone)
@@ -61,8 +68,7 @@ def main() -> None:
             rejected += statistical
             missing += absent and not statistical
             other += not r.passed and not (statistical or absent)
-            if seed == 0:
-                total = r.normalization[0]
+        total = results[0].normalization[0]
         upper = stats.beta.ppf(0.99, rejected + 1, args.seeds - rejected) if rejected < args.seeds else 1.0
         shows = n >= e.fails_from
         note = ("documented to fail the chi-square" if shows and "chi2" in e.fails

@@ -5,8 +5,17 @@ import numpy as np
 import pytest
 
 from harness.adapters.mitsuba import catalogue as cat
-from harness.adapters.mitsuba import checks
+from harness.adapters.mitsuba import checks, runtime
 from tests.adapters.mitsuba_helpers import ALPHA, N
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _one_drjit_worker():
+    """drjit's worker count set to one once for the module's checks (each check's own setting
+    then finds it so), not changed and restored twice a check: drjit's pool has hung once when
+    it shrank (README, "drjit's kernels run on one worker thread")."""
+    with runtime.jit_threads(1):
+        yield
 
 # --- the catalogue: every kind of sampler and planted fault ----------------------------------------
 # A representative subset (each kind of plugin, grazing incidence, lit from below, a light seen
