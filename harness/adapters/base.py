@@ -164,10 +164,21 @@ def check_spec(spec: dict[str, Any], keys: dict[str, Any], adapter: str) -> None
 
 
 def file_digest(path: Path) -> str:
-    """SHA-256 (24 hex digits) of a file's bytes, for fingerprints."""
-    import hashlib
+    """SHA-256 (24 hex digits) of a file's bytes, for fingerprints: read in blocks, and once per
+    process while the file's device, inode, size and modification and change times stay the
+    same (a renderer's fingerprint is taken several times a run, and a scene's meshes can be
+    gigabytes; the change time moves with any write, whatever a tool does to the others)."""
+    st = Path(path).stat()
+    key = (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
+    if key not in _DIGESTS:
+        import hashlib
 
-    return hashlib.sha256(path.read_bytes()).hexdigest()[:24]
+        with open(path, "rb") as f:
+            _DIGESTS[key] = hashlib.file_digest(f, "sha256").hexdigest()[:24]
+    return _DIGESTS[key]
+
+
+_DIGESTS: dict[tuple[int, ...], str] = {}   # file_digest's, by the file's stat identity
 
 
 class ExactImage:

@@ -11,11 +11,15 @@ from tests.adapters.mitsuba_helpers import ALPHA, N
 
 @pytest.fixture(autouse=True, scope="module")
 def _one_drjit_worker():
-    """drjit's worker count set to one once for the module's checks (each check's own setting
-    then finds it so), not changed and restored twice a check: drjit's pool has hung once when
-    it shrank (README, "drjit's kernels run on one worker thread")."""
-    with runtime.jit_threads(1):
-        yield
+    """drjit's worker count set to one once for the module's checks (a check whose own setting
+    is one then finds it so; an area light's, drjit's count as it is, runs on one here), not
+    changed and restored twice a check: drjit's pool has hung once when it shrank (README,
+    "drjit's kernels run on one worker thread").  The variant lock is taken to set it and to
+    restore it, not held between (a suite's checks run on worker threads that take it)."""
+    before = runtime.set_jit_threads(1)
+    yield
+    runtime.set_jit_threads(before)
+
 
 # --- the catalogue: every kind of sampler and planted fault ----------------------------------------
 # A representative subset (each kind of plugin, grazing incidence, lit from below, a light seen

@@ -98,6 +98,23 @@ def test_the_fingerprint_follows_the_script_source(repo):
     assert "cwd" not in json.dumps(after) and str(repo) not in json.dumps(after)
 
 
+def test_file_digests_are_kept_per_file_state_and_follow_any_write(tmp_path):
+    """file_digest hashes a file once while its stat identity stands, and again after any
+    write: a same-size edit whose modification time is put back (cp -p, rsync -t) too."""
+    import hashlib
+    import os
+
+    f = tmp_path / "mesh.obj"
+    f.write_bytes(b"v 0 0 0\n")
+    first = base.file_digest(f)
+    assert first == hashlib.sha256(b"v 0 0 0\n").hexdigest()[:24] == base.file_digest(f)
+    st = f.stat()
+    f.write_bytes(b"v 0 0 1\n")
+    os.utime(f, ns=(st.st_atime_ns, st.st_mtime_ns))
+    assert f.stat().st_size == st.st_size and f.stat().st_mtime_ns == st.st_mtime_ns
+    assert base.file_digest(f) == hashlib.sha256(b"v 0 0 1\n").hexdigest()[:24]
+
+
 def render_function(spp, seed, gain=1.0):
     rng = np.random.default_rng(seed)
     return gain * rng.random((4, 6, 3, spp)).mean(axis=3) * 2, 0.01 * spp

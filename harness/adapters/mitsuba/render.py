@@ -40,7 +40,7 @@ import numpy as np
 
 from harness.adapters.base import ENVIRONMENT, Render, RenderError
 from harness.adapters.mitsuba.runtime import VARIANT_LOCK, activate
-from harness.adapters.mitsuba.scene_files import scene_files, scene_references, stamp
+from harness.adapters.mitsuba.scene_files import scene_files
 
 __all__ = ["MitsubaRenderer", "make_renderer", "SCENES"]
 
@@ -107,8 +107,7 @@ class MitsubaRenderer:
         self.max_depth, self.width, self.height = max_depth, width, height
         self._scene = self._integrator = None
         self._warm: set[int] = set()
-        self._files: list[Path] = []   # a scene file and the files it reads, as loaded
-        self._stamp: tuple = ()
+        self._loaded: dict[str, Any] = {}   # a scene file's digests and its reads', as loaded
 
     # --- protocol ----------------------------------------------------------------------------
     def render(self, spp: int, seed: int) -> Render:
@@ -144,6 +143,13 @@ class MitsubaRenderer:
             scene = {"sha256": hashlib.sha256(Path(scene).read_bytes()).hexdigest()}
             environment["file"] = str(Path(self.scene_name).resolve())
             environment["reads"] = scene_files(Path(self.scene_name))
+            now = {"scene": scene, "reads": environment["reads"]}
+            with VARIANT_LOCK:   # (renders hold it while they use the scene)
+                if self._scene is not None and self._loaded != now:
+                    # the files changed since the scene was loaded: the renders this key stands
+                    # for are of the files as they are now, so the scene is loaded again
+                    self._scene = None
+                    self._warm.clear()
         return {"adapter": "mitsuba", "scene": scene, "integrator": self.integrator_type,
                 "variant": self.variant, "max_depth": self.max_depth, "width": self.width,
                 "height": self.height, ENVIRONMENT: environment}
@@ -161,17 +167,14 @@ class MitsubaRenderer:
         return self.scene_name not in SCENES
 
     def _activate(self):
-        """Sets this renderer's variant (process-global in Mitsuba) and loads the scene once
-        (a scene file again when it or a file it reads changed since: its fingerprint did)."""
+        """Sets this renderer's variant (process-global in Mitsuba) and loads the scene once (a
+        scene file again after :meth:`fingerprint` found it or a file it reads changed)."""
         mi = activate(self.variant)
-        if self._scene is not None and self._is_file and stamp(self._files) != self._stamp:
-            self._scene = None
-            self._warm.clear()
         if self._scene is None:
             if self._is_file:
                 path = Path(self.scene_name)
-                self._files = [path, *(p for p in scene_references(path).values() if p is not None)]
-                self._stamp = stamp(self._files)
+                self._loaded = {"scene": {"sha256": hashlib.sha256(path.read_bytes()).hexdigest()},
+                                "reads": scene_files(path)}
                 try:
                     self._scene = mi.load_file(self.scene_name)
                 except RuntimeError as e:   # Mitsuba's parser: a missing mesh, a bad plugin

@@ -28,7 +28,7 @@ from collections.abc import Iterator
 from typing import Any
 
 __all__ = ["LIBLLVM_PATTERNS", "VARIANT_LOCK", "activate", "check_variant", "is_jit", "jit_threads",
-           "use_libllvm", "using_variant"]
+           "set_jit_threads", "use_libllvm", "using_variant"]
 
 #: Where Debian (and Ubuntu) install libLLVM 19, in the order tried.
 LIBLLVM_PATTERNS = ("/usr/lib/*/libLLVM-19.so", "/usr/lib/*/libLLVM.so.19*")
@@ -70,25 +70,33 @@ def using_variant(variant: str) -> Iterator[Any]:
         yield activate(variant)
 
 
+def set_jit_threads(count: int) -> int:
+    """Sets the number of worker threads drjit runs its JIT kernels on (``dr.set_thread_count``,
+    under :data:`VARIANT_LOCK`; nothing where it is ``count`` already); returns the count
+    before."""
+    with VARIANT_LOCK:
+        import drjit as dr
+
+        before = dr.thread_count()
+        if count != before:
+            dr.set_thread_count(count)
+        return before
+
+
 @contextlib.contextmanager
 def jit_threads(count: int | None) -> Iterator[None]:
-    """Inside, drjit runs its JIT kernels on ``count`` worker threads (``dr.set_thread_count``;
+    """Inside, drjit runs its JIT kernels on ``count`` worker threads (:func:`set_jit_threads`;
     None: as they are), the count before restored after; :data:`VARIANT_LOCK` is held
     throughout (the count is process-global, like the variant)."""
     with VARIANT_LOCK:
         if count is None:
             yield
             return
-        import drjit as dr
-
-        before = dr.thread_count()
-        if count != before:
-            dr.set_thread_count(count)
+        before = set_jit_threads(count)
         try:
             yield
         finally:
-            if count != before:
-                dr.set_thread_count(before)
+            set_jit_threads(before)
 
 
 def is_jit(variant: str) -> bool:

@@ -3,84 +3,121 @@
 A scene file names meshes, textures, environment maps, volume grids, spectra and other XML
 files (``<include>``); its images depend on their bytes as much as on its own, so a renderer's
 fingerprint carries a digest of each (:func:`scene_files`), and an edited mesh or texture is
-rendered again instead of a stored image being reused (and a renderer that loaded the scene
-reloads it when one of its files changed: :func:`stamp`).  The references are found as Mitsuba's
-parser reads them: every ``filename`` attribute (``<include>``, ``<spectrum>``) and every
-``<string name="filename">`` property, ``$name`` replaced by the scene's ``<default>`` values;
-each resolved against the scene's folder, the folders its ``<path>`` tags add and the working
-folder, the first that holds it (an included file's references too: Mitsuba 3.9 resolves
-them against the scene's folder, not the included file's).  Included XML files are read in turn
-(at most 15 levels deep, as Mitsuba).  A reference that no folder holds is listed as missing
-(None): Mitsuba's loader, not the fingerprint, reports it.
+rendered again instead of a stored image being reused.
+
+Which files Mitsuba opens depends on rules of its parser that have changed between versions
+(the order of ``<path>`` folders and the scene's folder, the folder an include's own includes
+are resolved in, which ``<default>`` wins, how ``$name`` is replaced), so this module does not
+imitate them: it takes a superset.  Every attribute value of the scene and of the XML files it
+names (``$name`` replaced by each value any ``<default>`` gives it, and left as written), read
+as a file name against every folder Mitsuba's resolver may search (the scene's, each XML
+file's, each folder such a value names, the working folder), is a file the scene may read
+wherever a file is there.  A file the scene does not read can only cost an extra render when
+it changes; a file it reads cannot be missed (Mitsuba's own data files aside: its version is
+in the key).  The values are read with a regular expression rather than an XML parser, so a
+file Mitsuba's tolerant parser accepts (a comment holding ``--``, a bare ``&``) is read too.
 """
 from __future__ import annotations
 
+import html
+import itertools
 import re
-import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from harness.adapters.base import file_digest
 
-__all__ = ["scene_files", "scene_references", "stamp"]
+__all__ = ["scene_files"]
 
 _MAX_INCLUDE_DEPTH = 15   # Mitsuba's MI_XML_INCLUDE_MAX_RECURSION
-_PARAMETER = re.compile(r"\$(\w+)")
+_MAX_VARIANTS = 64        # spellings of one value with its $names replaced
+_VALUE = re.compile(r"""=\s*(?:"([^"<]*)"|'([^'<]*)')""")
+_DEFAULT = re.compile(r"<default\b([^>]*)>")
+_ATTRIBUTE = re.compile(r"""\b(name|value)\s*=\s*(?:"([^"]*)"|'([^']*)')""")
+_COMMENT = re.compile(r"<!--.*?-->", re.S)
 
 
-def scene_references(scene: Path) -> dict[str, Path | None]:
-    """{reference as written (``$name`` replaced): the file it resolves to, or None where no
-    folder holds it} for every file the XML scene ``scene`` reads, included XML files and what
-    they read as well, sorted by reference.  ValueError naming the file where one is not
-    well-formed XML."""
+def scene_files(scene: Path) -> dict[str, str]:
+    """{file: SHA-256 digest (24 hex digits)} of every file the XML scene ``scene`` may read
+    (the module's superset), its own file aside: a path relative to the scene's folder where
+    the file lies under it, else absolute; sorted."""
     scene = Path(scene).resolve()
-    found: dict[str, Path | None] = {}
-    _read(scene, scene, [scene.parent], {}, found, 0)
-    return dict(sorted(found.items()))
+    texts = {scene: _text(scene)}
+    for _ in range(_MAX_INCLUDE_DEPTH):   # the XML files the values name, a level at a time
+        folders, values = _folders(scene, texts), _values(texts)
+        named = {(f / v).resolve() for v in values if v.lower().endswith(".xml") for f in folders
+                 if _is_file(f / v)} - set(texts)
+        if not named:
+            break
+        texts.update((path, _text(path)) for path in sorted(named))
+    folders, values = _folders(scene, texts), _values(texts)
+    files = {(f / v).resolve() for v in values for f in folders if _is_file(f / v)} - {scene}
+    return {_name(p, scene.parent): file_digest(p) for p in sorted(files)}
 
 
-def scene_files(scene: Path) -> dict[str, str | None]:
-    """{reference: SHA-256 digest (24 hex digits) of its file, or None for a missing one} of
-    :func:`scene_references`: what a fingerprint carries."""
-    return {name: None if path is None else file_digest(path)
-            for name, path in scene_references(scene).items()}
+def _text(path: Path) -> str:
+    """An XML file's text, its comments dropped (a commented-out mesh is not read)."""
+    return _COMMENT.sub("", path.read_bytes().decode("utf-8", errors="replace"))
 
 
-def stamp(paths: list[Path]) -> tuple:
-    """(modification time in ns, size) of each file (None: not there): a cheap test of
-    whether files changed since a scene was loaded from them."""
-    stamps = []
-    for path in paths:
-        try:
-            st = path.stat()
-            stamps.append((st.st_mtime_ns, st.st_size))
-        except OSError:
-            stamps.append(None)
-    return tuple(stamps)
+def _values(texts: dict[Path, str]) -> set[str]:
+    """Every attribute value of the texts, as written and with each $name replaced by each
+    value a <default> of any of them gives it (longer names first, as Mitsuba replaces; a
+    default's own $names too, to three levels)."""
+    defaults: dict[str, set[str]] = {}
+    for text in texts.values():
+        for attributes in _DEFAULT.findall(text):
+            pairs = {k: a or b for k, a, b in _ATTRIBUTE.findall(attributes)}
+            if "name" in pairs and "value" in pairs:
+                defaults.setdefault(pairs["name"], set()).add(pairs["value"])
+    names = sorted(defaults, key=len, reverse=True)
+    out: set[str] = set()
+    for text in texts.values():
+        for quoted in _VALUE.findall(text):
+            raw = quoted[0] or quoted[1]
+            spellings = {raw, html.unescape(raw)}   # as written, and its entities (&amp;) read
+            for _ in range(3):
+                spellings |= {v for s in spellings for v in _replaced(s, names, defaults)}
+            out |= spellings
+    return {v.strip() for v in out if v.strip()}
 
 
-def _read(xml: Path, scene: Path, folders: list[Path], defaults: dict[str, str],
-          found: dict[str, Path | None], depth: int) -> None:
+def _replaced(value: str, names: list[str], defaults: dict[str, set[str]]) -> list[str]:
+    """value with its $names (longest first) replaced by each combination of their defaults'
+    values, at most _MAX_VARIANTS of them."""
+    used = [n for n in names if "$" + n in value]
+    spelled = []
+    for choice in itertools.islice(itertools.product(*(sorted(defaults[n]) for n in used)), _MAX_VARIANTS):
+        v = value
+        for name, replacement in zip(used, choice):
+            v = v.replace("$" + name, replacement)
+        spelled.append(v)
+    return spelled
+
+
+def _folders(scene: Path, texts: dict[Path, str]) -> list[Path]:
+    """The folders Mitsuba's resolver may search: the scene's, each XML file's, the working
+    folder, and each folder a value names relative to one of those (a <path> tag's)."""
+    bases = list(dict.fromkeys([scene.parent, *(p.parent for p in texts), Path.cwd()]))
+    named = [(b / v).resolve() for v in _values(texts) for b in bases if _is_dir(b / v)]
+    return list(dict.fromkeys([*bases, *named]))
+
+
+def _is_file(path: Path) -> bool:
     try:
-        root = ET.parse(xml).getroot()
-    except (ET.ParseError, OSError) as e:
-        raise ValueError(f"'scene': cannot read {xml} as XML: {e}") from None
-    defaults = {**defaults, **{d.get("name", ""): d.get("value", "") for d in root.iter("default")}}
-    folders = folders + [scene.parent / p.get("value", "") for p in root.iter("path")]
+        return path.is_file()
+    except (OSError, ValueError):   # a value no file system takes as a name (too long, a NUL)
+        return False
 
-    def substituted(text: str) -> str:
-        return _PARAMETER.sub(lambda m: defaults.get(m.group(1), m.group(0)), text)
 
-    for element in root.iter():
-        if element.tag == "string" and element.get("name") == "filename":
-            reference = element.get("value")
-        else:
-            reference = element.get("filename")
-        if reference is None:
-            continue
-        name = substituted(reference)
-        if name in found:
-            continue
-        path = next(((f / name).resolve() for f in [*folders, Path.cwd()] if (f / name).is_file()), None)
-        found[name] = path
-        if path is not None and element.tag == "include" and depth + 1 < _MAX_INCLUDE_DEPTH:
-            _read(path, scene, folders, defaults, found, depth + 1)
+def _is_dir(path: Path) -> bool:
+    try:
+        return path.is_dir()
+    except (OSError, ValueError):
+        return False
+
+
+def _name(path: Path, folder: Path) -> str:
+    try:
+        return path.relative_to(folder).as_posix()
+    except ValueError:
+        return str(path)
