@@ -1,6 +1,7 @@
 """Mitsuba emitters on shapes: their pdfs, and the cap and rectangle maps they are tested in."""
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -184,6 +185,11 @@ def test_area_lights_choose_their_map():
         moved = {**em.rectangle_light(1.0), "to_world": mi.ScalarTransform4f().translate([0.5, 0.0, 2.0])}
     rect = ms.area_emitter_sampler(moved, ref=cat.REFS[0]).mapping
     assert isinstance(rect, Rectangle)
+    with runtime.using_variant("llvm_ad_rgb") as mi:   # one float32 ulp further: another key
+        nudged = {**moved, "to_world": mi.ScalarTransform4f().translate([0.5, 0.0, 2.0000002])}
+    keys = [json.dumps(ms.area_emitter_sampler(p, ref=cat.REFS[0]).fingerprint(), sort_keys=True)
+            for p in (moved, nudged)]   # plain JSON: no str() of an object, whose digits are rounded
+    assert keys[0] != keys[1] and '"inverse_transpose": [[1.0, 0.0, 0.0, 0.0]' in keys[0]
     np.testing.assert_allclose(rect.corner, [-0.5, -1.0, 2.0])
     assert rect.height == pytest.approx(2.0)
     # seen at a grazing rise (0.25 % over 20 units, 10 sides) a sample's float32 rounding could

@@ -138,6 +138,30 @@ def _to_numpy(value: Any, n: int, widen: bool = True) -> np.ndarray:
     return view if out.ndim == 2 else view.copy()
 
 
+def exact_json(value: Any) -> Any:
+    """value as JSON that holds its numbers exactly, for fingerprints: dicts and sequences item by
+    item, numpy arrays and scalars as Python numbers, a Mitsuba transform as its matrix and
+    inverse transpose (a transform's str rounds to 6 digits, so two transforms 1e-7 apart had
+    keyed the same results; a translation's inverse is exact, a matrix's computed, and the two
+    may differ in their last bits), another drjit or Mitsuba array (a colour, a vector) as its
+    numbers; anything else as it is."""
+    if isinstance(value, dict):
+        return {k: exact_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [exact_json(v) for v in value]
+    if isinstance(value, (np.ndarray, np.generic)):
+        return value.tolist()
+    if hasattr(value, "matrix") and hasattr(value, "inverse_transpose"):
+        return {"matrix": np.asarray(value.matrix, dtype=float).tolist(),
+                "inverse_transpose": np.asarray(value.inverse_transpose, dtype=float).tolist()}
+    if type(value).__module__.split(".")[0] in ("drjit", "mitsuba"):
+        try:
+            return np.asarray(value, dtype=float).tolist()
+        except (TypeError, ValueError, RuntimeError):   # a plugin object, not an array
+            return value
+    return value
+
+
 def _per_channel(v: np.ndarray) -> np.ndarray:
     """A per-sample value as :func:`run_batch` returns it, (N,) or (N, channels), as (N,
     channels): a scalar's one channel.  (Not reshape(N, -1): with no rows it cannot infer the
@@ -351,11 +375,12 @@ class MitsubaSampler:
         return np.where(ok[:, None], _per_channel(v), 0.0)
 
     def fingerprint(self) -> dict[str, Any]:
-        """What the sampler's results depend on: Mitsuba's version, variant, kind and spec."""
+        """What the sampler's results depend on: Mitsuba's version, variant, kind and spec
+        (JSON, its numbers exact: :func:`exact_json`)."""
         import mitsuba as mi
 
         return {"adapter": "mitsuba", "mitsuba": mi.__version__, "kind": self.kind, "name": self.name,
-                "variant": self.variant, **self._spec()}
+                "variant": self.variant, **exact_json(self._spec())}
 
     def _spec(self) -> dict[str, Any]:
         return {}
