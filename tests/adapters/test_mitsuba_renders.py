@@ -248,6 +248,11 @@ def test_xml_scene_file(tmp_path):
     assert fp["environment"]["file"] == str(xml.resolve())   # where it lies: the key's, not the seeds'
     with pytest.raises(ValueError, match="'width'"):
         renderer("mitsuba", {"scene": str(xml), "width": 8})
+    # a relative path from the suite file's folder (base), as every adapter's paths
+    relative = renderer("mitsuba", {"scene": "scene.xml"}, base=tmp_path)
+    assert relative.fingerprint()["environment"]["file"] == str(xml.resolve())
+    with pytest.raises(ValueError, match=r"'scene': 'scene.xml' is neither .* existing file \(/"):
+        renderer("mitsuba", {"scene": "scene.xml"}, base=tmp_path / "elsewhere")
 
 
 SCENE_WITH_FILES = """\

@@ -3,7 +3,8 @@
 
 Spec keys (a suite's ``[[render]]`` table with ``adapter = "mitsuba"``):
 
-    scene        a built-in scene (below) or the path of a Mitsuba XML scene file
+    scene        a built-in scene (below) or the path of a Mitsuba XML scene file (relative:
+                 from the suite file's folder)
     integrator   "path", "direct", "ptracer", "volpath", "volpathmis", ... (a Mitsuba plugin)
     variant      "scalar_rgb" (default) or "llvm_ad_rgb" (or any installed variant)
     max_depth    path length limit of the integrator (default: the scene's)
@@ -189,8 +190,10 @@ class MitsubaRenderer:
         return mi
 
 
-def make_renderer(spec: dict[str, Any]) -> MitsubaRenderer:
-    """A MitsubaRenderer from a suite table's keys; ``ValueError`` names a bad key."""
+def make_renderer(spec: dict[str, Any], *, base: Path | None = None) -> MitsubaRenderer:
+    """A MitsubaRenderer from a suite table's keys; ``ValueError`` names a bad key.  A scene
+    file's relative path is taken from ``base`` (the suite file's folder; the working folder
+    without one), as the other adapters take theirs."""
     unknown = set(spec) - _KEYS
     if unknown:
         raise ValueError(f"'{sorted(unknown)[0]}': unknown key for adapter 'mitsuba'; "
@@ -198,9 +201,12 @@ def make_renderer(spec: dict[str, Any]) -> MitsubaRenderer:
     scene = spec.get("scene")
     if not isinstance(scene, str) or not scene:
         raise ValueError(f"'scene': expected a built-in scene name {list(SCENES)} or the path of an XML file")
-    if scene not in SCENES and not Path(scene).is_file():
-        raise ValueError(f"'scene': {scene!r} is neither a built-in scene {list(SCENES)} "
-                         "nor an existing file")
+    if scene not in SCENES:
+        path = (base or Path.cwd()) / scene
+        if not path.is_file():
+            raise ValueError(f"'scene': {scene!r} is neither a built-in scene {list(SCENES)} "
+                             f"nor an existing file ({path.resolve()})")
+        scene = str(path.resolve())
     integrator = spec.get("integrator", "path")
     if not isinstance(integrator, str):
         raise ValueError(f"'integrator': expected a Mitsuba integrator name, got {integrator!r}")
