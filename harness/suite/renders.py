@@ -151,6 +151,7 @@ class _Case:
     ref: Renderer | None
     stream: str                  # what the renders' seeds derive from (plan.render_stream)
     ref_stream: str | None       # ... the reference's (plan.reference_stream)
+    ref_fingerprint: dict | None = None   # what ref_key was taken from
     sibling: _Case | None = None  # the configuration whose bias replicas are the reference
 
 
@@ -170,16 +171,20 @@ class RenderKind:
     def register(self, store: Store) -> None:
         self.cases = []
         for rc in self.suite.renders:
+            # each fingerprint taken once: the keys, the seeds and the record all stand for the
+            # same files (a renderer's files may change, and hashing a scene's can take seconds)
             r = cached_renderer(rc.adapter, rc.spec, base=rc.base)
-            key = render_key(self.suite, r.fingerprint())
+            fp = r.fingerprint()
+            key = render_key(self.suite, fp)
             rendered = r.exact() is None and rc.reference_config is None
             ref = cached_renderer(rc.adapter, rc.spec, reference=True, base=rc.base) if rendered else None
-            ref_key = reference_key(self.suite, rc, ref.fingerprint()) if ref else None
-            ref_stream = reference_stream(self.suite, rc, ref.fingerprint()) if ref else None
-            self.cases.append(_Case(rc, key, r, ref_key, ref, render_stream(self.suite, r.fingerprint()),
-                                    ref_stream))
+            ref_fp = ref.fingerprint() if ref else None
+            ref_key = reference_key(self.suite, rc, ref_fp) if ref_fp else None
+            ref_stream = reference_stream(self.suite, rc, ref_fp) if ref_fp else None
+            self.cases.append(_Case(rc, key, r, ref_key, ref, render_stream(self.suite, fp), ref_stream,
+                                    ref_fp))
             store.add_case(key, self.suite.name, rc.scene, rc.label,
-                           {"adapter": rc.adapter, "spec": dict(rc.spec), "fingerprint": r.fingerprint()})
+                           {"adapter": rc.adapter, "spec": dict(rc.spec), "fingerprint": fp})
             if ref_key:
                 store.use_key(ref_key)
         cases = self.cases
@@ -272,7 +277,7 @@ def _build_reference(store: Store, cache: ReferenceCache, c: _Case) -> ist.Refer
     payloads = store.payloads(c.ref_key)
     images = np.stack([store.image(p["image"]) for _, p in sorted(payloads.items())]).astype(np.float64)
     reference = ist.Reference.from_parts(images)
-    cache.save(c.ref_key, reference, {"fingerprint": c.ref.fingerprint(), "spp": c.rc.reference_spp,
+    cache.save(c.ref_key, reference, {"fingerprint": c.ref_fingerprint, "spp": c.rc.reference_spp,
                                       "invalid_pixels": _faults(payloads).total,
                                       "seconds": float(sum(store.seconds(c.ref_key).values()))})
     return reference

@@ -190,6 +190,13 @@ def test_area_lights_choose_their_map():
     keys = [json.dumps(ms.area_emitter_sampler(p, ref=cat.REFS[0]).fingerprint(), sort_keys=True)
             for p in (moved, nudged)]   # plain JSON: no str() of an object, whose digits are rounded
     assert keys[0] != keys[1] and '"inverse_transpose": [[1.0, 0.0, 0.0, 0.0]' in keys[0]
+    with runtime.using_variant("llvm_ad_rgb") as mi:   # a bitmap: its pixels' digest and its format
+        linear = mi.Bitmap(em.light_bitmap())
+        srgb = mi.Bitmap(em.light_bitmap())
+        srgb.set_srgb_gamma(True)
+    prints = [ms.area_emitter_sampler(em.rectangle_light({"type": "bitmap", "bitmap": b}),
+                                      ref=cat.REFS[0]).fingerprint() for b in (linear, srgb)]
+    assert prints[0] != prints[1] and len(json.dumps(prints[0])) < 2000
     np.testing.assert_allclose(rect.corner, [-0.5, -1.0, 2.0])
     assert rect.height == pytest.approx(2.0)
     # seen at a grazing rise (0.25 % over 20 units, 10 sides) a sample's float32 rounding could

@@ -319,6 +319,13 @@ def test_the_files_a_scene_reads_are_in_its_key_and_reload_it(tmp_path):
     assert darker.mean() < image.mean() and not np.array_equal(darker, image)
     (tmp_path / "textures" / "tri.obj").write_text(triangle + "\n")     # the shadowing candidate
     assert r.fingerprint()["environment"]["reads"]["textures/tri.obj"] != reads["textures/tri.obj"]
+    write_exr(tmp_path / "textures" / "albedo.exr", 0.75)   # keyed, then edited before it loads
+    r.fingerprint()
+    write_exr(tmp_path / "textures" / "albedo.exr", 0.6)
+    with pytest.raises(RenderError, match=r"its files changed after the run took its key "
+                                          r"\(textures/albedo\.exr\); run it again"):
+        r.render(16, 3)
+    r.fingerprint()
 
     (tmp_path / "tri.obj").unlink()
     (tmp_path / "textures" / "tri.obj").unlink()
@@ -328,6 +335,30 @@ def test_the_files_a_scene_reads_are_in_its_key_and_reload_it(tmp_path):
     with pytest.raises(ValueError, match=r"^'scene': Mitsuba cannot load .*scene\.xml: .*tri\.obj"):
         renderer("mitsuba", {"scene": str(xml)})   # the scene's key named, not the integrator's
     assert renderer("mitsuba", {"scene": "furnace"}).fingerprint()["environment"].get("reads") is None
+
+
+def test_scene_files_without_mitsubas_parser_read_the_text(tmp_path, monkeypatch):
+    """Without Mitsuba's parser (mi.parser) the names come from the files' text: the same files
+    as the parser's here, the commented-out mesh too (a superset); an include that holds only a
+    <default> (which the parser does not list) either way; an unreadable file recorded."""
+    from harness.adapters.mitsuba import scene_files as sf
+
+    (tmp_path / "parts").mkdir()
+    (tmp_path / "textures").mkdir()
+    (tmp_path / "scene.xml").write_text(textwrap.dedent(SCENE_WITH_FILES))
+    (tmp_path / "parts" / "light.xml").write_text(
+        '<scene version="3.0.0"><include filename="more.inc"/>'
+        '<emitter type="envmap"><string name="filename" value="sky.exr"/></emitter></scene>')
+    (tmp_path / "more.inc").write_text('<scene version="3.0.0"><default name="x" value="1"/></scene>')
+    for name in ("tri.obj", "old.obj", "sky.exr", "textures/albedo.exr"):
+        (tmp_path / name).write_text(name)
+    parsed = sf.scene_files(tmp_path / "scene.xml", "scalar_rgb")
+    monkeypatch.setattr(sf, "_parsed", lambda scene, variant: None)
+    scanned = sf.scene_files(tmp_path / "scene.xml", "scalar_rgb")
+    assert sorted(parsed) == ["more.inc", "parts/light.xml", "sky.exr", "textures/albedo.exr", "tri.obj"]
+    assert sorted(scanned) == sorted([*parsed, "old.obj"]) and all(scanned[k] == v for k, v in parsed.items())
+    monkeypatch.setattr(sf, "file_digest", lambda path: (_ for _ in ()).throw(PermissionError(13, "denied")))
+    assert set(sf.scene_files(tmp_path / "scene.xml", "scalar_rgb").values()) == {"unreadable: denied"}
 
 
 def test_suite_errors_name_file_line_and_key(tmp_path):

@@ -19,6 +19,7 @@ objects are built once per sampler, for its variant.
 """
 from __future__ import annotations
 
+import hashlib
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -143,14 +144,21 @@ def exact_json(value: Any) -> Any:
     item, numpy arrays and scalars as Python numbers, a Mitsuba transform as its matrix and
     inverse transpose (a transform's str rounds to 6 digits, so two transforms 1e-7 apart had
     keyed the same results; a translation's inverse is exact, a matrix's computed, and the two
-    may differ in their last bits), another drjit or Mitsuba array (a colour, a vector) as its
-    numbers; anything else as it is."""
+    may differ in their last bits), a Mitsuba bitmap as its pixels' SHA-256 and its format
+    (pixel format, sRGB gamma, premultiplied alpha), another drjit or Mitsuba array (a colour,
+    a vector) as its numbers; anything else as it is."""
     if isinstance(value, dict):
         return {k: exact_json(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
         return [exact_json(v) for v in value]
     if isinstance(value, (np.ndarray, np.generic)):
         return value.tolist()
+    if hasattr(value, "pixel_format") and hasattr(value, "srgb_gamma"):   # a mi.Bitmap: its bytes
+        pixels = np.ascontiguousarray(value)
+        return {"bitmap_sha256": hashlib.sha256(pixels.tobytes()).hexdigest(),
+                "shape": list(pixels.shape), "dtype": str(pixels.dtype),
+                "pixel_format": str(value.pixel_format()), "srgb_gamma": bool(value.srgb_gamma()),
+                "premultiplied_alpha": bool(value.premultiplied_alpha())}
     if hasattr(value, "matrix") and hasattr(value, "inverse_transpose"):
         return {"matrix": np.asarray(value.matrix, dtype=float).tolist(),
                 "inverse_transpose": np.asarray(value.inverse_transpose, dtype=float).tolist()}

@@ -109,6 +109,7 @@ class MitsubaRenderer:
         self._scene = self._integrator = None
         self._warm: set[int] = set()
         self._loaded: dict[str, Any] = {}   # a scene file's digests and its reads', as loaded
+        self._keyed: dict[str, Any] = {}    # ... as the last fingerprint took them
 
     # --- protocol ----------------------------------------------------------------------------
     def render(self, spp: int, seed: int) -> Render:
@@ -141,11 +142,11 @@ class MitsubaRenderer:
         mi = _mi()
         scene, environment = self.scene_name, {"mitsuba": mi.__version__}
         if self._is_file:
-            scene = {"sha256": hashlib.sha256(Path(scene).read_bytes()).hexdigest()}
+            now = self._files_now()
+            scene, environment["reads"] = now["scene"], now["reads"]
             environment["file"] = str(Path(self.scene_name).resolve())
-            environment["reads"] = scene_files(Path(self.scene_name))
-            now = {"scene": scene, "reads": environment["reads"]}
             with VARIANT_LOCK:   # (renders hold it while they use the scene)
+                self._keyed = now
                 if self._scene is not None and self._loaded != now:
                     # the files changed since the scene was loaded: the renders this key stands
                     # for are of the files as they are now, so the scene is loaded again
@@ -163,6 +164,12 @@ class MitsubaRenderer:
         return MitsubaRenderer(self.scene_name, ref, self.variant, depth, self.width, self.height)
 
     # --- internals ---------------------------------------------------------------------------
+    def _files_now(self) -> dict[str, Any]:
+        """A scene file's SHA-256 and the digests of the files it reads, as they are now."""
+        path = Path(self.scene_name)
+        return {"scene": {"sha256": hashlib.sha256(path.read_bytes()).hexdigest()},
+                "reads": scene_files(path, self.variant)}
+
     @property
     def _is_file(self) -> bool:
         return self.scene_name not in SCENES
@@ -173,9 +180,13 @@ class MitsubaRenderer:
         mi = activate(self.variant)
         if self._scene is None:
             if self._is_file:
-                path = Path(self.scene_name)
-                self._loaded = {"scene": {"sha256": hashlib.sha256(path.read_bytes()).hexdigest()},
-                                "reads": scene_files(path)}
+                now = self._files_now()
+                if self._keyed and now != self._keyed:   # the key stands for other files
+                    before, after = self._keyed["reads"], now["reads"]
+                    changed = [k for k in sorted({*before, *after}) if before.get(k) != after.get(k)]
+                    raise RenderError(f"{self.scene_name}: its files changed after the run took its key "
+                                      f"({', '.join(changed) or 'the scene file'}); run it again")
+                self._loaded = now
                 try:
                     self._scene = mi.load_file(self.scene_name)
                 except RuntimeError as e:   # Mitsuba's parser: a missing mesh, a bad plugin

@@ -5,17 +5,20 @@ files (``<include>``); its images depend on their bytes as much as on its own, s
 fingerprint carries a digest of each (:func:`scene_files`), and an edited mesh or texture is
 rendered again instead of a stored image being reused.
 
-Which files Mitsuba opens depends on rules of its parser that have changed between versions
-(the order of ``<path>`` folders and the scene's folder, the folder an include's own includes
-are resolved in, which ``<default>`` wins, how ``$name`` is replaced), so this module does not
-imitate them: it takes a superset.  Every attribute value of the scene and of the XML files it
-names (``$name`` replaced by each value any ``<default>`` gives it, and left as written), read
-as a file name against every folder Mitsuba's resolver may search (the scene's, each XML
-file's, each folder such a value names, the working folder), is a file the scene may read
-wherever a file is there.  A file the scene does not read can only cost an extra render when
-it changes; a file it reads cannot be missed (Mitsuba's own data files aside: its version is
-in the key).  The values are read with a regular expression rather than an XML parser, so a
-file Mitsuba's tolerant parser accepts (a comment holding ``--``, a bare ``&``) is read too.
+The XML files are the scene and every file its ``<include>`` tags name, transitively (any
+extension), with those Mitsuba's own parser lists.  The names come from that parser where
+Mitsuba has one (``mi.parser.parse_file``, as 3.9 has): every string property of every
+object, with ``$name`` defaults, escapes, entities and the file's encoding applied as Mitsuba
+applies them, without building a plugin.  A release without it, or a scene it refuses
+(whose load fails too), fall back to regular expressions over the files' text: every
+attribute value, as written and with each ``<default>`` value for its ``$names``.  Where the
+names are looked up is a superset of the folders Mitsuba's file resolver may search: the
+scene's, each XML file's, each ``<path>`` folder (taken from any folder before it, as Mitsuba
+resolves one through the others), the working folder.  Every file found under any of them is
+hashed: a same-named file Mitsuba does not read can cost an extra render, a file it reads
+is not missed.  One derived name is followed (a conductor's ``material`` reads
+``data/ior/<material>.eta.spd`` and ``.k.spd``, which a scene's folder may shadow); files
+under Mitsuba's own package are not (its version is in the key).
 """
 from __future__ import annotations
 
@@ -29,83 +32,128 @@ from harness.adapters.base import file_digest
 __all__ = ["scene_files"]
 
 _MAX_INCLUDE_DEPTH = 15   # Mitsuba's MI_XML_INCLUDE_MAX_RECURSION
-_MAX_VARIANTS = 64        # spellings of one value with its $names replaced
-_VALUE = re.compile(r"""=\s*(?:"([^"<]*)"|'([^'<]*)')""")
-_DEFAULT = re.compile(r"<default\b([^>]*)>")
+_MAX_SPELLINGS = 64       # the fallback's spellings of one value with its $names replaced
+_VALUE = re.compile(r"""=\s*(?:"([^"]*)"|'([^']*)')""")
+_TAG = re.compile(r"<(default|path)\b([^>]*)>")
+_INCLUDE = re.compile(r"""<include\b[^>]*?\bfilename\s*=\s*(?:"([^"]*)"|'([^']*)')""")
 _ATTRIBUTE = re.compile(r"""\b(name|value)\s*=\s*(?:"([^"]*)"|'([^']*)')""")
-_COMMENT = re.compile(r"<!--.*?-->", re.S)
 
 
-def scene_files(scene: Path) -> dict[str, str]:
+def scene_files(scene: Path, variant: str) -> dict[str, str]:
     """{file: SHA-256 digest (24 hex digits)} of every file the XML scene ``scene`` may read
-    (the module's superset), its own file aside: a path relative to the scene's folder where
-    the file lies under it, else absolute; sorted."""
+    (see the module; ``variant``: the Mitsuba variant it is parsed for), its own file aside: a
+    path relative to the scene's folder where the file lies under it, else absolute; sorted.
+    A file that cannot be read has "unreadable: <reason>" for its digest: the scene's load, not
+    its fingerprint, reports it."""
     scene = Path(scene).resolve()
+    texts = _included(scene)
+    parsed = _parsed(scene, variant)
+    if parsed is not None:
+        texts.update((path, _text(path)) for path in parsed[0] if path not in texts)
+    names = parsed[1] if parsed is not None else _values(texts)
+    xml = list(texts)
+    folders = _folders(scene, texts)
+    found = {(f / name).resolve() for name in names for f in folders if _is_file(f / name)}
+    return {_name(p, scene.parent): _digest(p) for p in sorted((found | set(xml)) - {scene})}
+
+
+def _parsed(scene: Path, variant: str) -> tuple[list[Path], set[str]] | None:
+    """(the XML files it lists, every string property) by Mitsuba's parser; None where the
+    release has no such parser or it refuses the scene."""
+    from harness.adapters.mitsuba.runtime import using_variant
+
+    try:
+        with using_variant(variant) as mi:
+            state = mi.parser.parse_file(mi.parser.ParserConfig(variant), str(scene))
+            names = set()
+            for node in state.nodes:
+                props = node.props
+                for key in props.keys():
+                    value = props[key]
+                    if isinstance(value, str):
+                        names.add(value)
+                        if key == "material":   # a conductor's spectra, which a scene may shadow
+                            names.update(f"data/ior/{value}.{part}.spd" for part in ("eta", "k"))
+            return [Path(str(f)).resolve() for f in state.files], names
+    except Exception:   # noqa: BLE001 - any failure of the parser: the fallback reads the text
+        return None
+
+
+def _included(scene: Path) -> dict[Path, str]:
+    """{XML file: its text} of the scene and of every file its <include> tags name,
+    transitively (any extension, as Mitsuba includes; by regular expressions, so a file that
+    holds only <default>s, which Mitsuba's parser does not list, is hashed too)."""
     texts = {scene: _text(scene)}
-    for _ in range(_MAX_INCLUDE_DEPTH):   # the XML files the values name, a level at a time
-        folders, values = _folders(scene, texts), _values(texts)
-        named = {(f / v).resolve() for v in values if v.lower().endswith(".xml") for f in folders
-                 if _is_file(f / v)} - set(texts)
+    for _ in range(_MAX_INCLUDE_DEPTH):
+        folders = _folders(scene, texts)
+        names = {html.unescape(a or b) for text in texts.values() for a, b in _INCLUDE.findall(text)}
+        named = {(f / v).resolve() for v in names for f in folders if _is_file(f / v)} - set(texts)
         if not named:
             break
         texts.update((path, _text(path)) for path in sorted(named))
-    folders, values = _folders(scene, texts), _values(texts)
-    files = {(f / v).resolve() for v in values for f in folders if _is_file(f / v)} - {scene}
-    return {_name(p, scene.parent): file_digest(p) for p in sorted(files)}
+    return texts
 
 
 def _text(path: Path) -> str:
-    """An XML file's text, its comments dropped (a commented-out mesh is not read)."""
-    return _COMMENT.sub("", path.read_bytes().decode("utf-8", errors="replace"))
+    try:
+        return path.read_bytes().decode("utf-8", errors="replace")
+    except OSError:
+        return ""
+
+
+def _tags(texts: dict[Path, str], tag: str) -> list[dict[str, str]]:
+    """The name and value attributes of each <tag ...> of the texts, in order."""
+    return [{k: html.unescape(a or b) for k, a, b in _ATTRIBUTE.findall(attributes)}
+            for text in texts.values() for t, attributes in _TAG.findall(text) if t == tag]
 
 
 def _values(texts: dict[Path, str]) -> set[str]:
-    """Every attribute value of the texts, as written and with each $name replaced by each
-    value a <default> of any of them gives it (longer names first, as Mitsuba replaces; a
-    default's own $names too, to three levels)."""
+    """Every attribute value of the texts, as written (entities read) and with each $name
+    replaced by each value a <default> gives it, longer names first (at most _MAX_SPELLINGS
+    spellings a value)."""
     defaults: dict[str, set[str]] = {}
-    for text in texts.values():
-        for attributes in _DEFAULT.findall(text):
-            pairs = {k: a or b for k, a, b in _ATTRIBUTE.findall(attributes)}
-            if "name" in pairs and "value" in pairs:
-                defaults.setdefault(pairs["name"], set()).add(pairs["value"])
+    for pair in _tags(texts, "default"):
+        if "name" in pair and "value" in pair:
+            defaults.setdefault(pair["name"], set()).add(pair["value"])
     names = sorted(defaults, key=len, reverse=True)
     out: set[str] = set()
     for text in texts.values():
         for quoted in _VALUE.findall(text):
-            raw = quoted[0] or quoted[1]
-            spellings = {raw, html.unescape(raw)}   # as written, and its entities (&amp;) read
-            for _ in range(3):
-                spellings |= {v for s in spellings for v in _replaced(s, names, defaults)}
-            out |= spellings
-    return {v.strip() for v in out if v.strip()}
-
-
-def _replaced(value: str, names: list[str], defaults: dict[str, set[str]]) -> list[str]:
-    """value with its $names (longest first) replaced by each combination of their defaults'
-    values, at most _MAX_VARIANTS of them."""
-    used = [n for n in names if "$" + n in value]
-    spelled = []
-    for choice in itertools.islice(itertools.product(*(sorted(defaults[n]) for n in used)), _MAX_VARIANTS):
-        v = value
-        for name, replacement in zip(used, choice):
-            v = v.replace("$" + name, replacement)
-        spelled.append(v)
-    return spelled
+            value = html.unescape(quoted[0] or quoted[1])
+            out.add(value)
+            if "$" not in value:
+                continue
+            used = [n for n in names if "$" + n in value]
+            for choice in itertools.islice(itertools.product(*(sorted(defaults[n]) for n in used)),
+                                           _MAX_SPELLINGS):
+                spelled = value
+                for name, replacement in zip(used, choice):
+                    spelled = spelled.replace("$" + name, replacement)
+                out.add(spelled)
+    return out
 
 
 def _folders(scene: Path, texts: dict[Path, str]) -> list[Path]:
-    """The folders Mitsuba's resolver may search: the scene's, each XML file's, the working
-    folder, and each folder a value names relative to one of those (a <path> tag's)."""
-    bases = list(dict.fromkeys([scene.parent, *(p.parent for p in texts), Path.cwd()]))
-    named = [(b / v).resolve() for v in _values(texts) for b in bases if _is_dir(b / v)]
-    return list(dict.fromkeys([*bases, *named]))
+    """The scene's folder, each XML file's, each <path> folder (relative to any folder before
+    it), and the working folder."""
+    folders = list(dict.fromkeys([scene.parent, *(p.parent for p in texts), Path.cwd()]))
+    for pair in _tags(texts, "path"):
+        value = pair.get("value", "")
+        folders += [(f / value).resolve() for f in list(folders) if value and _is_dir(f / value)]
+    return list(dict.fromkeys(folders))
+
+
+def _digest(path: Path) -> str:
+    try:
+        return file_digest(path)
+    except OSError as e:   # a permission, a /proc file: recorded, not raised
+        return f"unreadable: {e.strerror or type(e).__name__}"
 
 
 def _is_file(path: Path) -> bool:
     try:
         return path.is_file()
-    except (OSError, ValueError):   # a value no file system takes as a name (too long, a NUL)
+    except (OSError, ValueError):   # a name no file system takes (too long, a NUL)
         return False
 
 
