@@ -51,10 +51,9 @@ def scene_files(scene: Path, variant: str) -> dict[str, str]:
     if parsed is not None:
         texts.update((path, _text(path)) for path in parsed[0] if path not in texts)
     names = parsed[1] if parsed is not None else _values(texts)
-    xml = list(texts)
     folders = _folders(scene, texts)
     found = {(f / name).resolve() for name in names for f in folders if _is_file(f / name)}
-    return {_name(p, scene.parent): _digest(p) for p in sorted((found | set(xml)) - {scene})}
+    return {_name(p, scene.parent): _digest(p) for p in sorted((found | set(texts)) - {scene})}
 
 
 def _parsed(scene: Path, variant: str) -> tuple[list[Path], set[str]] | None:
