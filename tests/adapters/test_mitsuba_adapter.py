@@ -2,6 +2,7 @@
 functions."""
 from __future__ import annotations
 
+import json
 import math
 import os
 
@@ -11,6 +12,7 @@ import pytest
 from harness.adapters.mitsuba import catalogue as cat
 from harness.adapters.mitsuba import checks, runtime
 from harness.adapters.mitsuba import samplers as ms
+from harness.adapters.mitsuba.batch import exact_json
 from tests.adapters.mitsuba_helpers import ALPHA, N
 
 
@@ -289,3 +291,22 @@ def test_phase_function_conventions():
         ms.phase_sampler({"type": "hg"}, wi=200)
     with pytest.raises(ValueError, match="not a phase function"):
         ms.phase_sampler({"type": "diffuse"})
+
+
+def test_a_built_plugin_in_a_spec_is_keyed_by_its_exact_parameters():
+    # two BSDFs built 1e-7 apart in roughness printed the same str (6 digits): one key for both
+    with runtime.using_variant("llvm_ad_rgb") as mi:
+        built = [mi.load_dict({"type": "roughconductor", "alpha": a}) for a in (0.1, 0.1000001, 0.1)]
+        texture = mi.load_dict({"type": "bitmap", "bitmap": mi.Bitmap(np.full((16, 16, 3), 0.5, np.float32))})
+        box = mi.ScalarBoundingBox3f([0.0, 0.0, 0.0], [1.0, 1.0, 1e-7])
+    masks = [ms.bsdf_sampler({"type": "mask", "opacity": 0.3, "bsdf": b}) for b in built]
+    keys = [json.dumps(m.fingerprint(), sort_keys=True) for m in masks]
+    assert keys[0] != keys[1] and keys[0] == keys[2]          # exact, and the same settings twice
+    key = json.loads(keys[0])["plugin"]["bsdf"]
+    assert key["plugin_object"] == "BSDF" and "distribution = beckmann" in key["str"]
+    assert key["parameters"]["alpha.value"] == [float(np.float32(0.1))]
+    # a texture's pixels by their digest, its uv transform exactly; a bounding box by its corners
+    pixels = exact_json(texture)["parameters"]
+    assert pixels["data"]["shape"] == [16, 16, 3] and len(pixels["data"]["sha256"]) == 64
+    assert pixels["to_uv"]["matrix"][0] == [1.0, 0.0, 0.0]
+    assert exact_json(box) == {"min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, float(np.float32(1e-7))]}

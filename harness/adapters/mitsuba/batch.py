@@ -145,8 +145,10 @@ def exact_json(value: Any) -> Any:
     inverse transpose (a transform's str rounds to 6 digits, so two transforms 1e-7 apart had
     keyed the same results; a translation's inverse is exact, a matrix's computed, and the two
     may differ in their last bits), a Mitsuba bitmap as its pixels' SHA-256 and its format
-    (pixel format, sRGB gamma, premultiplied alpha), another drjit or Mitsuba array (a colour,
-    a vector) as its numbers; anything else as it is."""
+    (pixel format, sRGB gamma, premultiplied alpha), a Mitsuba plugin object (a BSDF, texture
+    or emitter a spec holds already built) as :func:`_plugin_json`'s, a bounding box as its
+    corners, another drjit or Mitsuba array (a colour, a vector) as its numbers; anything else
+    as it is."""
     if isinstance(value, dict):
         return {k: exact_json(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
@@ -162,12 +164,47 @@ def exact_json(value: Any) -> Any:
     if hasattr(value, "matrix") and hasattr(value, "inverse_transpose"):
         return {"matrix": np.asarray(value.matrix, dtype=float).tolist(),
                 "inverse_transpose": np.asarray(value.inverse_transpose, dtype=float).tolist()}
+    if type(value).__module__.split(".")[0] == "mitsuba" and hasattr(value, "parameters_changed"):
+        return _plugin_json(value)
+    if hasattr(value, "min") and hasattr(value, "max") and hasattr(value, "extents"):   # a bounding box
+        return {"min": exact_json(value.min), "max": exact_json(value.max)}
     if type(value).__module__.split(".")[0] in ("drjit", "mitsuba"):
         try:
             return np.asarray(value, dtype=float).tolist()
         except (TypeError, ValueError, RuntimeError):   # a plugin object, not an array
             return value
     return value
+
+
+#: A plugin parameter with more values than this (a texture's pixels, a mesh's vertices) is
+#: keyed by the SHA-256 of its bytes rather than listed
+_LISTED_VALUES = 64
+
+
+def _plugin_json(plugin: Any) -> dict[str, Any]:
+    """A built Mitsuba plugin object as JSON that tells apart any two that differ: its class,
+    its ``str`` (the settings that are not parameters: a microfacet distribution, a filter
+    type) and every parameter ``mi.traverse`` gives, its nested plugins' included, with exact
+    numbers (``str`` alone rounds them to 6 digits, so two BSDFs 1e-7 apart in roughness had
+    keyed the same results): transforms as :func:`exact_json`'s, arrays of up to
+    _LISTED_VALUES values as their numbers, larger ones as the SHA-256 of their bytes with
+    their shape and dtype.  A setting a built plugin shows neither in its ``str`` nor as a
+    parameter (a bitmap texture's filter and wrap modes, in Mitsuba 3.9) is not seen: a spec
+    that gives plugin dicts, as a suite's tables do, is keyed by every setting."""
+    import mitsuba as mi
+
+    params = mi.traverse(plugin)
+    values = {}
+    for key in sorted(params.keys()):
+        value = params[key]
+        if hasattr(value, "matrix") and hasattr(value, "inverse_transpose"):
+            values[key] = exact_json(value)
+            continue
+        a = np.ascontiguousarray(value)
+        values[key] = (a.tolist() if a.size <= _LISTED_VALUES else
+                       {"sha256": hashlib.sha256(a.tobytes()).hexdigest(), "shape": list(a.shape),
+                        "dtype": str(a.dtype)})
+    return {"plugin_object": type(plugin).__name__, "str": str(plugin), "parameters": values}
 
 
 def _per_channel(v: np.ndarray) -> np.ndarray:
