@@ -337,6 +337,43 @@ def test_the_files_a_scene_reads_are_in_its_key_and_reload_it(tmp_path):
     assert renderer("mitsuba", {"scene": "furnace"}).fingerprint()["environment"].get("reads") is None
 
 
+def test_a_folder_added_to_mitsubas_resolver_is_searched_for_the_scenes_files(tmp_path, monkeypatch):
+    """Mitsuba finds a scene's files in the folders of its file resolver too: the working folder
+    it was imported in (a later chdir does not move it) and any a user appends (a shared
+    folder of assets).  Their files are in the key; an edit there renders again.  Taking the
+    key leaves the resolver as it was (Mitsuba's parser adds a scene's <path> folders to it)."""
+    from harness.adapters.mitsuba.runtime import activate, using_variant
+
+    (tmp_path / "scene" / "textures").mkdir(parents=True)     # the <path> folder, empty
+    (tmp_path / "assets").mkdir()
+    xml = tmp_path / "scene" / "scene.xml"
+    xml.write_text(textwrap.dedent(SCENE_WITH_FILES).replace('<include filename="parts/light.xml"/>', ""))
+    (tmp_path / "assets" / "tri.obj").write_text("v -2 -2 0\nv 2 -2 0\nv 0 2 0\nf 1 2 3\n")
+    albedo = tmp_path / "assets" / "albedo.exr"
+    activate("scalar_rgb").Bitmap(np.full((4, 8, 3), 0.5, dtype=np.float32)).write(str(albedo))
+    monkeypatch.chdir(tmp_path / "scene")       # not where Mitsuba's resolver began
+    with using_variant("scalar_rgb") as mi:
+        resolver = mi.file_resolver()
+        kept = [str(resolver[i]) for i in range(len(resolver))]
+        resolver.append(str(tmp_path / "assets"))
+    try:
+        r = renderer("mitsuba", {"scene": str(xml), "integrator": "direct"})
+        reads = r.fingerprint()["environment"]["reads"]
+        assets = (tmp_path / "assets").resolve()
+        assert sorted(reads) == [str(assets / "albedo.exr"), str(assets / "tri.obj")]
+        with using_variant("scalar_rgb") as mi:
+            folders = mi.file_resolver()
+            assert [str(folders[i]) for i in range(len(folders))] == kept + [str(assets)]
+        assert r.render(4, 1).image.shape == (8, 8, 3)   # Mitsuba found them there too
+        activate("scalar_rgb").Bitmap(np.full((4, 8, 3), 0.25, dtype=np.float32)).write(str(albedo))
+        assert r.fingerprint()["environment"]["reads"][str(albedo.resolve())] != reads[str(albedo.resolve())]
+    finally:
+        with using_variant("scalar_rgb") as mi:
+            mi.file_resolver().clear()
+            for folder in kept:
+                mi.file_resolver().append(folder)
+
+
 def test_scene_files_without_mitsubas_parser_read_the_text(tmp_path, monkeypatch):
     """Without Mitsuba's parser (mi.parser) the names come from the files' text: the same files
     as the parser's here, the commented-out mesh too (a superset); an include that holds only a

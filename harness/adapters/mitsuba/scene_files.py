@@ -14,7 +14,8 @@ applies them, without building a plugin.  A release without it, or a scene it re
 attribute value, as written and with each ``<default>`` value for its ``$names``.  Where the
 names are looked up is a superset of the folders Mitsuba's file resolver may search: the
 scene's, each XML file's, each ``<path>`` folder (taken from any folder before it, as Mitsuba
-resolves one through the others), the working folder.  Every file found under any of them is
+resolves one through the others), the working folder, and those of Mitsuba's file resolver
+(the working folder it was imported in, any a user added).  Every file found under any of them is
 hashed: a same-named file Mitsuba does not read can cost an extra render, a file it reads
 is not missed.  One derived name is followed (a conductor's ``material`` reads
 ``data/ior/<material>.eta.spd`` and ``.k.spd``, which a scene's folder may shadow); files
@@ -22,10 +23,13 @@ under Mitsuba's own package are not (its version is in the key).
 """
 from __future__ import annotations
 
+import contextlib
 import html
 import itertools
 import re
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 from harness.adapters.base import file_digest
 
@@ -46,12 +50,13 @@ def scene_files(scene: Path, variant: str) -> dict[str, str]:
     A file that cannot be read has "unreadable: <reason>" for its digest: the scene's load, not
     its fingerprint, reports it."""
     scene = Path(scene).resolve()
-    texts = _included(scene)
+    searched = _resolver_folders(variant)
+    texts = _included(scene, searched)
     parsed = _parsed(scene, variant)
     if parsed is not None:
         texts.update((path, _text(path)) for path in parsed[0] if path not in texts)
     names = parsed[1] if parsed is not None else _values(texts)
-    folders = _folders(scene, texts)
+    folders = _folders(scene, texts, searched)
     found = {(f / name).resolve() for name in names for f in folders if _is_file(f / name)}
     return {_name(p, scene.parent): _digest(p) for p in sorted((found | set(texts)) - {scene})}
 
@@ -62,7 +67,7 @@ def _parsed(scene: Path, variant: str) -> tuple[list[Path], set[str]] | None:
     from harness.adapters.mitsuba.runtime import using_variant
 
     try:
-        with using_variant(variant) as mi:
+        with using_variant(variant) as mi, _resolver_kept(mi):
             state = mi.parser.parse_file(mi.parser.ParserConfig(variant), str(scene))
             names = set()
             for node in state.nodes:
@@ -78,13 +83,30 @@ def _parsed(scene: Path, variant: str) -> tuple[list[Path], set[str]] | None:
         return None
 
 
-def _included(scene: Path) -> dict[Path, str]:
+@contextlib.contextmanager
+def _resolver_kept(mi: Any) -> Iterator[None]:
+    """Mitsuba's global file resolver as it was before, after: ``mi.parser.parse_file`` leaves
+    a scene's ``<path>`` folders in it (3.9.1; ``mi.load_file`` does not), where every scene
+    loaded after would search them (a fingerprint changing what a later render reads).  A
+    release without a global resolver has nothing to keep."""
+    resolver = mi.file_resolver() if hasattr(mi, "file_resolver") else None
+    kept = None if resolver is None else [str(resolver[i]) for i in range(len(resolver))]
+    try:
+        yield
+    finally:
+        if kept is not None and [str(resolver[i]) for i in range(len(resolver))] != kept:
+            resolver.clear()
+            for folder in kept:
+                resolver.append(folder)
+
+
+def _included(scene: Path, searched: list[Path]) -> dict[Path, str]:
     """{XML file: its text} of the scene and of every file its <include> tags name,
     transitively (any extension, as Mitsuba includes; by regular expressions, so a file that
     holds only <default>s, which Mitsuba's parser does not list, is hashed too)."""
     texts = {scene: _text(scene)}
     for _ in range(_MAX_INCLUDE_DEPTH):
-        folders = _folders(scene, texts)
+        folders = _folders(scene, texts, searched)
         names = {html.unescape(a or b) for text in texts.values() for a, b in _INCLUDE.findall(text)}
         named = {(f / v).resolve() for v in names for f in folders if _is_file(f / v)} - set(texts)
         if not named:
@@ -132,14 +154,29 @@ def _values(texts: dict[Path, str]) -> set[str]:
     return out
 
 
-def _folders(scene: Path, texts: dict[Path, str]) -> list[Path]:
+def _folders(scene: Path, texts: dict[Path, str], searched: list[Path]) -> list[Path]:
     """The scene's folder, each XML file's, each <path> folder (relative to any folder before
-    it), and the working folder."""
-    folders = list(dict.fromkeys([scene.parent, *(p.parent for p in texts), Path.cwd()]))
+    it), the working folder and those ``searched`` (Mitsuba's file resolver's:
+    :func:`_resolver_folders`)."""
+    folders = list(dict.fromkeys([scene.parent, *(p.parent for p in texts), Path.cwd(), *searched]))
     for pair in _tags(texts, "path"):
         value = pair.get("value", "")
         folders += [(f / value).resolve() for f in list(folders) if value and _is_dir(f / value)]
     return list(dict.fromkeys(folders))
+
+
+def _resolver_folders(variant: str) -> list[Path]:
+    """The folders Mitsuba's file resolver searches beside a scene's: the working folder Mitsuba
+    was imported in (which a later ``os.chdir`` does not move) and any a user added to it
+    (``mi.file_resolver().append``: a folder of textures, say); Mitsuba's own package aside.
+    Mitsuba's global resolver where it has one (3.9 has), else the calling thread's."""
+    from harness.adapters.mitsuba.runtime import using_variant
+
+    with using_variant(variant) as mi:
+        resolver = mi.file_resolver() if hasattr(mi, "file_resolver") else mi.Thread.thread().file_resolver()
+        package = Path(mi.__file__).resolve().parent
+        folders = [Path(str(resolver[i])).resolve() for i in range(len(resolver))]
+    return [f for f in folders if f != package and package not in f.parents]
 
 
 def _digest(path: Path) -> str:
