@@ -167,18 +167,28 @@ def file_digest(path: Path) -> str:
     """SHA-256 (24 hex digits) of a file's bytes, for fingerprints: read in blocks, and once per
     process while the file's device, inode, size and modification and change times stay the
     same (a renderer's fingerprint is taken several times a run, and a scene's meshes can be
-    gigabytes; the change time moves with any write, whatever a tool does to the others)."""
+    gigabytes; the change time moves with any write, whatever a tool does to the others).
+    A digest is kept only for a file last changed more than _RACY_NS before it was read: two
+    writes within one tick of the file system's clock leave the same times (2 s on FAT, a
+    jiffy of a few ms where Linux keeps coarse timestamps), so the times of a file changed just
+    now do not yet tell its next write apart (git treats its "racily clean" entries so)."""
     st = Path(path).stat()
     key = (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
-    if key not in _DIGESTS:
+    digest = _DIGESTS.get(key)
+    if digest is None:
         import hashlib
+        import time
 
+        read_at = time.time_ns()
         with open(path, "rb") as f:
-            _DIGESTS[key] = hashlib.file_digest(f, "sha256").hexdigest()[:24]
-    return _DIGESTS[key]
+            digest = hashlib.file_digest(f, "sha256").hexdigest()[:24]
+        if read_at - max(st.st_mtime_ns, st.st_ctime_ns) > _RACY_NS:
+            _DIGESTS[key] = digest
+    return digest
 
 
 _DIGESTS: dict[tuple[int, ...], str] = {}   # file_digest's, by the file's stat identity
+_RACY_NS = 3_000_000_000   # file_digest keeps no digest of a file changed this recently (ns)
 
 
 class ExactImage:

@@ -115,6 +115,36 @@ def test_file_digests_are_kept_per_file_state_and_follow_any_write(tmp_path):
     assert base.file_digest(f) == hashlib.sha256(b"v 0 0 1\n").hexdigest()[:24]
 
 
+def test_a_file_changed_within_its_clocks_tick_is_hashed_again(tmp_path, monkeypatch):
+    """On a file system whose clock ticks coarsely (FAT: 2 s; Linux's coarse timestamps: a few
+    ms) two same-size writes in one tick leave the same stat: a file changed within _RACY_NS of
+    its reading is hashed on every call, and a digest is kept only for an older one."""
+    import hashlib
+    import time
+    from pathlib import Path
+
+    real_stat = Path.stat
+    tick = {"ns": time.time_ns()}
+
+    class Coarse:   # the real stat, its times those of the clock's tick
+        def __init__(self, st):
+            self.st_dev, self.st_ino, self.st_size = st.st_dev, st.st_ino, st.st_size
+            self.st_mtime_ns = self.st_ctime_ns = tick["ns"]
+
+    monkeypatch.setattr(Path, "stat", lambda self, **kw: Coarse(real_stat(self, **kw)))
+    f = tmp_path / "mesh.obj"
+    digests = []
+    for text in (b"v 0 0 0\n", b"v 0 0 1\n"):   # two writes in one tick, just now
+        f.write_bytes(text)
+        digests.append(base.file_digest(f))
+    assert digests == [hashlib.sha256(t).hexdigest()[:24] for t in (b"v 0 0 0\n", b"v 0 0 1\n")]
+    tick["ns"] -= 3600 * 10**9                     # a file last changed an hour ago: kept
+    f.write_bytes(b"v 0 0 2\n")
+    kept = base.file_digest(f)
+    f.write_bytes(b"v 0 0 3\n")                    # (its stat forged to stay the same)
+    assert base.file_digest(f) == kept == hashlib.sha256(b"v 0 0 2\n").hexdigest()[:24]
+
+
 def render_function(spp, seed, gain=1.0):
     rng = np.random.default_rng(seed)
     return gain * rng.random((4, 6, 3, spp)).mean(axis=3) * 2, 0.01 * spp
