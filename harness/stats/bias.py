@@ -19,7 +19,7 @@ import reference_estimators as rest
 
 from harness.stats import distributions
 from harness.stats.merge import merge_moments
-from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level, failures_from_counts
+from harness.stats.results import ConfidenceInterval, Failure, failures_from_counts, t_interval
 from harness.stats.tails import Side, TailEnd, TailSample
 from harness.stats.validate import count, integer_in, level
 
@@ -119,9 +119,7 @@ class UnbiasedResult:
     def confidence_interval(self, confidence_level: float = 0.95) -> ConfidenceInterval:
         """Student-t interval for E[Y] with ``df`` degrees of freedom
         (NaN ends for an "invalid" result; too narrow where ``no_level``)."""
-        check_confidence_level(confidence_level)
-        half = distributions.t_ppf(0.5 + confidence_level / 2, self.df) * self.stderr
-        return ConfidenceInterval(float(self.estimate - half), float(self.estimate + half))
+        return t_interval(self.estimate, self.stderr, self.df, confidence_level)
 
     def __iter__(self):
         return iter((self.statistic, self.pvalue))

@@ -17,7 +17,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from harness.stats import distributions
 from harness.stats.images import (
     PixelVerdict,
     faulty_values,
@@ -25,7 +24,7 @@ from harness.stats.images import (
     relative_squared_error,
     valid_pixels,
 )
-from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
+from harness.stats.results import ConfidenceInterval, Failure, t_interval
 from harness.stats.scales import Scale, combined, multiscale
 from harness.stats.validate import count, level
 
@@ -64,9 +63,7 @@ class ImageComparison(PixelVerdict):
 
     def confidence_interval(self, confidence_level: float = 0.95) -> ConfidenceInterval:
         """Student-t interval (``difference_df`` degrees of freedom) of mean(A) - mean(B)."""
-        check_confidence_level(confidence_level)
-        half = float(distributions.t_ppf(0.5 + confidence_level / 2, self.difference_df)) * self.difference_se
-        return ConfidenceInterval(self.difference - half, self.difference + half)
+        return t_interval(self.difference, self.difference_se, self.difference_df, confidence_level)
 
     def __str__(self) -> str:
         lo, hi = self.confidence_interval(1 - self.alpha)

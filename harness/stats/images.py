@@ -16,8 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from harness import stats
-from harness.stats import distributions
-from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
+from harness.stats.results import ConfidenceInterval, Failure, t_interval
 from harness.stats.scales import ROUNDING, Scale, combined, multiscale
 from harness.stats.timing import median_time, satterthwaite, time_blocks
 from harness.stats.validate import level
@@ -248,9 +247,7 @@ class ImageBias(PixelVerdict):
 
     def confidence_interval(self, confidence_level: float = 0.95) -> ConfidenceInterval:
         """Student-t interval (``bias_mean_df`` degrees of freedom) of the image-average bias."""
-        check_confidence_level(confidence_level)
-        half = float(distributions.t_ppf(0.5 + confidence_level / 2, self.bias_mean_df)) * self.bias_mean_se
-        return ConfidenceInterval(self.bias_mean - half, self.bias_mean + half)
+        return t_interval(self.bias_mean, self.bias_mean_se, self.bias_mean_df, confidence_level)
 
     def __str__(self) -> str:
         lo, hi = self.confidence_interval(1 - self.alpha)

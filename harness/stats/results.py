@@ -90,3 +90,13 @@ def failure_counts(failures: Iterable[Failure]) -> dict[str, int]:
 def check_confidence_level(confidence_level: float) -> float:
     """The level, validated: a number strictly between 0 and 1."""
     return level(confidence_level, "confidence_level")
+
+
+def t_interval(centre: float, stderr: float, df: float, confidence_level: float) -> ConfidenceInterval:
+    """The two-sided Student-t interval centre -/+ t((1 + level) / 2, df) stderr (``df``
+    infinite: the normal's), the level validated first (:func:`check_confidence_level`)."""
+    check_confidence_level(confidence_level)
+    from harness.stats import distributions
+
+    half = float(distributions.t_ppf(0.5 + confidence_level / 2, df)) * stderr
+    return ConfidenceInterval(float(centre - half), float(centre + half))
