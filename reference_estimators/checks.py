@@ -19,8 +19,8 @@ __all__ = [
     "CHECK_DOMAINS", "domain_params", "dithered_domain_params", "domain_points", "grid_histogram",
     "rosenblatt", "piecewise_linear_lookup", "transform_statistics", "cramer_von_mises_sum", "pdf_summary",
     "all_float32", "dither_float32", "float32_nudged", "finite_rows", "pdf_mismatches", "float64_rows",
-    "float32_columns", "take_rows", "nan_rows", "float32_unit_rows", "cap_to_world", "cap_to_hemisphere",
-    "cap_density",
+    "float32_columns", "take_rows", "nan_rows", "produced_rows", "float32_unit_rows", "cap_to_world",
+    "cap_to_hemisphere", "cap_density",
     "rect_to_square", "rect_to_world", "rect_density", "RowLookup", "weight_agreement",
 ]
 
@@ -310,6 +310,23 @@ def finite_rows(x: Any) -> np.ndarray:
     (a transposed (3, N) array as well)."""
     a = _strided(x)
     return _core.finite_rows(a.reshape(a.shape[0], math.prod(a.shape[1:])) if a.ndim > 2 else a)
+
+
+def produced_rows(x: Any, pdf: Any, weight: Any = None, delta: Any = None) -> np.ndarray:
+    """(N,) bool: which samples a renderer's sample call produced: the direction (row of x
+    (N, 3)) finite, the pdf it reported (N,) above 0, some channel of its ``weight`` (N, c) not
+    0 (a NaN is not 0, as numpy's !=; a view whose rows all are one row, as a constant weight
+    comes back, is read as that row), and ``delta`` (N,) 0 (it did not sample a Dirac lobe);
+    ``weight`` and ``delta`` None where the sampler has none.  numpy's comparisons, the same
+    flags, in one pass in C++ on all threads."""
+    a = np.ascontiguousarray(x, dtype=np.float64)
+    p = np.ascontiguousarray(pdf, dtype=np.float64).reshape(-1)
+    empty = np.empty(0)
+    constant = weight is not None and weight.ndim == 2 and len(weight) > 0 and weight.strides[0] == 0
+    w = (empty if weight is None else
+         np.ascontiguousarray(weight[:1] if constant else weight, dtype=np.float64))
+    d = empty if delta is None else np.ascontiguousarray(delta, dtype=np.float64).reshape(-1)
+    return _core.produced_rows(a, p, w, constant, d)
 
 
 def all_float32(v: Any) -> bool:

@@ -195,13 +195,6 @@ inline void cap_to_hemisphere(const double *d, size_t a, size_t e, const double 
     });
 }
 
-// Whether the double v is finite, by its exponent bits (no branch, vectorisable).
-RE_INLINE bool finite_bits(double v) {
-    uint64_t u;
-    std::memcpy(&u, &v, 8);
-    return (u & 0x7ff0000000000000ull) != 0x7ff0000000000000ull;
-}
-
 // CapView.pdf's density on the hemisphere, rows a .. b - 1: out[i] = the world pdf p[i] in
 // float32 times the map's Jacobian `scale` in float32, widened (numpy's float32 product), at
 // the points h[i] (rows of 3) that are finite with h_z >= 0, else 0.  One pass where numpy's

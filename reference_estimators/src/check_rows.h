@@ -165,4 +165,32 @@ inline double weight_agreement(const double *w, size_t w_row, const double *e, c
     return most;
 }
 
+// Whether the double v is finite, by its exponent bits (no branch, vectorisable).
+inline __attribute__((always_inline)) bool finite_bits(double v) {
+    uint64_t u;
+    std::memcpy(&u, &v, 8);
+    return (u & 0x7ff0000000000000ull) != 0x7ff0000000000000ull;
+}
+
+// Which of rows a .. b - 1 of a renderer's samples it produced (the Mitsuba adapter's
+// SampleBatch.valid): ok[i] = the direction x (rows of 3) finite, its reported pdf p[i] > 0,
+// some channel of its weight w (rows of c at w + i * w_row; w_row 0 for one constant weight;
+// null for none) not 0 (a NaN is not 0, as numpy's !=), and delta[i] (null for none) 0: it did
+// not sample a Dirac lobe.  numpy's comparisons, the same flags, in one pass where numpy had
+// made eight (3 ms a million BSDF samples).
+inline void produced_rows(const double *x, const double *p, const double *w, size_t w_row, size_t c,
+                          const double *delta, size_t a, size_t b, bool *ok) {
+    for (size_t i = a; i < b; ++i) {
+        const double *xi = x + 3 * i;
+        bool produced = finite_bits(xi[0]) & finite_bits(xi[1]) & finite_bits(xi[2]) & (p[i] > 0);
+        if (w) {
+            bool nonzero = false;
+            for (size_t j = 0; j < c; ++j) nonzero |= w[i * w_row + j] != 0;
+            produced &= nonzero;
+        }
+        if (delta) produced &= delta[i] == 0;
+        ok[i] = produced;
+    }
+}
+
 }  // namespace re

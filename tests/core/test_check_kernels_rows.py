@@ -1,5 +1,5 @@
-"""Row kernels against numpy: RowLookup, finite_rows, rows in and out of the adapters, the weight check,
-float32 columns."""
+"""Row kernels against numpy: RowLookup, finite_rows, produced_rows, rows in and out of the adapters, the
+weight check, float32 columns."""
 from __future__ import annotations
 
 import math
@@ -43,6 +43,35 @@ def test_finite_rows_match_numpy():
         assert ok.dtype == bool and ok.shape == (shape[0],)
         np.testing.assert_array_equal(ok, np.all(np.isfinite(flat), axis=1))
     assert rest.finite_rows(np.array([[1, 2], [3, 4]], dtype=np.float32)).tolist() == [True, True]
+
+
+def test_produced_rows_match_numpy():
+    """A renderer's samples across several chunks: directions with NaN and infinite values,
+    pdfs 0, negative, NaN; weights of 1 and 3 channels with zeros, -0.0 and NaN (not 0, as
+    numpy's !=), one constant weight (a broadcast view, zero or not), Dirac-lobe flags with
+    NaN; with and without weights and flags."""
+    rng = np.random.default_rng(19)
+    x = rng.normal(size=(CHUNKS, 3))
+    x[rng.random(CHUNKS) < 0.01, rng.integers(0, 3)] = np.nan
+    x[rng.random(CHUNKS) < 0.01, 2] = np.inf
+    pdf = rng.choice([0.0, -1.0, np.nan, 0.5, 2.0], size=CHUNKS, p=[0.05, 0.02, 0.01, 0.5, 0.42])
+    delta = rng.choice([0.0, 1.0, np.nan], size=CHUNKS, p=[0.8, 0.19, 0.01])
+    base = np.all(np.isfinite(x), axis=1) & (pdf > 0)
+    for c in (1, 3):
+        w = rng.choice([0.0, -0.0, np.nan, 0.3], size=(CHUNKS, c), p=[0.4, 0.1, 0.01, 0.49])
+        nonzero = np.any(w != 0, axis=1)
+        np.testing.assert_array_equal(rest.produced_rows(x, pdf, w, delta), base & nonzero & (delta == 0))
+        np.testing.assert_array_equal(rest.produced_rows(x, pdf, w), base & nonzero)
+        for row in (np.zeros(c), np.full(c, 0.25)):          # one constant weight, as a view
+            constant = np.broadcast_to(row, (CHUNKS, c))
+            np.testing.assert_array_equal(rest.produced_rows(x, pdf, constant, delta),
+                                          base & bool(np.any(row != 0)) & (delta == 0))
+    np.testing.assert_array_equal(rest.produced_rows(x, pdf), base)
+    assert rest.produced_rows(np.empty((0, 3)), np.empty(0), np.empty((0, 3)), np.empty(0)).shape == (0,)
+    with pytest.raises(ValueError, match="'w' must be"):
+        rest.produced_rows(x, pdf, np.ones((5, 3)))
+    with pytest.raises(ValueError, match="'delta' must be"):
+        rest.produced_rows(x, pdf, None, np.zeros(3))
 
 
 def test_finite_rows_read_strided_views_in_place():

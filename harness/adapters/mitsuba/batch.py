@@ -369,19 +369,13 @@ class MitsubaSampler:
         spdf = out.pop("pdf").reshape(-1)
         weight = out.pop("weight", None)
         delta = out.pop("delta", None)
-        valid = rest.finite_rows(x) & (spdf > 0)
         if weight is not None:
             weight = _per_channel(weight)
-            if len(x) and weight.strides[0] == 0:   # one constant weight (_to_numpy's view): its row decides
-                valid &= bool(np.any(weight[0] != 0))
-            else:
-                nonzero = weight[:, 0] != 0     # np.any(weight != 0, axis=1) took 14 ms a million rows
-                for column in weight.T[1:]:
-                    nonzero |= column != 0
-                valid &= nonzero
         if delta is not None:
-            delta = delta.reshape(-1) != 0
-            valid &= ~delta
+            delta = delta.reshape(-1)
+        valid = rest.produced_rows(x, spdf, weight, delta)
+        if delta is not None:
+            delta = delta != 0
         return SampleBatch(np.asarray(u, dtype=float), x, weight, spdf, valid, delta, out)
 
     def sample(self, u: np.ndarray) -> np.ndarray:
