@@ -72,11 +72,14 @@ def _snapped_levels(marginal: AxisCdf, count: int) -> tuple[np.ndarray, np.ndarr
     jump = np.concatenate([[0.0], np.nan_to_num(jump, nan=0.0, posinf=1e300), [0.0]])
     x = edges[i]
     below, above = 0.08 * np.diff(x, prepend=x[0]), 0.08 * np.diff(x, append=x[-1])
-    for j in range(1, count):   # the ends stay at the support's ends
-        a, b = np.searchsorted(edges, [x[j] - below[j], x[j] + above[j]])
-        b = min(b + 1, jump.size)
-        if b > a and jump[a:b].max() > math.log(1.5):
-            i[j] = a + int(np.argmax(jump[a:b]))
+    j = np.arange(1, count)   # the ends stay at the support's ends
+    a = np.searchsorted(edges, x[j] - below[j])
+    b = np.minimum(np.searchsorted(edges, x[j] + above[j]) + 1, jump.size)
+    # the cuts whose window holds a step (one numpy pass; a cut's window is searched alone)
+    steps_before = np.concatenate([[0], np.cumsum(jump > math.log(1.5))])
+    moved = (b > a) & (steps_before[np.maximum(a, b)] > steps_before[a])
+    for jj, aa, bb in zip(j[moved], a[moved], b[moved]):
+        i[jj] = aa + int(np.argmax(jump[aa:bb]))
     i = np.maximum.accumulate(i)
     return edges[i], cdf[i]
 
@@ -104,18 +107,27 @@ def _cut_at_steps(edges: np.ndarray, levels: np.ndarray, marginal: AxisCdf,
     side = np.minimum(np.concatenate([[0.0], jump[:-1]]), np.concatenate([jump[1:], [0.0]]))
     step = (jump > 1e-6) & (jump > 4 * side)
     step_at, size = hi[:-1][step], jump[step]
+    # each strip's steps and levels, as ranges of those sorted arrays: strictly inside it, and
+    # within it ends included
+    first, last = np.searchsorted(step_at, edges[:-1], side="right"), np.searchsorted(step_at, edges[1:])
+    level_first = np.searchsorted(levels, edges[:-1])
+    level_last = np.searchsorted(levels, edges[1:], side="right")
+
+    def mean(a: float, b: float) -> float:
+        """The density's mean over the strip [a, b)."""
+        return marginal.mass[(lo >= a) & (hi <= b)].sum() / max(b - a, 1e-300)
+
     cuts = []
     for g in range(edges.size - 1):
         a, b = edges[g], edges[g + 1]
-        inside = (step_at > a) & (step_at < b)
-        keep = step_at[inside][np.argsort(-size[inside], kind="stable")[:most]]
-        mine = levels[(levels >= a) & (levels <= b)]
+        keep = step_at[first[g]:last[g]]
+        if keep.size > most:
+            keep = keep[np.argsort(-size[first[g]:last[g]], kind="stable")[:most]]
+        mine = levels[level_first[g]:level_last[g]]
         ends = []
-        within = (lo >= a) & (hi <= b)
-        mean = marginal.mass[within].sum() / max(b - a, 1e-300)
-        if g == 0 and density[0] > 2 * mean:              # singular at s0 = 0 (a pole)
+        if g == 0 and density[0] > 2 * mean(a, b):              # singular at s0 = 0 (a pole)
             ends.append(a + (b - a) * _POLE_GRADING)
-        if g == edges.size - 2 and density[-1] > 2 * mean:  # or at s0 = 1
+        if g == edges.size - 2 and density[-1] > 2 * mean(a, b):  # or at s0 = 1
             ends.append(b - (b - a) * _POLE_GRADING)
         cuts.append(np.unique(np.concatenate([[a, b], mine, keep, *ends])))
     width = max(c.size for c in cuts) - 1
