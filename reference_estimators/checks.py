@@ -322,11 +322,20 @@ def produced_rows(x: Any, pdf: Any, weight: Any = None, delta: Any = None) -> np
     a = np.ascontiguousarray(x, dtype=np.float64)
     p = np.ascontiguousarray(pdf, dtype=np.float64).reshape(-1)
     empty = np.empty(0)
-    constant = weight is not None and weight.ndim == 2 and len(weight) > 0 and weight.strides[0] == 0
-    w = (empty if weight is None else
-         np.ascontiguousarray(weight[:1] if constant else weight, dtype=np.float64))
-    d = empty if delta is None else np.ascontiguousarray(delta, dtype=np.float64).reshape(-1)
-    return _core.produced_rows(a, p, w, constant, d)
+    w = empty if weight is None else _real(weight, "weight")
+    constant = w.ndim == 2 and len(w) > 0 and w.strides[0] == 0
+    w = np.ascontiguousarray(w[:1] if constant else w, dtype=np.float64)
+    d = empty if delta is None else np.ascontiguousarray(_real(delta, "delta"), dtype=np.float64)
+    return _core.produced_rows(a, p, weight is not None, w, constant, delta is not None, d)
+
+
+def _real(v: Any, name: str) -> np.ndarray:
+    """v as a numpy array of real numbers (views kept); ValueError naming ``name`` for complex
+    ones, whose imaginary parts a float64 copy would drop."""
+    a = np.asarray(v)
+    if np.iscomplexobj(a):
+        raise ValueError(f"'{name}' must hold real numbers, got {a.dtype}")
+    return a
 
 
 def all_float32(v: Any) -> bool:

@@ -171,7 +171,9 @@ def file_digest(path: Path) -> str:
     A digest is kept only for a file last changed more than _RACY_NS before it was read: two
     writes within one tick of the file system's clock leave the same times (2 s on FAT, a
     jiffy of a few ms where Linux keeps coarse timestamps), so the times of a file changed just
-    now do not yet tell its next write apart (git treats its "racily clean" entries so)."""
+    now do not yet tell its next write apart (git treats its "racily clean" entries so).  The
+    file system's clock is taken to agree with this machine's within _RACY_NS (a local one
+    does; a network server's running more than 3 s behind would bring the race back)."""
     st = Path(path).stat()
     key = (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
     digest = _DIGESTS.get(key)

@@ -91,7 +91,8 @@ def _cut_at_steps(edges: np.ndarray, levels: np.ndarray, marginal: AxisCdf,
     of marginal leaves where the claimed density steps (the ``most`` largest steps per
     strip), and, where the density at s0 = 0 or 1 is more than twice its strip's mean (a pole
     of the domain map where the density is singular), geometrically toward that end, at
-    2^-1 .. 2^-24 of the strip's width.  Strips with fewer cuts are padded with empty pieces
+    2^-1 .. 2^-24 of the strip's width (``edges`` and ``levels`` sorted and finite, as
+    :func:`_snapped_levels` gives them).  Strips with fewer cuts are padded with empty pieces
     at their end.  Halving leaves along s1 never reduces the error of a box that crosses a
     step or holds a singularity in s0: a texel table's columns and the poles of a lat-long map
     had left conditional bounds of 1.5e-3 to 5.9e-3, past what the tests resolve at 1e6

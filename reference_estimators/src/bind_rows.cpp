@@ -167,15 +167,15 @@ void bind_rows(nb::module_ &m) {
         return nb::make_tuple(ma, ba, largest);
     }, "w"_a, "constant"_a, "e"_a, "p"_a, "atol"_a, "rtol"_a,
        "(mismatch (N,), bad (N,), max_rel): the weight check of samples' weights w against e / p per channel.");
-    m.def("produced_rows", [](InArray x, InArray p, InArray w, bool constant, InArray delta) {
+    m.def("produced_rows", [](InArray x, InArray p, bool weighted, InArray w, bool constant, bool flagged,
+                              InArray delta) {
         if (x.ndim() != 2 || x.shape(1) != 3 || p.ndim() != 1 || p.size() != x.shape(0))
             throw nb::value_error("'x' must be (N, 3) and 'p' (N,)");
         const size_t n = x.shape(0);
-        const bool weighted = w.size() > 0, flagged = delta.size() > 0;
         const size_t c = weighted && w.ndim() == 2 ? w.shape(1) : 0;
         if (weighted && (w.ndim() != 2 || c == 0 || w.shape(0) != (constant ? 1 : n)))
-            throw nb::value_error("'w' must be (N, c), c >= 1, (1, c) for one constant weight, or empty for none");
-        if (flagged && delta.size() != n) throw nb::value_error("'delta' must be (N,), or empty for none");
+            throw nb::value_error("'weight' must be (N, c), c >= 1, or (1, c) for one constant weight");
+        if (flagged && (delta.ndim() != 1 || delta.size() != n)) throw nb::value_error("'delta' must be (N,)");
         bool *ok;
         auto oa = new_bool_array(n, &ok);
         {
@@ -187,8 +187,8 @@ void bind_rows(nb::module_ &m) {
             });
         }
         return oa;
-    }, "x"_a, "p"_a, "w"_a, "constant"_a, "delta"_a,
-       "(N,) bool: x's row finite, p > 0, a channel of w not 0 (w empty: none), delta 0 (empty: none).");
+    }, "x"_a, "p"_a, "weighted"_a, "w"_a, "constant"_a, "flagged"_a, "delta"_a,
+       "(N,) bool: x's row finite, p > 0, a channel of w not 0 (where weighted), delta 0 (where flagged).");
 }
 
 }  // namespace re::py

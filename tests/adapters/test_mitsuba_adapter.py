@@ -310,3 +310,21 @@ def test_a_built_plugin_in_a_spec_is_keyed_by_its_exact_parameters():
     assert pixels["data"]["shape"] == [16, 16, 3] and len(pixels["data"]["sha256"]) == 64
     assert pixels["to_uv"]["matrix"][0] == [1.0, 0.0, 0.0]
     assert exact_json(box) == {"min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, float(np.float32(1e-7))]}
+    # a plugin written in Python (its class in the test's module) is keyed by its parameters too
+    with runtime.using_variant("llvm_ad_rgb") as mi:
+        class Tinted(mi.BSDF):
+            def __init__(self, props):
+                mi.BSDF.__init__(self, props)
+                self.tint = mi.Float(props.get("tint", 0.5))
+
+            def traverse(self, callback):
+                callback.put("tint", self.tint, mi.ParamFlags.Differentiable)
+
+            def to_string(self):
+                return "Tinted[]"
+
+        mi.register_bsdf("harness_test_tinted", lambda props: Tinted(props))
+        tints = [mi.load_dict({"type": "harness_test_tinted", "tint": v}) for v in (0.25, 0.2500001)]
+        own = [exact_json(t) for t in tints]
+    assert own[0] == {"plugin_object": "Tinted", "str": "Tinted[]", "parameters": {"tint": [0.25]}} != own[1]
+    assert exact_json({"min": 1, "max": 2, "extents": 3}) == {"min": 1, "max": 2, "extents": 3}   # not a box

@@ -164,9 +164,10 @@ def exact_json(value: Any) -> Any:
     if hasattr(value, "matrix") and hasattr(value, "inverse_transpose"):
         return {"matrix": np.asarray(value.matrix, dtype=float).tolist(),
                 "inverse_transpose": np.asarray(value.inverse_transpose, dtype=float).tolist()}
-    if type(value).__module__.split(".")[0] == "mitsuba" and hasattr(value, "parameters_changed"):
+    mitsuba_type = any(c.__module__.split(".")[0] == "mitsuba" for c in type(value).__mro__)
+    if mitsuba_type and hasattr(value, "parameters_changed"):   # a plugin, a Python-defined one too
         return _plugin_json(value)
-    if hasattr(value, "min") and hasattr(value, "max") and hasattr(value, "extents"):   # a bounding box
+    if mitsuba_type and hasattr(value, "extents"):              # a bounding box
         return {"min": exact_json(value.min), "max": exact_json(value.max)}
     if type(value).__module__.split(".")[0] in ("drjit", "mitsuba"):
         try:
@@ -416,10 +417,9 @@ class MitsubaSampler:
     def fingerprint(self) -> dict[str, Any]:
         """What the sampler's results depend on: Mitsuba's version, variant, kind and spec
         (JSON, its numbers exact: :func:`exact_json`)."""
-        import mitsuba as mi
-
-        return {"adapter": "mitsuba", "mitsuba": mi.__version__, "kind": self.kind, "name": self.name,
-                "variant": self.variant, **exact_json(self._spec())}
+        with using_variant(self.variant) as mi:   # a built plugin in the spec is traversed in its variant
+            return {"adapter": "mitsuba", "mitsuba": mi.__version__, "kind": self.kind, "name": self.name,
+                    "variant": self.variant, **exact_json(self._spec())}
 
     def _spec(self) -> dict[str, Any]:
         return {}

@@ -85,19 +85,20 @@ def _parsed(scene: Path, variant: str) -> tuple[list[Path], set[str]] | None:
 
 @contextlib.contextmanager
 def _resolver_kept(mi: Any) -> Iterator[None]:
-    """Mitsuba's global file resolver as it was before, after: ``mi.parser.parse_file`` leaves
-    a scene's ``<path>`` folders in it (3.9.1; ``mi.load_file`` does not), where every scene
-    loaded after would search them (a fingerprint changing what a later render reads).  A
-    release without a global resolver has nothing to keep."""
-    resolver = mi.file_resolver() if hasattr(mi, "file_resolver") else None
-    kept = None if resolver is None else [str(resolver[i]) for i in range(len(resolver))]
+    """Inside, Mitsuba's global file resolver is a copy of itself, and the resolver itself is
+    put back after, untouched: ``mi.parser.parse_file`` leaves a scene's ``<path>`` folders
+    in the resolver (3.9.1; ``mi.load_file`` does not), where every scene loaded after would
+    search them (a fingerprint changing what a later render reads).  A release without a
+    global resolver that can be set has nothing to keep."""
+    if not (hasattr(mi, "file_resolver") and hasattr(mi, "set_file_resolver")):
+        yield
+        return
+    resolver = mi.file_resolver()
+    mi.set_file_resolver(mi.FileResolver(resolver))
     try:
         yield
     finally:
-        if kept is not None and [str(resolver[i]) for i in range(len(resolver))] != kept:
-            resolver.clear()
-            for folder in kept:
-                resolver.append(folder)
+        mi.set_file_resolver(resolver)
 
 
 def _included(scene: Path, searched: list[Path]) -> dict[Path, str]:
