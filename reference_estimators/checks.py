@@ -319,11 +319,11 @@ def produced_rows(x: Any, pdf: Any, weight: Any = None, delta: Any = None) -> np
     comes back, is read as that row), and ``delta`` (N,) 0 (it did not sample a Dirac lobe);
     ``weight`` and ``delta`` None where the sampler has none.  numpy's comparisons, the same
     flags, in one pass in C++ on all threads."""
-    a = np.ascontiguousarray(x, dtype=np.float64)
-    p = np.ascontiguousarray(pdf, dtype=np.float64).reshape(-1)
+    a = np.ascontiguousarray(_real(x, "x"), dtype=np.float64)
+    p = np.ascontiguousarray(_real(pdf, "pdf"), dtype=np.float64).reshape(-1)
     empty = np.empty(0)
     w = empty if weight is None else _real(weight, "weight")
-    constant = w.ndim == 2 and len(w) > 0 and w.strides[0] == 0
+    constant = w.ndim == 2 and len(w) == len(a) > 0 and w.strides[0] == 0
     w = np.ascontiguousarray(w[:1] if constant else w, dtype=np.float64)
     d = empty if delta is None else np.ascontiguousarray(_real(delta, "delta"), dtype=np.float64)
     return _core.produced_rows(a, p, weight is not None, w, constant, delta is not None, d)

@@ -135,7 +135,7 @@ def test_a_file_changed_within_its_clocks_tick_is_hashed_again(tmp_path, monkeyp
     monkeypatch.setattr(Path, "stat", lambda self, **kw: Coarse(real_stat(self, **kw)))
     f = tmp_path / "mesh.obj"
     digests = []
-    tick["ns"] = time.time_ns()
+    tick["ns"] = time.time_ns() + 60 * 10**9     # (a tick ahead of this clock: a stall keeps it recent)
     for text in (b"v 0 0 0\n", b"v 0 0 1\n"):   # two writes in one tick, just now
         f.write_bytes(text)
         digests.append(base.file_digest(f))

@@ -69,11 +69,14 @@ def test_produced_rows_match_numpy():
     np.testing.assert_array_equal(rest.produced_rows(x, pdf), base)
     assert rest.produced_rows(np.empty((0, 3)), np.empty(0), np.empty((0, 3)), np.empty(0)).shape == (0,)
     assert rest.produced_rows(x[:2], pdf[:2], [[0.0], [1.0]]).tolist() == [False, base[1]]   # a list
-    for bad in (np.ones((5, 3)), np.zeros((0, 3)), np.zeros((CHUNKS, 0)), np.ones(CHUNKS)):
+    for bad in (np.ones((5, 3)), np.zeros((0, 3)), np.zeros((CHUNKS, 0)), np.ones(CHUNKS),
+                np.broadcast_to(np.ones(3), (CHUNKS + 2, 3)), np.ones(3)[None, :]):
         with pytest.raises(ValueError, match="'weight' must be"):      # never read as no weight
             rest.produced_rows(x, pdf, bad)
     with pytest.raises(ValueError, match="'weight' must hold real numbers"):
         rest.produced_rows(x, pdf, np.full((CHUNKS, 1), 1j))
+    with pytest.raises(ValueError, match="'pdf' must hold real numbers"):
+        rest.produced_rows(x, pdf + 0j)
     for bad in (np.zeros(3), np.zeros(0), np.zeros((CHUNKS, 1))):
         with pytest.raises(ValueError, match="'delta' must be"):
             rest.produced_rows(x, pdf, None, bad)

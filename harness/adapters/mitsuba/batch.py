@@ -183,15 +183,16 @@ _LISTED_VALUES = 64
 
 
 def _plugin_json(plugin: Any) -> dict[str, Any]:
-    """A built Mitsuba plugin object as JSON that tells apart any two that differ: its class,
-    its ``str`` (the settings that are not parameters: a microfacet distribution, a filter
-    type) and every parameter ``mi.traverse`` gives, its nested plugins' included, with exact
-    numbers (``str`` alone rounds them to 6 digits, so two BSDFs 1e-7 apart in roughness had
-    keyed the same results): transforms as :func:`exact_json`'s, arrays of up to
-    _LISTED_VALUES values as their numbers, larger ones as the SHA-256 of their bytes with
-    their shape and dtype.  A setting a built plugin shows neither in its ``str`` nor as a
-    parameter (a bitmap texture's filter and wrap modes, in Mitsuba 3.9) is not seen: a spec
-    that gives plugin dicts, as a suite's tables do, is keyed by every setting."""
+    """A built Mitsuba plugin object as JSON that tells apart any two that differ: its class
+    (module and qualified name), its ``str`` (the settings that are not parameters: a
+    microfacet distribution, a filter type) and every parameter ``mi.traverse`` gives, its
+    nested plugins' included, with exact numbers (``str`` alone rounds them to 6 digits, so
+    two BSDFs 1e-7 apart in roughness had keyed the same results): transforms as
+    :func:`exact_json`'s, arrays of up to _LISTED_VALUES values as their numbers, larger ones
+    as the SHA-256 of their bytes with their shape and dtype.  A setting a built plugin shows
+    neither in its ``str`` nor as a parameter (a bitmap texture's filter and wrap modes, in
+    Mitsuba 3.9) is not seen: a spec that gives plugin dicts, as a suite's tables do, is
+    keyed by every setting."""
     import mitsuba as mi
 
     params = mi.traverse(plugin)
@@ -205,7 +206,8 @@ def _plugin_json(plugin: Any) -> dict[str, Any]:
         values[key] = (a.tolist() if a.size <= _LISTED_VALUES else
                        {"sha256": hashlib.sha256(a.tobytes()).hexdigest(), "shape": list(a.shape),
                         "dtype": str(a.dtype)})
-    return {"plugin_object": type(plugin).__name__, "str": str(plugin), "parameters": values}
+    kind = f"{type(plugin).__module__}.{type(plugin).__qualname__}"
+    return {"plugin_object": kind, "str": str(plugin), "parameters": values}
 
 
 def _per_channel(v: np.ndarray) -> np.ndarray:
@@ -417,9 +419,10 @@ class MitsubaSampler:
     def fingerprint(self) -> dict[str, Any]:
         """What the sampler's results depend on: Mitsuba's version, variant, kind and spec
         (JSON, its numbers exact: :func:`exact_json`)."""
+        spec = self._spec()   # (an envmap's reads and hashes its file: outside the lock)
         with using_variant(self.variant) as mi:   # a built plugin in the spec is traversed in its variant
             return {"adapter": "mitsuba", "mitsuba": mi.__version__, "kind": self.kind, "name": self.name,
-                    "variant": self.variant, **exact_json(self._spec())}
+                    "variant": self.variant, **exact_json(spec)}
 
     def _spec(self) -> dict[str, Any]:
         return {}
