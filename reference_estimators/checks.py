@@ -322,11 +322,17 @@ def produced_rows(x: Any, pdf: Any, weight: Any = None, delta: Any = None) -> np
     a = np.ascontiguousarray(_real(x, "x"), dtype=np.float64)
     p = np.ascontiguousarray(_real(pdf, "pdf"), dtype=np.float64).reshape(-1)
     empty = np.empty(0)
-    w = empty if weight is None else _real(weight, "weight")
-    constant = w.ndim == 2 and len(w) == len(a) > 0 and w.strides[0] == 0
-    w = np.ascontiguousarray(w[:1] if constant else w, dtype=np.float64)
+    w, constant = _one_row_if_constant(empty if weight is None else _real(weight, "weight"), len(a))
     d = empty if delta is None else np.ascontiguousarray(_real(delta, "delta"), dtype=np.float64)
     return _core.produced_rows(a, p, weight is not None, w, constant, delta is not None, d)
+
+
+def _one_row_if_constant(w: np.ndarray, n: int) -> tuple[np.ndarray, bool]:
+    """(w as float64 in C order, whether it is one constant row): a view (n, c) whose rows are
+    all its first (row stride 0: a constant weight as the Mitsuba adapter returns it) becomes
+    that row alone, (1, c), so that the core reads one row, not n copies of it."""
+    constant = w.ndim == 2 and len(w) == n > 0 and w.strides[0] == 0
+    return np.ascontiguousarray(w[:1] if constant else w, dtype=np.float64), constant
 
 
 def _real(v: Any, name: str) -> np.ndarray:
@@ -416,8 +422,7 @@ def weight_agreement(w: Any, e: Any, p: Any, atol: float,
     wa, ea = np.asarray(w, dtype=np.float64), np.ascontiguousarray(e, dtype=np.float64)
     if wa.shape != ea.shape:
         raise ValueError(f"'w' must have the shape of 'e', {ea.shape}; got {wa.shape}")
-    constant = wa.ndim == 2 and wa.shape[0] > 0 and wa.strides[0] == 0
-    wa = np.ascontiguousarray(wa[:1] if constant else wa)
+    wa, constant = _one_row_if_constant(wa, ea.shape[0])
     pa = np.ascontiguousarray(p, dtype=np.float64).reshape(-1)
     mismatch, bad, most = _core.weight_agreement(wa, constant, ea, pa, float(atol), float(rtol))
     return mismatch, bad, float(most)

@@ -213,8 +213,8 @@ inline void cap_density(const double *h, const double *p, size_t a, size_t b, do
 // corner + s0 e0 + s1 e1, s in [0, 1]^2, seen from ref, its unit normal n, the dual basis f
 // (rows f0, f1: f_i . e_j = delta_ij) and the plane's signed distance from ref, height =
 // <n, corner - ref>.  Each row's value is its numpy definition's
-// (tests/core/test_check_kernels_area_light_maps.py) in the same order of operations, left to right: one pass where numpy's temporaries had cost
-// 100-150 ns a direction.
+// (tests/core/test_check_kernels_area_light_maps.py) in the same order of operations, left to
+// right: one pass where numpy's temporaries had cost 100-150 ns a direction.
 struct RectangleFrame {
     const double *to_corner;   // corner - ref
     const double *e0, *e1, *normal;

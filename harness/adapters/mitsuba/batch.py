@@ -372,14 +372,11 @@ class MitsubaSampler:
         spdf = out.pop("pdf").reshape(-1)
         weight = out.pop("weight", None)
         delta = out.pop("delta", None)
-        if weight is not None:
-            weight = _per_channel(weight)
-        if delta is not None:
-            delta = delta.reshape(-1)
+        weight = None if weight is None else _per_channel(weight)
+        delta = None if delta is None else delta.reshape(-1)
         valid = rest.produced_rows(x, spdf, weight, delta)
-        if delta is not None:
-            delta = delta != 0
-        return SampleBatch(np.asarray(u, dtype=float), x, weight, spdf, valid, delta, out)
+        return SampleBatch(np.asarray(u, dtype=float), x, weight, spdf, valid,
+                           None if delta is None else delta != 0, out)
 
     def sample(self, u: np.ndarray) -> np.ndarray:
         """Directions (N, 3) for uniforms ``u``; NaN rows for samples not produced."""
