@@ -330,3 +330,37 @@ def test_a_built_plugin_in_a_spec_is_keyed_by_its_exact_parameters():
                                             ".<locals>.Tinted")   # its module and qualified name
     assert own[0]["parameters"] == {"tint": [0.25]} and own[0] != own[1]
     assert exact_json({"min": 1, "max": 2, "extents": 3}) == {"min": 1, "max": 2, "extents": 3}   # not a box
+
+
+def test_mitsuba_values_without_a_plugin_are_keyed_exactly_or_refused():
+    # a sphere, a ray, a frame, Properties and a complex value had been keyed by their str (6
+    # digits) or their real part alone
+    with runtime.using_variant("llvm_ad_rgb") as mi:
+        import drjit as dr
+
+        spheres = [exact_json(mi.ScalarBoundingSphere3f([0.0, 1.0, 2.0], r)) for r in (0.5, 0.5000001)]
+        ray = exact_json(mi.ScalarRay3f([0.0, 0.0, 0.0], [0.0, 0.6, 0.8]))
+        frame = exact_json(mi.Frame3f([0.0, 0.0, 1.0]))
+        props = mi.Properties("diffuse")
+        props["offset"] = mi.ScalarTransform4f().translate([1.0, 2.0, 3.0])
+        props["alpha"] = 0.1000001
+        complex_ = [exact_json(dr.scalar.Complex2f(1.5, v)) for v in (2.0, 2.5)]
+        quaternion = exact_json(dr.scalar.Quaternion4f(1.0, 2.0, 3.0, 4.0))
+        props_json = exact_json(props)
+    assert spheres[0] == {"center": [0.0, 1.0, 2.0], "radius": 0.5} and spheres[0] != spheres[1]
+    assert ray["o"] == [0.0, 0.0, 0.0] and ray["d"] == [0.0, float(np.float32(0.6)), float(np.float32(0.8))]
+    assert set(ray) == {"o", "d", "maxt", "time", "wavelengths"}
+    assert frame == {"s": [[1.0], [0.0], [0.0]], "t": [[0.0], [1.0], [0.0]], "n": [[0.0], [0.0], [1.0]]}
+    assert props_json["plugin_name"] == "diffuse" and props_json["entries"]["alpha"] == 0.1000001
+    assert props_json["entries"]["offset"]["matrix"][0] == [1.0, 0.0, 0.0, 1.0]
+    assert complex_ == [{"real": 1.5, "imag": 2.0}, {"real": 1.5, "imag": 2.5}]
+    assert quaternion == [1.0, 2.0, 3.0, 4.0]
+    json.dumps([spheres, ray, frame, props_json, complex_], allow_nan=False)   # plain JSON throughout
+
+
+def test_a_mitsuba_value_with_neither_numbers_nor_fields_is_refused():
+    class Opaque:          # a value of the library's that is neither an array nor a structure
+        __module__ = "mitsuba.fake"
+
+    with pytest.raises(ValueError, match=r"cannot key a mitsuba\.fake\..*Opaque exactly"):
+        exact_json({"bsdf": {"type": "diffuse", "reflectance": Opaque()}})

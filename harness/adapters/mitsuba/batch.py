@@ -146,9 +146,12 @@ def exact_json(value: Any) -> Any:
     keyed the same results; a translation's inverse is exact, a matrix's computed, and the two
     may differ in their last bits), a Mitsuba bitmap as its pixels' SHA-256 and its format
     (pixel format, sRGB gamma, premultiplied alpha), a Mitsuba plugin object (a BSDF, texture
-    or emitter a spec holds already built) as :func:`_plugin_json`'s, a bounding box as its
-    corners, another drjit or Mitsuba array (a colour, a vector) as its numbers; anything else
-    as it is."""
+    or emitter a spec holds already built) as :func:`_plugin_json`'s, a drjit complex value as
+    its real and imaginary parts, another drjit or Mitsuba array (a colour, a vector, a
+    quaternion) as its numbers, Mitsuba ``Properties`` as their plugin name, id and entries,
+    and any other Mitsuba value (a bounding box or sphere, a ray, a frame) as its data fields,
+    each the same way; anything else as it is.  A drjit or Mitsuba value with neither numbers
+    nor fields raises ValueError: its ``str`` (rounded) would key results it does not fix."""
     if isinstance(value, dict):
         return {k: exact_json(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
@@ -164,17 +167,35 @@ def exact_json(value: Any) -> Any:
     if hasattr(value, "matrix") and hasattr(value, "inverse_transpose"):
         return {"matrix": np.asarray(value.matrix, dtype=float).tolist(),
                 "inverse_transpose": np.asarray(value.inverse_transpose, dtype=float).tolist()}
-    mitsuba_type = any(c.__module__.split(".")[0] == "mitsuba" for c in type(value).__mro__)
-    if mitsuba_type and hasattr(value, "parameters_changed"):   # a plugin, a Python-defined one too
+    library = {c.__module__.split(".")[0] for c in type(value).__mro__} & {"drjit", "mitsuba"}
+    if not library:
+        return value
+    if "mitsuba" in library and hasattr(value, "parameters_changed"):   # a plugin, a Python-defined one too
         return _plugin_json(value)
-    if mitsuba_type and hasattr(value, "extents"):              # a bounding box
-        return {"min": exact_json(value.min), "max": exact_json(value.max)}
-    if type(value).__module__.split(".")[0] in ("drjit", "mitsuba"):
-        try:
-            return np.asarray(value, dtype=float).tolist()
-        except (TypeError, ValueError, RuntimeError):   # a plugin object, not an array
-            return value
-    return value
+    return _value_json(value)
+
+
+def _value_json(value: Any) -> Any:
+    """exact_json of a drjit or Mitsuba value that is neither a plugin, a bitmap nor a transform."""
+    import drjit as dr
+
+    if dr.is_complex_v(value):   # numpy's float cast keeps only the real part
+        return {"real": exact_json(dr.real(value)), "imag": exact_json(dr.imag(value))}
+    try:
+        return np.asarray(value, dtype=float).tolist()
+    except (TypeError, ValueError, RuntimeError):   # not an array: a structure
+        pass
+    if type(value).__name__ == "Properties":
+        names = value.keys() if hasattr(value, "keys") else value.property_names()
+        return {"plugin_name": value.plugin_name(), "id": value.id(),
+                "entries": {str(k): exact_json(value[k]) for k in names}}
+    fields = getattr(type(value), "DRJIT_STRUCT", None)
+    names = list(fields) if isinstance(fields, dict) else [
+        a for a in dir(value) if not a.startswith("_") and not callable(getattr(value, a))]
+    if not names:
+        raise ValueError(f"cannot key a {type(value).__module__}.{type(value).__qualname__} exactly "
+                         "(neither numbers nor data fields): give its settings as numbers or a plugin dict")
+    return {a: exact_json(getattr(value, a)) for a in names}
 
 
 #: A plugin parameter with more values than this (a texture's pixels, a mesh's vertices) is
