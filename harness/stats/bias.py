@@ -19,7 +19,7 @@ import reference_estimators as rest
 
 from harness.stats import distributions
 from harness.stats.merge import merge_moments
-from harness.stats.results import ConfidenceInterval, Failure, failures_from_counts, t_interval
+from harness.stats.results import ConfidenceInterval, Failure, failures_from_counts, summed_counts, t_interval
 from harness.stats.tails import Side, TailEnd, TailSample
 from harness.stats.validate import count, integer_in, level
 
@@ -383,10 +383,7 @@ def check_technique(integrand: str | rest.Integrand, technique: str | rest.Techn
     size = n // batches
     ests = [rest.integrate(f, t, size, seed=seed, case_id=case_id, replica=k, threads=threads)
             for k in range(batches)]
-    counts: dict[str, int] = {}
-    for e in ests:
-        for key, v in e.issues.items():
-            counts[key] = counts.get(key, 0) + v
+    counts = summed_counts(e.issues for e in ests)
     if counts:
         first = next(e for e in ests if e.issues)
         return UnbiasedResult.invalid(counts, first.examples, reference=f.reference, n=n, alpha=alpha,

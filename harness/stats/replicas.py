@@ -18,7 +18,7 @@ import reference_estimators as rest
 from harness.stats import distributions
 from harness.stats.estimator import Contributions, Estimator, estimator
 from harness.stats.merge import chan_merge
-from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level
+from harness.stats.results import ConfidenceInterval, Failure, check_confidence_level, summed_counts
 from harness.stats.timing import clock_time, median_time, reference_clock
 from harness.stats.validate import count
 
@@ -78,7 +78,7 @@ class Replicates:
                        clock: Sequence[float] | None = None) -> Replicates:
         """Replicates from independent estimates of one case (any :class:`Estimator`) at budget n;
         ``clock``: the reference clock's time beside each of them (s), if it was timed."""
-        bad = {k: v for e in ests for k, v in e.issues.items()}
+        bad = summed_counts(e.issues for e in ests)
         if bad:
             first = next(e for e in ests if e.issues)
             raise ValueError(f"{est.integrand}/{est.technique}: contributions with faults {bad}; "

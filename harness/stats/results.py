@@ -26,7 +26,7 @@ from typing import Any, NamedTuple
 from harness.stats.validate import level
 
 __all__ = ["ConfidenceInterval", "Failure", "failures_from_dicts", "failures_from_counts", "failure_counts",
-           "check_confidence_level"]
+           "check_confidence_level", "summed_counts"]
 
 
 class ConfidenceInterval(NamedTuple):
@@ -80,6 +80,16 @@ def failures_from_counts(counts: Mapping[str, int], examples: Iterable[Mapping[s
     return [Failure(check, int(c), details.get(check, ""),
                     tuple(dict(e) for e in examples if e.get("issue") == check))
             for check, c in counts.items() if c]
+
+
+def summed_counts(parts: Iterable[Mapping[str, int]]) -> dict[str, int]:
+    """Counts per key summed over ``parts`` (the fault counts of several batches' estimates,
+    say), keys in the order first seen."""
+    total: dict[str, int] = {}
+    for part in parts:
+        for key, c in part.items():
+            total[key] = total.get(key, 0) + int(c)
+    return total
 
 
 def failure_counts(failures: Iterable[Failure]) -> dict[str, int]:

@@ -28,6 +28,7 @@ import reference_estimators as rest
 
 from harness import stats
 from harness.stats import distributions
+from harness.stats.results import summed_counts
 from harness.suite.estimator_tables import failure, format_table, results_table, store_rows
 from harness.suite.execute import JobResult
 from harness.suite.kind import Outcome
@@ -310,7 +311,7 @@ def _measure(suite: Suite, case: Case, payloads: dict[Unit, dict], look: int = 0
     if wanted & {"bias", "variance"}:
         b, stream = bias_budget(suite, case, look), bias_stream(look)
         batches = [estimate(stream, b, k) for k in range(suite.batches)]
-        faults = {k: v for e in batches for k, v in e.issues.items()}
+        faults = summed_counts(e.issues for e in batches)
         if "bias" in wanted:
             if tails is None:
                 raise RuntimeError(f"{case.name}: the bias test's tail sample is missing at look {look} "

@@ -41,6 +41,10 @@ def late(u):                     # passes the 4-row probe when the suite loads, 
     return u[:, 0]
 
 
+def all_nan(u):
+    return np.full(len(u), np.nan)
+
+
 NOT_CALLABLE = 3
 '''
 
@@ -153,6 +157,16 @@ def test_a_user_estimator_failing_in_the_run_is_one_line_and_keeps_what_was_stor
     assert ("harness: myest:late raised RuntimeError: texture cache exhausted (called on shape (4096, 1), "
             "float64; expected to return contributions of shape (4096,))") in r.stderr
     assert "units stored in r.sqlite; fix it and rerun to resume" in r.stderr
+
+
+def test_faults_are_counted_over_every_batch_of_the_bias_test(repo):
+    # each batch's count had replaced the one before: 512 NaN contributions reported of 4096
+    nan_case = '[suite]\nsamples = 4096\nbatches = 8\nmeasurements = ["bias"]\n\n' \
+               '[[case]]\nestimator = "myest:all_nan"\ndim = 1\nreference = 0.5\n'
+    (repo / "nan.toml").write_text(nan_case)
+    o = run_suite(load_suite(repo / "nan.toml"), repo / "r.sqlite", threads=2)["estimator"]
+    row = o.frame.iloc[0]
+    assert row["verdict"] == "invalid" and "faults: {'nan': 4096}" in row["notes"], row["notes"]
 
 
 def _error(repo, case: str) -> str:
