@@ -87,6 +87,8 @@ TWOSIDED_THETAS = (0.0, 45.0, 80.0, 135.0)
 #: phase functions: incident directions across the whole sphere
 PHASE_THETAS = (0.0, 60.0, 135.0)
 ALPHAS = (0.01, 0.1, 0.5)
+#: the narrow GGX lobe checked at normal incidence alone (visible normals)
+POLE_ALPHA = 0.003
 #: reference points the area lights are sampled from: on the axis, and off it and closer
 #: (the light seen obliquely, a sphere's silhouette near the edge of the cone)
 REFS = ((0.0, 0.0, 0.0), (0.6, -0.4, 0.3))
@@ -150,12 +152,13 @@ def catalogue(*, thetas: Sequence[float] = THETAS, alphas: Sequence[float] = ALP
               variant: str = "llvm_ad_rgb") -> list[CatalogueEntry]:
     """The real plugins checked, each at every incident angle in ``thetas`` (degrees):
     diffuse; roughconductor, GGX and Beckmann, at every alpha, visible-normal sampling on
-    and off; roughdielectric (GGX, alpha 0.1 and 0.5, int_ior 1.5); roughplastic (GGX, alpha
-    0.1); the microfacet distributions themselves (GGX and Beckmann at every alpha; visible
-    normals at every angle, all normals once: they do not depend on wi); the composite and
-    layered BSDFs of :func:`layered_bsdfs` at their own angles; the phase functions of
-    :func:`phase_functions` at :data:`PHASE_THETAS`; envmaps from ``sky_bitmap()`` with a
-    soft-rimmed and a hard-edged sun; the area lights of :func:`emitter_entries`."""
+    and off, and GGX at :data:`POLE_ALPHA` at normal incidence; roughdielectric (GGX, alpha
+    0.1 and 0.5, int_ior 1.5); roughplastic (GGX, alpha 0.1); the microfacet distributions
+    themselves (GGX and Beckmann at every alpha; visible normals at every angle, all normals
+    once: they do not depend on wi); the composite and layered BSDFs of :func:`layered_bsdfs`
+    at their own angles; the phase functions of :func:`phase_functions` at
+    :data:`PHASE_THETAS`; envmaps from ``sky_bitmap()`` with a soft-rimmed and a hard-edged
+    sun; the area lights of :func:`emitter_entries`."""
     out: list[CatalogueEntry] = []
 
     def bsdf(group: str, plugin: dict[str, Any], angles: Sequence[float] = thetas) -> None:
@@ -169,6 +172,10 @@ def catalogue(*, thetas: Sequence[float] = THETAS, alphas: Sequence[float] = ALP
             for vis in (True, False):
                 bsdf("roughconductor",
                      {"type": "roughconductor", "distribution": dist, "alpha": a, "sample_visible": vis})
+    # a lobe about the pole narrower than a float32 direction's z resolves (1 - cos theta ~ 2e-5
+    # across it, in steps of 6e-8): the domain's map takes cos theta across the pole
+    bsdf("roughconductor", {"type": "roughconductor", "distribution": "ggx", "alpha": POLE_ALPHA,
+                            "sample_visible": True}, (0.0,))
     for a in (0.1, 0.5):
         bsdf("roughdielectric",
              {"type": "roughdielectric", "distribution": "ggx", "alpha": a, "int_ior": 1.5})
