@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 __all__ = ["UserCodeError", "load_attr", "call", "array_result", "describe", "callable_name",
-           "source_fingerprint"]
+           "source_fingerprint", "USER_ERRORS", "raised"]
 
 
 class UserCodeError(ValueError):
@@ -56,6 +56,8 @@ def _module(where: str, base: Path, target: str) -> Any:
             name = f"harness_user_{path.stem}_{hashlib.sha256(str(path).encode()).hexdigest()[:12]}"
             if name not in sys.modules:
                 spec = importlib.util.spec_from_file_location(name, path)
+                if spec is None or spec.loader is None:   # no loader for the suffix: not a .py file
+                    raise UserCodeError(f"{target!r}: {path} is not a Python source file (.py)")
                 module = importlib.util.module_from_spec(spec)
                 sys.modules[name] = module
                 try:
@@ -72,8 +74,8 @@ def _module(where: str, base: Path, target: str) -> Any:
         raise
     except ImportError as e:
         raise UserCodeError(f"{target!r}: cannot import {where!r} (from {base}): {e}") from None
-    except Exception as e:  # the user's module raised while importing: say which and what
-        raise UserCodeError(f"{target!r}: importing {where!r} raised {type(e).__name__}: {e}") from None
+    except USER_ERRORS as e:  # the user's module raised (or exited) while importing: say which and what
+        raise UserCodeError(f"{target!r}: importing {where!r} {raised(e)}") from None
 
 
 def callable_name(fn: Any) -> str:
@@ -97,24 +99,43 @@ def describe(a: Any) -> str:
     return type(a).__name__
 
 
+#: What a team's code may raise that the harness reports as that code's failure: any Exception,
+#: and SystemExit (a command-line tool's main() called as a function calls sys.exit; escaping, it
+#: had ended a run without a word, with exit status 0 after sys.exit(0)).  KeyboardInterrupt
+#: still stops the run.
+USER_ERRORS: tuple[type[BaseException], ...] = (Exception, SystemExit)
+
+
+def raised(e: BaseException) -> str:
+    """What a team's code did, as messages say it: "raised KeyError: 'x'", or "called
+    sys.exit(0)"."""
+    if isinstance(e, SystemExit):
+        return f"called sys.exit({e.code!r})"
+    return f"raised {type(e).__name__}: {e}"
+
+
 def call(fn: Callable[..., Any], name: str, *args: Any, what: str = "") -> Any:
-    """fn(*args); an exception inside it becomes a UserCodeError naming ``name``, the
-    arguments' shapes and dtypes and ``what`` was expected (the original is chained)."""
+    """fn(*args); an exception inside it (or a sys.exit: :data:`USER_ERRORS`) becomes a
+    UserCodeError naming ``name``, the arguments' shapes and dtypes and ``what`` was expected
+    (the original is chained)."""
     try:
         return fn(*args)
-    except Exception as e:
+    except USER_ERRORS as e:
         given = ", ".join(describe(a) for a in args)
-        raise UserCodeError(f"{name} raised {type(e).__name__}: {e} (called on {given}"
+        raise UserCodeError(f"{name} {raised(e)} (called on {given}"
                             + (f"; expected to return {what}" if what else "") + ")") from e
 
 
 def array_result(value: Any, shape: tuple[int, ...] | None, name: str, given: str) -> np.ndarray:
     """A user's return value as float64 of exactly ``shape`` (any shape where None), or a
     UserCodeError saying what came back, for which input, and what was expected."""
+    want = "a float array" + (f" of shape {shape}" if shape is not None else "")
     try:
-        a = np.asarray(value, dtype=np.float64)
+        raw = np.asarray(value)
+        if np.iscomplexobj(raw):   # numpy's cast would keep the real part, with only a warning
+            raise TypeError("complex values")
+        a = raw.astype(np.float64, copy=False)
     except (TypeError, ValueError) as e:
-        want = "a float array" + (f" of shape {shape}" if shape is not None else "")
         raise UserCodeError(f"{name} returned {type(value).__name__} for {given}; "
                             f"expected {want} ({e})") from None
     if shape is not None and a.shape != shape:

@@ -33,9 +33,11 @@ from typing import Any, Callable, Protocol
 
 import numpy as np
 
+from harness.usercode import USER_ERRORS, raised
+
 __all__ = ["Render", "Renderer", "RenderError", "ImageFaults", "image_faults", "read_image", "renderer",
-           "adapter_names", "check_spec", "file_digest", "ExactImage", "ADAPTERS", "ENTRY_POINTS",
-           "ENVIRONMENT"]
+           "checked_render", "adapter_names", "check_spec", "file_digest", "ExactImage", "ADAPTERS",
+           "ENTRY_POINTS", "ENVIRONMENT"]
 
 # adapter name -> module that defines `make_renderer(spec: dict[, base=]) -> Renderer`
 ADAPTERS = {"mitsuba": "harness.adapters.mitsuba.render", "pyrender": "harness.adapters.pyrender.render",
@@ -138,9 +140,9 @@ def renderer(adapter: str, spec: dict[str, Any], *, base: Path | None = None) ->
                              f"(third-party adapters register under the entry-point group {ENTRY_POINTS!r})")
         try:
             make = found[0].load()
-        except Exception as e:
-            raise ValueError(f"adapter {adapter!r}: loading its entry point {found[0].value!r} raised "
-                             f"{type(e).__name__}: {e}") from None
+        except USER_ERRORS as e:
+            raise ValueError(f"adapter {adapter!r}: loading its entry point {found[0].value!r} "
+                             f"{raised(e)}") from None
         if not callable(make):
             raise ValueError(f"adapter {adapter!r}: entry point {found[0].value!r} is not a factory "
                              "make_renderer(spec, *, base=None)")
@@ -148,7 +150,43 @@ def renderer(adapter: str, spec: dict[str, Any], *, base: Path | None = None) ->
         takes_base = "base" in inspect.signature(make).parameters
     except (TypeError, ValueError):
         takes_base = False
-    return make(dict(spec), base=base) if takes_base else make(dict(spec))
+    if adapter in ADAPTERS:
+        return make(dict(spec), base=base) if takes_base else make(dict(spec))
+    try:   # a registered factory's own failure (a KeyError on a missing key, say) names it
+        return make(dict(spec), base=base) if takes_base else make(dict(spec))
+    except ValueError:
+        raise
+    except USER_ERRORS as e:
+        raise ValueError(f"adapter {adapter!r}: its factory {found[0].value!r} {raised(e)}") from e
+
+
+def checked_render(r: Renderer, adapter: str, spp: int, seed: int) -> Render:
+    """``r.render(spp, seed)``, its image checked before anything stores it: a Render (or an
+    object with its fields) whose image is a non-empty array (height, width, channels), of the
+    exact image's shape where ``r`` has one (a render of another size, stored, had failed
+    every later run of the suite).  A registered adapter's exception becomes a RenderError
+    naming the call; the harness's own adapters raise RenderError for their renderers'
+    failures, and anything else from them is a defect of the harness, left as it is."""
+    what = f"adapter {adapter!r}: render(spp={spp}, seed={seed})"
+    try:
+        out = r.render(spp, seed)
+    except RenderError:
+        raise
+    except USER_ERRORS as e:
+        if adapter in ADAPTERS:
+            raise
+        raise RenderError(f"{what} {raised(e)}") from e
+    image = getattr(out, "image", None)
+    if not isinstance(image, np.ndarray) or image.ndim != 3 or not image.size or not (
+            hasattr(out, "spp") and hasattr(out, "seconds")):
+        got = f"an image of shape {image.shape}" if isinstance(image, np.ndarray) else type(out).__name__
+        raise RenderError(f"{what} returned {got}; expected a Render (image (height, width, channels), "
+                          "spp, seconds)")
+    exact = r.exact()
+    if exact is not None and image.shape != exact.shape:
+        raise RenderError(f"{what} returned an image of shape {image.shape}; the exact image's is "
+                          f"{exact.shape}")
+    return out
 
 
 def check_spec(spec: dict[str, Any], keys: dict[str, Any], adapter: str) -> None:

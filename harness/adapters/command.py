@@ -228,9 +228,11 @@ def _tail(text: str | bytes | None, name: str = "stderr", lines: int = 8) -> str
 def _run_group(line: str, cwd: Path | None, timeout: float) -> subprocess.CompletedProcess:
     """Runs a shell command line in its own process group, capturing its output; on a timeout
     or an interrupt (Ctrl-C, SIGTERM) the whole group is killed, so a renderer the shell
-    started never outlives the run (``subprocess.run`` would kill only the shell)."""
+    started never outlives the run (``subprocess.run`` would kill only the shell).  Its output
+    is read as UTF-8, a byte that is not (a progress bar's, a locale's) replaced: it had ended
+    the run with a UnicodeDecodeError after a good render."""
     proc = subprocess.Popen(line, shell=True, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)
+                            encoding="utf-8", errors="replace", start_new_session=True)
     try:
         stdout, stderr = proc.communicate(timeout=timeout)
     except BaseException:

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from harness.adapters.base import ENVIRONMENT, ExactImage, Render, RenderError, check_spec
-from harness.usercode import UserCodeError, load_attr, source_fingerprint
+from harness.usercode import USER_ERRORS, UserCodeError, load_attr, raised, source_fingerprint
 
 __all__ = ["PythonRenderer", "make_renderer"]
 
@@ -55,12 +55,15 @@ class PythonRenderer:
         start = time.perf_counter()
         try:
             out = self.function(spp=spp, seed=seed, **self.params)
-        except Exception as e:
-            raise RenderError(f"{call}) raised {type(e).__name__}: {e}") from e
+        except USER_ERRORS as e:
+            raise RenderError(f"{call}) {raised(e)}") from e
         wall = time.perf_counter() - start
         image, seconds = (out if isinstance(out, tuple) and len(out) == 2 else (out, wall))
         try:
-            a = np.asarray(image, dtype=np.float64)
+            a = np.asarray(image)
+            if np.iscomplexobj(a):   # numpy's cast would keep the real part, with only a warning
+                raise TypeError("complex values")
+            a = a.astype(np.float64, copy=False)
             seconds = float(seconds)
         except (TypeError, ValueError) as e:
             raise RenderError(f"{call}) returned {type(out).__name__}; expected an image (height, width[, "

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from harness.samplers.domains import Domain
-from harness.usercode import UserCodeError
+from harness.usercode import USER_ERRORS, UserCodeError, raised
 
 __all__ = ["UserSampler", "resolve_sampler"]
 
@@ -47,9 +47,9 @@ def resolve_sampler(obj: Any, params: dict[str, Any] | None = None, *, name: str
             raise UserCodeError(f"{name}: params were given, but it is a {type(obj).__name__}, not a factory")
         try:
             obj = obj(**(params or {}))
-        except Exception as e:
+        except USER_ERRORS as e:
             given = ", ".join(f"{k}={v!r}" for k, v in (params or {}).items())
-            raise UserCodeError(f"{name}({given}) raised {type(e).__name__}: {e}") from e
+            raise UserCodeError(f"{name}({given}) {raised(e)}") from e
     if isinstance(obj, tuple):
         if len(obj) not in (2, 3):
             raise UserCodeError(f"{name}: expected a (sample, pdf) or (sample, pdf, domain) tuple, got "

@@ -109,6 +109,9 @@ _CASE_KEYS = {"integrand": str, "techniques": (str, list), "samples": int, "meas
               "target": float, "max_samples": int, "label": str, "baseline": str, "xfail": str}
 _USER_CASE_KEYS = {"estimator": str, "dim": int, "reference": (int, float, str), "points": str,
                    **{k: v for k, v in _CASE_KEYS.items() if k not in ("integrand", "techniques")}}
+#: The most uniforms per sample a team's estimator takes: each call gets rest.CHUNK_SIZE rows of
+#: them as float64 (512 MB a call at this many)
+MAX_DIM = 1024
 
 
 def load_suite(path: str | Path) -> Suite:
@@ -293,8 +296,9 @@ def user_estimator(c: dict[str, Any], base: Path, where: Locator, table: Any) ->
     if "dim" not in c:
         raise SuiteError(where.at(table, None, "missing key 'dim' (canonical uniforms per sample of the "
                                                "estimator)"))
-    if c["dim"] < 1:
-        raise SuiteError(where.at(table, "dim", f"expected a positive number of uniforms per sample, "
+    if not 1 <= c["dim"] <= MAX_DIM:
+        raise SuiteError(where.at(table, "dim", f"expected a positive number of uniforms per sample, at most "
+                                                f"{MAX_DIM} (each call gets {rest.CHUNK_SIZE} rows of them), "
                                                 f"got {c['dim']}"))
     if "reference" not in c:
         raise SuiteError(where.at(table, None, "missing key 'reference' (the exact value: a number or "
@@ -312,8 +316,12 @@ def user_estimator(c: dict[str, Any], base: Path, where: Locator, table: Any) ->
         raise SuiteError(where.at(table, "points",
                                   f"expected one of: {', '.join(POINT_SETS)}, got {points!r}"))
     user = Contributions(fn, c["dim"], float(reference), c.get("label", ""), points, name=target)
+    try:   # the case's own point set (Sobol' points have at most 256 dimensions)
+        probe = rest.points(4, user.dim, points, seed=0)
+    except ValueError as e:
+        raise SuiteError(where.at(table, "dim", str(e))) from None
     try:
-        user(rest.points(4, user.dim, seed=0))
+        user(probe)
     except UserCodeError as e:
         raise SuiteError(where.at(table, "estimator", str(e))) from None
     return user

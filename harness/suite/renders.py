@@ -29,7 +29,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from harness import stats
-from harness.adapters import ImageFaults, Renderer, image_faults, renderer
+from harness.adapters import ImageFaults, Renderer, RenderError, image_faults, renderer
+from harness.adapters.base import checked_render
 from harness.stats import images as ist
 from harness.stats.scales import FINE_REPLICAS
 from harness.suite.execute import JobResult
@@ -85,7 +86,7 @@ class RenderJob:
     def run(self) -> JobResult:
         u = self.unit
         r = cached_renderer(self.adapter, self.spec, reference=self.reference, base=self.base)
-        out = r.render(u.budget, render_seed(self.stream, u))
+        out = checked_render(r, self.adapter, u.budget, render_seed(self.stream, u))
         name = f"{u.case_key}/render-s{u.stream}-b{u.budget}-r{u.replica}"
         payload = {"image": name, "spp": out.spp, "faults": image_faults(out.image).to_dict()}
         return JobResult(u, payload, out.seconds, {name: out.image})
@@ -224,7 +225,7 @@ class RenderKind:
         for c in self.cases:
             if c.sibling is not None:   # two renderers, no converged reference: the sibling's replicas
                 images, _, _ = _stack(store, _planned_payloads(store, c.sibling.rc, c.sibling.key),
-                                      store.seconds(c.sibling.key), 0)
+                                      store.seconds(c.sibling.key), 0, c.sibling.rc.label)
                 reference, label = ist.Reference.from_parts(images), c.sibling.rc.label
             elif c.ref_key is None:
                 reference, label = ist.Reference.exact(c.renderer.exact()), "exact"
@@ -273,9 +274,25 @@ def _reference_folder(store: Store) -> Path:
     return store.path.parent / "references"
 
 
+def _stored_images(store: Store, rows: list[tuple[Unit, dict]], label: str,
+                   shape: tuple[int, ...] | None = None) -> np.ndarray:
+    """The stored images of ``rows`` (units and payloads) as float64 (R, h, w, c); a
+    RenderError naming the case (``label``) where their shapes differ from one another or from
+    ``shape`` (the reference's): a renderer whose image size varies from call to call."""
+    images = [store.image(p["image"]) for _, p in rows]
+    want = shape or images[0].shape
+    odd = next(((u, a.shape) for (u, _), a in zip(rows, images) if a.shape != want), None)
+    if odd is not None:
+        first = "reference" if shape else "first render"
+        raise RenderError(f"{label}: the render of budget {odd[0].budget}, replica {odd[0].replica} has "
+                          f"shape {odd[1]}, where the case's {first} has {want}: the renderer's image size "
+                          "varies")
+    return np.stack(images).astype(np.float64)
+
+
 def _build_reference(store: Store, cache: ReferenceCache, c: _Case) -> ist.Reference:
     payloads = store.payloads(c.ref_key)
-    images = np.stack([store.image(p["image"]) for _, p in sorted(payloads.items())]).astype(np.float64)
+    images = _stored_images(store, sorted(payloads.items()), f"{c.rc.label} (reference)")
     reference = ist.Reference.from_parts(images)
     cache.save(c.ref_key, reference, {"fingerprint": c.ref_fingerprint, "spp": c.rc.reference_spp,
                                       "invalid_pixels": _faults(payloads).total,
@@ -283,11 +300,13 @@ def _build_reference(store: Store, cache: ReferenceCache, c: _Case) -> ist.Refer
     return reference
 
 
-def _stack(store: Store, payloads: dict[Unit, dict], seconds: dict[Unit, float],
-           stream: int) -> tuple[np.ndarray, np.ndarray, int]:
-    """The replica images of one stream (R, h, w, c), their wall times (R,) and their budget."""
+def _stack(store: Store, payloads: dict[Unit, dict], seconds: dict[Unit, float], stream: int, label: str,
+           shape: tuple[int, ...] | None = None) -> tuple[np.ndarray, np.ndarray, int]:
+    """The replica images of one stream (R, h, w, c), their wall times (R,) and their budget;
+    the images checked to share one shape, the reference's ``shape`` where given
+    (:func:`_stored_images`; ``label`` names the case)."""
     rows = sorted((u, p) for u, p in payloads.items() if u.stream == stream)
-    images = np.stack([store.image(p["image"]) for _, p in rows]).astype(np.float64)
+    images = _stored_images(store, rows, label, shape)
     return images, np.array([seconds[u] for u, _ in rows]), rows[0][0].budget
 
 
@@ -313,7 +332,7 @@ def _measure(rc: RenderCase, key: str, store: Store, reference: ist.Reference,
     notes: list[str] = []
     bias = variance = convergence = eff = errors = None
     if wanted & {"bias", "variance"}:
-        images, _, spp = _stack(store, payloads, seconds_of, 0)
+        images, _, spp = _stack(store, payloads, seconds_of, 0, rc.label, reference.mean.shape)
         if "bias" in wanted:
             bias = ist.pixel_bias_test(images, reference, spp)
             if bias.replicas < FINE_REPLICAS:
@@ -336,7 +355,7 @@ def _measure(rc: RenderCase, key: str, store: Store, reference: ist.Reference,
     noise = reference.noise_relmse()
     reps, rows = [], []
     for stream in chosen:
-        images, seconds, spp = _stack(store, payloads, seconds_of, stream)
+        images, seconds, spp = _stack(store, payloads, seconds_of, stream, rc.label, reference.mean.shape)
         err = ist.relmse(images, reference)
         reps.append((spp, err, seconds))
         rows.append({"spp": spp, "seconds": float(np.median(seconds)), "relmse": float(err.mean()),

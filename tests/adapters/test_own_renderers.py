@@ -33,6 +33,11 @@ p = argparse.ArgumentParser()
 p.add_argument("--spp", type=int); p.add_argument("--seed", type=int); p.add_argument("--out")
 p.add_argument("--mode", default="ok")
 a = p.parse_args()
+if a.mode in ("bytes", "failbytes"):     # a progress bar's bytes that are not UTF-8
+    sys.stdout.buffer.write(b"\\xff\\xfe progress \\x80\\n"); sys.stdout.flush()
+    sys.stderr.buffer.write(b"warning: \\xe9clairage \\xff\\n"); sys.stderr.flush()
+if a.mode == "failbytes":
+    sys.exit(4)
 if a.mode == "fail":
     print("scene file not found: cornell.xml", file=sys.stderr); sys.exit(3)
 if a.mode == "sleep":
@@ -74,10 +79,14 @@ def test_a_command_renders_with_its_own_or_its_wall_time(repo):
     assert "start-up time (the wall time of a 1-spp render" in wall.notes()[0]
     again = renderer("command", command(), base=repo).render(8, 3)
     assert np.array_equal(again.image, out.image)          # the seed reaches the renderer
+    # output that is not UTF-8 is read with its odd bytes replaced (it had ended the run)
+    odd = renderer("command", command("bytes", time="stdout:rendered in ([0-9.]+) s"), base=repo).render(8, 3)
+    assert np.array_equal(odd.image, out.image) and odd.seconds == 2.0
 
 
 @pytest.mark.parametrize("mode, keys, message", [
     ("fail", {}, r"exited with status 3; stderr ends:\n    scene file not found: cornell.xml"),
+    ("failbytes", {}, "exited with status 4; stderr ends:\n    warning: \ufffdclairage \ufffd"),
     ("sleep", {"timeout": 1}, r"timed out after 1 s"),
     ("noimage", {}, r"wrote no image at \{out\} = .*image.exr"),
     ("garbage", {}, r"cannot read image .*image.exr"),
@@ -273,3 +282,80 @@ def test_third_party_adapters_register_through_entry_points(repo, monkeypatch):
     (repo / "bad.toml").write_text('[[render]]\nadapter = "flat"\ncolour = 2\n')
     with pytest.raises(SuiteError, match="bad.toml:3: colour: unknown key"):
         load_suite(repo / "bad.toml")
+
+
+FLAKY = '''
+import sys
+import numpy as np
+
+def wrong_size(spp, seed):           # the exact image is (4, 6, 3)
+    return np.ones((3, 6, 3))
+
+def varying(spp, seed):              # its size changes from call to call
+    return np.ones((4 + seed % 2, 6, 3))
+
+def exits(spp, seed):                # a command-line tool's main() called as a function
+    sys.exit(0)
+'''
+
+
+def test_a_python_renders_wrong_size_or_exit_is_a_render_error_and_nothing_is_stored(repo):
+    (repo / "flaky.py").write_text(FLAKY)
+    table = ('[[render]]\nadapter = "python"\nfunction = "flaky:{}"\n{}spp = 4\nreplicas = 4\n'
+             'measurements = ["bias"]\n')
+    (repo / "size.toml").write_text(table.format("wrong_size", 'exact = "ones.exr"\n'))
+    wrong = (r"render\(spp=4, seed=\d+\) returned an image of shape \(3, 6, 3\); "
+             r"the exact image's is \(4, 6, 3\)")
+    with pytest.raises(RenderError, match=wrong):
+        run_suite(load_suite(repo / "size.toml"), repo / "size.sqlite", threads=1)
+    stored = Store(repo / "size.sqlite")
+    try:
+        assert not stored.payloads(suite_key(load_suite(repo / "size.toml"), 0))
+    finally:
+        stored.close()
+    with pytest.raises(RenderError, match=r"flaky:exits\(spp=4, seed=\d+\) called sys.exit\(0\)"):
+        renderer("python", {"function": "flaky:exits"}, base=repo).render(4, 1)
+    # without an exact image the sizes are compared once stored: a clear error on every run
+    (repo / "vary.toml").write_text(table.format("varying", ""))
+    varies = (r"the render of budget \d+, replica \d+ has shape \(\d, 6, 3\), where the case's "
+              r"(first render|reference) has .* image size varies")
+    for _ in range(2):
+        with pytest.raises(RenderError, match=varies):
+            run_suite(load_suite(repo / "vary.toml"), repo / "vary.sqlite", threads=1)
+
+
+def test_a_registered_adapters_own_failures_name_it(repo, monkeypatch):
+    (repo / "fragile.py").write_text(textwrap.dedent('''
+        import numpy as np
+        from harness.adapters.base import Render
+
+        class Fragile:
+            def __init__(self, spec):
+                self.scene = spec["scene"]          # a KeyError where the table has none
+            def render(self, spp, seed):
+                if self.scene == "gpu":
+                    raise RuntimeError("GPU lost")
+                return Render(np.ones((2, 2, 3)) if self.scene == "ok" else np.ones(4), spp, 0.001)
+            def exact(self):
+                return np.ones((2, 2, 3))
+            def fingerprint(self):
+                return {"adapter": "fragile", "scene": self.scene}
+            def reference(self):
+                return self
+
+        def make_renderer(spec):
+            return Fragile(spec)
+    '''))
+    monkeypatch.syspath_prepend(str(repo))
+    eps = [EntryPoint("fragile", "fragile:make_renderer", base.ENTRY_POINTS)]
+    monkeypatch.setattr(base, "entry_points", lambda group: eps if group == base.ENTRY_POINTS else [])
+    (repo / "nokey.toml").write_text('[[render]]\nadapter = "fragile"\nspp = 4\nmeasurements = ["bias"]\n')
+    with pytest.raises(SuiteError, match=r"nokey.toml:1: adapter 'fragile': its factory "
+                                         r"'fragile:make_renderer' raised KeyError: 'scene'"):
+        load_suite(repo / "nokey.toml")
+    for scene, message in (("gpu", r"render\(spp=4, seed=\d+\) raised RuntimeError: GPU lost"),
+                           ("flat", r"render\(spp=4, seed=\d+\) returned an image of shape \(4,\)")):
+        (repo / "s.toml").write_text(f'[[render]]\nadapter = "fragile"\nscene = "{scene}"\nspp = 4\n'
+                                     'replicas = 4\nmeasurements = ["bias"]\n')
+        with pytest.raises(RenderError, match=r"adapter 'fragile': " + message):
+            run_suite(load_suite(repo / "s.toml"), repo / f"{scene}.sqlite", threads=1)

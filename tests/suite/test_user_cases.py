@@ -45,6 +45,17 @@ def all_nan(u):
     return np.full(len(u), np.nan)
 
 
+def complex_(u):
+    return u[:, 0] + 0.5j
+
+
+def exits(u):                    # a command-line tool's main() called as a function
+    if len(u) > 4:
+        import sys
+        sys.exit(0)
+    return u[:, 0]
+
+
 NOT_CALLABLE = 3
 '''
 
@@ -159,6 +170,17 @@ def test_a_user_estimator_failing_in_the_run_is_one_line_and_keeps_what_was_stor
     assert "units stored in r.sqlite; fix it and rerun to resume" in r.stderr
 
 
+def test_a_user_estimator_calling_sys_exit_fails_the_run_with_a_message(repo):
+    # SystemExit had escaped: the harness ended without a word, exit status 0
+    exits = '\n[[case]]\nestimator = "myest:exits"\ndim = 1\nreference = 0.5\n'
+    (repo / "exits.toml").write_text(SUITE + exits)
+    r = subprocess.run([str(HARNESS), "run", "exits.toml", "--db", "r.sqlite"], capture_output=True,
+                       text=True, cwd=repo, timeout=300)
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert "harness: myest:exits called sys.exit(0) (called on shape (" in r.stderr
+    assert "units stored in r.sqlite; fix it and rerun to resume" in r.stderr
+
+
 def test_faults_are_counted_over_every_batch_of_the_bias_test(repo):
     # each batch's count had replaced the one before: 512 NaN contributions reported of 4096
     nan_case = '[suite]\nsamples = 4096\nbatches = 8\nmeasurements = ["bias"]\n\n' \
@@ -185,8 +207,16 @@ def _error(repo, case: str) -> str:
      "bad.toml:2: estimator: 'myest:NOT_CALLABLE' is a int; expected a callable u (N, dim) -> contributions"),
     ('[[case]]\nestimator = "myest:uniform"\nreference = 1.0\n',
      "bad.toml:1: missing key 'dim' (canonical uniforms per sample of the estimator)"),
+    ('[[case]]\nestimator = "myest:complex_"\ndim = 1\nreference = 1.0\n',    # had kept the real part
+     "bad.toml:2: estimator: myest:complex_ returned ndarray for uniforms of shape (4, 1), float64; "
+     "expected a float array of shape (4,) (complex values)"),
     ('[[case]]\nestimator = "myest:uniform"\ndim = 0\nreference = 1.0\n',
-     "bad.toml:3: dim: expected a positive number of uniforms per sample, got 0"),
+     "bad.toml:3: dim: expected a positive number of uniforms per sample, at most 1024 (each call gets 65536 "
+     "rows of them), got 0"),
+    ('[[case]]\nestimator = "myest:uniform"\ndim = 2147483648\nreference = 1.0\n',   # had been a TypeError
+     "bad.toml:3: dim: expected a positive number of uniforms per sample, at most 1024"),
+    ('[[case]]\nestimator = "myest:uniform"\ndim = 300\nreference = 1.0\npoints = "sobol"\n',  # ran, failed
+     "bad.toml:3: dim: Sobol' points need 300 dimensions; direction numbers are loaded for 256"),
     ('[[case]]\nestimator = "myest:uniform"\ndim = 1\n',
      "missing key 'reference' (the exact value: a number or \"module:attr\")"),
     ('[[case]]\nestimator = "myest:uniform"\ndim = 1\nreference = "myest:uniform"\n',
@@ -210,3 +240,10 @@ def _error(repo, case: str) -> str:
 ])
 def test_user_case_mistakes_name_file_line_and_key(repo, case, message):
     assert message in _error(repo, case)
+
+
+def test_a_file_that_is_not_python_source_is_named(repo):
+    # it had been "raised AttributeError: 'NoneType' object has no attribute 'loader'"
+    (repo / "data.bin").write_bytes(b"\x00\x01")
+    message = _error(repo, '[[case]]\nestimator = "./data.bin:f"\ndim = 1\nreference = 1.0\n')
+    assert f"bad.toml:2: estimator: './data.bin:f': {repo / 'data.bin'} is not a Python source" in message
