@@ -20,6 +20,17 @@ from harness.suite.store import StoreError
 from harness.usercode import UserCodeError
 
 
+def _seconds(text: str) -> float:
+    """A time in seconds for argparse: a finite number >= 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0 <= value < float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a number of seconds >= 0, got {text!r}")
+    return value
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="harness", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -31,7 +42,7 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--db", metavar="PATH", help="results database (default: results/<suite name>.sqlite)")
     run.add_argument("--dask", metavar="ADDRESS",
                      help="run on a Dask scheduler at ADDRESS, or 'local' for a LocalCluster")
-    run.add_argument("--wait", type=float, default=60, metavar="SECONDS",
+    run.add_argument("--wait", type=_seconds, default=60, metavar="SECONDS",
                      help="how long to wait for a lock another process holds on the database (default 60)")
     show = sub.add_parser("show", help="print the measurements stored in a results database (each suite's "
                                        "latest finished run)")
@@ -105,8 +116,24 @@ def main(argv: list[str] | None = None) -> int:
     if args.threads is not None and args.threads < 1:
         print("harness: --threads must be >= 1", file=sys.stderr)
         return 2
+    if args.csv and (why := _unwritable(args.csv, "--csv")):
+        print(f"harness: {why}", file=sys.stderr)
+        return 2
     db = args.db or f"results/{suite.file_name}.sqlite"
     return _run(suite, db, args.threads, args.csv, args.dask, args.wait)
+
+
+def _unwritable(path: str, flag: str) -> str | None:
+    """Why ``path`` (given to ``flag``) cannot name an output file (a folder; a missing
+    folder), or None; checked before the work, so that a run does not end on it."""
+    from pathlib import Path
+
+    p = Path(path)
+    if p.is_dir():
+        return f"{flag} {path}: a folder; give a file name"
+    if not p.resolve().parent.is_dir():
+        return f"{flag} {path}: no folder {p.parent}"
+    return None
 
 
 def _run(suite, db: str, threads: int | None, csv: str | None, dask: str | None, wait: float) -> int:
@@ -157,7 +184,11 @@ def _run(suite, db: str, threads: int | None, csv: str | None, dask: str | None,
     if csv:
         import pandas as pd  # deferred, as in kind.Outcome.frame
         frames = [o.frame.assign(kind=o.kind) for o in summary.outcomes if o.table]
-        (pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()).to_csv(csv, index=False)
+        try:
+            (pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()).to_csv(csv, index=False)
+        except OSError as e:   # its folder went, or no permission: the results are stored all the same
+            print(f"harness: --csv {csv}: {e.strerror or e}; the results are stored in {db}", file=sys.stderr)
+            return 2
         print(f"table written to {csv}")
     return 1 if summary.failed else 0
 
@@ -209,6 +240,9 @@ def _compare(args) -> int:
     from harness.stats.compare import compare_images
     from reports.compare import compare_page, load_replicas
 
+    if why := _unwritable(args.output, "-o"):
+        print(f"harness: {why}", file=sys.stderr)
+        return 2
     try:
         a, b = (load_replicas(x, db=args.db) for x in (args.a, args.b))
         result = compare_images(a.images, b.images, alpha=args.alpha, spp=args.spp)
@@ -216,7 +250,11 @@ def _compare(args) -> int:
         print(f"harness: {e}", file=sys.stderr)
         return 2
     out = Path(args.output)
-    out.write_text(compare_page(a, b, result), encoding="utf-8")
+    try:
+        out.write_text(compare_page(a, b, result), encoding="utf-8")
+    except OSError as e:
+        print(f"harness: -o {out}: {e.strerror or e}", file=sys.stderr)
+        return 2
     for name, s in (("A", a), ("B", b)):
         print(f"{name}: {s.label} ({s.images.shape[0]} replicas, {s.source})")
     print(f"{result}\nreport: {out}")

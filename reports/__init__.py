@@ -31,8 +31,14 @@ def write_report(db: str | Path, out: str | Path | None = None, *, fmt: str = "h
     results = load_results(db, suite, run)
     path = Path(out) if out is not None else Path(db).with_suffix(FORMATS[fmt])
     text = {"html": render_html, "csv": to_csv, "markdown": to_markdown}[fmt](results)
+    if path.is_dir():
+        raise ValueError(f"{path}: a folder; give the report a file name")
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".partial")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(path)
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        tmp.replace(path)
+    except OSError:
+        tmp.unlink(missing_ok=True)   # no half-written file left beside the target
+        raise
     return path

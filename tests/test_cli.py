@@ -73,6 +73,27 @@ def test_csv_output(tmp_path):
     assert df.iloc[0]["efficiency_ratio"] == 1.0
 
 
+def test_output_paths_that_cannot_be_written_are_one_line_errors(tmp_path):
+    # --csv into a missing folder had failed after the whole run, with a traceback; a report
+    # given a folder had left a .partial file beside it
+    suite = tmp_path / "small.toml"
+    suite.write_text('[suite]\nsamples = 65536\n\n[[case]]\nintegrand = "gaussian"\ntechniques = "uniform"\n')
+    db = str(tmp_path / "small.sqlite")
+    r = run("run", str(suite), "--csv", str(tmp_path / "no" / "t.csv"), "--db", db)
+    assert r.returncode == 2 and f"--csv {tmp_path / 'no' / 't.csv'}: no folder" in r.stderr, r.stderr
+    assert not Path(db).exists()                      # refused before the run
+    r = run("run", str(suite), "--csv", str(tmp_path), "--db", db)
+    assert r.returncode == 2 and "a folder; give a file name" in r.stderr and "Traceback" not in r.stderr
+    assert run("run", str(suite), "--db", db).returncode == 0
+    (tmp_path / "out").mkdir()
+    r = run("report", "--db", db, "-o", str(tmp_path / "out"))
+    assert r.returncode == 2 and "a folder; give the report a file name" in r.stderr, r.stderr
+    assert not (tmp_path / "out.partial").exists()
+    for wait in ("nan", "-5"):                        # had been accepted
+        r = run("run", str(suite), "--db", db, "--wait", wait)
+        assert r.returncode == 2 and f"--wait: expected a number of seconds >= 0, got '{wait}'" in r.stderr
+
+
 def test_a_resumed_run_prints_its_table_without_importing_pandas(tmp_path):
     """A finished suite resumed as a command reads its units and prints the same table; pandas
     (a third to a half of that command's time) is imported only for --csv and harness.load."""

@@ -59,7 +59,9 @@ def test_compare_errors_are_one_line(tmp_path):
                           (("a", "empty"), "empty: no .exr, .pfm, .hdr images in it"),
                           (("a", "small"), "at least 4 replicas of each, got 6 and 3"),
                           (("a", "bad"), "cannot read image"),
-                          (("a", "b", "--db", "none.sqlite"), "no results database at none.sqlite")):
+                          (("a", "b", "--db", "none.sqlite"), "no results database at none.sqlite"),
+                          (("a", "a", "-o", "empty"), "-o empty: a folder; give a file name"),
+                          (("a", "a", "-o", "nofolder/x.html"), "-o nofolder/x.html: no folder nofolder")):
         r = run(*args, cwd=tmp_path)
         assert r.returncode == 2 and message in r.stderr and "Traceback" not in r.stderr, (args, r.stderr)
 

@@ -40,8 +40,9 @@ from harness.samplers.result import SamplerCheck
 from harness.samplers.transform import STRIPS, Transform
 from harness.stats import distributions, holm
 from harness.stats.results import Failure
+from harness.stats.validate import count
 
-__all__ = ["SAMPLE_CASE", "SamplerTest", "check_sampler", "check_with_missing",
+__all__ = ["MAX_SAMPLES", "SAMPLE_CASE", "SamplerTest", "check_sampler", "check_with_missing",
            "failure_pvalue", "histogram"]
 
 #: The stream (case id) the sampler check draws its canonical uniforms from.
@@ -58,6 +59,9 @@ DITHER_CASE = 0xD17E
 #: pdf evaluations the base grid's cubature may spend (SamplerTest)
 _MOMENT_EVALS = 12_000_000
 
+#: The most samples a check takes: it holds them in memory (0.9 GB for a plain sampler's 1e7)
+MAX_SAMPLES = 100_000_000
+
 
 # --- the check -------------------------------------------------------------------------------
 class SamplerTest:
@@ -72,9 +76,7 @@ class SamplerTest:
         self.breaks = breaks = checked_breaks(breaks, dom)
         self.pdf = self.claimed_pdf = checked_pdf(pdf)   # claimed_pdf: the pdf as given (for_total keeps it)
         self.total = 1.0    # pdf = claimed_pdf / total (for_total)
-        self.n = n = int(sample_count)
-        if n < 1000:
-            raise ValueError(f"'sample_count' must be at least 1000, got {sample_count!r}")
+        self.n = n = _sample_count(sample_count)
         if not 0 < alpha < 1:
             raise ValueError(f"'alpha' must be in (0, 1), got {alpha!r}")
         self.alpha = alpha
@@ -448,9 +450,11 @@ def _u_examples(u: np.ndarray, mask: np.ndarray, k: int = 5) -> list[dict[str, A
 
 
 def _sample_count(sample_count: Any) -> int:
-    n = int(sample_count)
-    if n < 1000:
-        raise ValueError(f"'sample_count' must be at least 1000, got {sample_count!r}")
+    """A check's sample count: a whole number from 1000 to :data:`MAX_SAMPLES`."""
+    n = count(sample_count, "sample_count")
+    if not 1000 <= n <= MAX_SAMPLES:
+        raise ValueError(f"'sample_count' must be from 1000 to {MAX_SAMPLES:,} (a check holds its samples in "
+                         f"memory), got {sample_count!r}")
     return n
 
 

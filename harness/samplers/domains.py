@@ -50,6 +50,8 @@ class Domain:
     pole: str = "z"     # the sphere's: the axis theta is measured from (below)
 
     def __post_init__(self):
+        if not isinstance(self.kind, str) or self.kind not in DOMAINS:
+            raise ValueError(f"'domain' must be one of {DOMAINS}, got {self.kind!r}")
         if not isinstance(self.pole, str) or self.pole not in _POLES:
             raise ValueError(f"'pole' must be one of {tuple(_POLES)}, got {self.pole!r}")
         if self.pole != "z" and self.kind != "sphere":

@@ -7,6 +7,7 @@ from typing import Any
 
 import reference_estimators as rest
 
+from harness.samplers.check import MAX_SAMPLES
 from harness.suite.locate import Locator
 from harness.suite.model import SAMPLER_MEASUREMENTS, SamplerCase, SuiteError
 from harness.suite.rules import check_keys, named_key, xfail_reason
@@ -121,10 +122,13 @@ def _user_sampler(c: dict[str, Any], samples: int, case_id: int, base: Path, whe
 
 
 def _samples(c: dict[str, Any], samples: int, where: Locator, table: Any) -> int:
-    """A sampler table's ``samples`` (default: the suite's), at least 1000."""
+    """A sampler table's ``samples`` (default: the suite's), from 1000 to the check's
+    MAX_SAMPLES."""
     n = c.get("samples", samples)
-    if n < 1000:
-        raise SuiteError(where.at(table, "samples", f"expected at least 1000 samples, got {n}"))
+    if not 1000 <= n <= MAX_SAMPLES:
+        raise SuiteError(where.at(table if "samples" in c else "suite", "samples",
+                                  f"expected 1000 to {MAX_SAMPLES:,} samples (a check holds its samples in "
+                                  f"memory), got {n:,}"))
     return n
 
 

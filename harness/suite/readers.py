@@ -44,13 +44,17 @@ def run_filter(con: sqlite3.Connection, db: str | Path, *, suite: str | None = N
                all_runs: bool = False) -> tuple[str, tuple[Any, ...]]:
     """A WHERE clause (and its parameters) choosing measurement rows ``m``: of each suite's
     latest finished run by default, of run ``run``, or of every run (``all_runs``); of one
-    suite if ``suite`` is given.  ValueError naming the runs there are for an unknown run."""
+    suite if ``suite`` is given.  ValueError naming the runs (suites) there are for an unknown
+    run (suite)."""
     tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
     if "measurements" not in tables:
         raise ValueError(f"{db} is not a results database (no measurements table)")
     where: list[str] = []
     params: list[Any] = []
     if suite:
+        if con.execute("SELECT 1 FROM measurements WHERE suite = ? LIMIT 1", (suite,)).fetchone() is None:
+            known = [s for (s,) in con.execute("SELECT DISTINCT suite FROM measurements ORDER BY suite")]
+            raise ValueError(f"{db} has no suite {suite!r}; its suites: {', '.join(known) or 'none'}")
         where.append("m.suite = ?")
         params.append(suite)
     if "runs" in tables and run is not None:

@@ -26,7 +26,10 @@ def test_domains_by_name():
     ({"domain": "cube"}, ValueError,
      r"'domain' must be one of \('interval', 'half_line', 'square', 'disk', 'hemisphere', 'sphere'\)"),
     ({"domain": ("interval", 2, 1)}, ValueError, r"\('interval', a, b\) with a < b"),
-    ({"sample_count": 10}, ValueError, r"'sample_count' must be at least 1000, got 10"),
+    ({"sample_count": 10}, ValueError, r"'sample_count' must be from 1000 to 100,000,000 \(a check holds its "
+                                       r"samples in memory\), got 10"),
+    ({"sample_count": 2**40}, ValueError, r"'sample_count' must be from 1000 to 100,000,000"),
+    ({"sample_count": 1500.5}, ValueError, r"'sample_count' must be a positive whole number, got 1500.5"),
     ({"alpha": 0.0}, ValueError, r"'alpha' must be in \(0, 1\)"),
 ])
 def test_bad_arguments(kwargs, error, message):
@@ -34,6 +37,13 @@ def test_bad_arguments(kwargs, error, message):
     args = {"domain": s.domain, **kwargs}
     with pytest.raises(error, match=message):
         check_sampler(s.sample, s.pdf, **args)
+
+
+def test_a_domain_of_an_unknown_kind_is_refused_where_it_is_made():
+    # a sampler object's own domain (Domain(name), as check-sampler builds it) had failed later
+    # with a KeyError
+    with pytest.raises(ValueError, match=r"'domain' must be one of \('interval', .*\), got 'torus'"):
+        Domain("torus")
 
 
 def test_wrong_point_shapes_are_named():

@@ -254,7 +254,11 @@ MISTAKES = {
         2, "budgets", "expected at least 3 positive integer budgets, got [64, 0, 256]"),
     "too few sampler samples": (
         HEAD + '[[sampler]]\nname = "ggx"\nsamples = 999\n',
-        8, "samples", "expected at least 1000 samples, got 999"),
+        8, "samples", "expected 1000 to 100,000,000 samples (a check holds its samples in memory), got 999"),
+    "too many sampler samples": (   # had run into a MemoryError
+        HEAD + '[[sampler]]\nname = "ggx"\nsamples = 1099511627776\n',
+        8, "samples", "expected 1000 to 100,000,000 samples (a check holds its samples in memory), got "
+                      "1,099,511,627,776"),
     "zero spp": (
         HEAD + '[[render]]\nadapter = "mitsuba"\nspp = 0\n',
         8, "spp", "expected a budget > 0 samples, got 0"),

@@ -91,6 +91,10 @@ def test_each_run_is_recorded_with_the_suite_revision_it_measured(tmp_path, suit
                                            .reset_index(drop=True))
     one_line_error(cli("show", "--db", str(db), "--run", "7", cwd=tmp_path), "has no run 7; its runs: 1, 2")
     one_line_error(cli("report", "--db", str(db), "--run", "7", cwd=tmp_path), "has no run 7")
+    suite_name = harness.load(db)["suite"][0]    # an unknown suite had given an empty report, status 0
+    for command in ("show", "report"):
+        one_line_error(cli(command, "--db", str(db), "--suite", "nosuch", cwd=tmp_path),
+                       f"has no suite 'nosuch'; its suites: {suite_name}")
 
 
 def test_an_interrupted_run_leaves_the_last_finished_one_shown(tmp_path, suite_file):
