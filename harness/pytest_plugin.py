@@ -18,8 +18,12 @@ from pathlib import Path, PurePosixPath
 
 import pytest
 
+from harness.adapters.base import RenderError
+from harness.suite.execute import ClusterError
 from harness.suite.parse import SuiteError, load_suite
 from harness.suite.run import RunSummary, kinds_of, run_suite
+from harness.suite.store import StoreError
+from harness.usercode import UserCodeError
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -54,11 +58,13 @@ def _wanted(path: Path, config: pytest.Config) -> bool:
 
 
 def _is_suite(path: Path) -> bool:
+    """Whether ``path`` holds a suite: a TOML file with any of a suite's tables.  A file that is
+    no TOML (or not UTF-8) is not one: it is left alone, not an error that stops the session."""
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, tomllib.TOMLDecodeError):
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
         return False
-    return "suite" in data or "case" in data or "render" in data
+    return any(table in data for table in ("suite", "case", "render", "sampler"))
 
 
 class SuiteFile(pytest.File):
@@ -69,6 +75,7 @@ class SuiteFile(pytest.File):
             raise self.CollectError(str(e)) from None
         self.suite = suite
         self.summary: RunSummary | None = None
+        self.error: str | None = None
         for kind in kinds_of(suite):
             for i, name in enumerate(kind.names()):
                 yield CaseItem.from_parent(self, name=name, kind=kind.name, index=i)
@@ -80,17 +87,30 @@ class SuiteFile(pytest.File):
         self.suite, self.summary = None, None
 
     def run(self) -> RunSummary:
+        """The suite's run, made once for all its cases; a run that stopped (a team's code
+        failing, the database, a render) is a RunFailure for every case, raised from that one
+        attempt, not a new run per case."""
+        if self.error is not None:
+            raise RunFailure(self.error)
         if self.summary is None:
             opt = self.config.getoption
             cache = getattr(self.config, "cache", None)  # None under -p no:cacheprovider
             db = opt("--harness-db") or (cache.mkdir("harness") / f"{self.suite.file_name}.sqlite" if cache
                                          else Path(f"results/{self.suite.file_name}.sqlite"))
-            self.summary = run_suite(self.suite, db, threads=opt("--harness-threads"))
+            try:
+                self.summary = run_suite(self.suite, db, threads=opt("--harness-threads"))
+            except (UserCodeError, RenderError, StoreError, ClusterError) as e:
+                self.error = f"the suite's run stopped: {e} (units stored in {db} are kept; fix it and rerun)"
+                raise RunFailure(self.error) from None
         return self.summary
 
 
 class CaseFailure(Exception):
     pass
+
+
+class RunFailure(Exception):
+    """The suite's run stopped before its cases could be judged."""
 
 
 class CaseItem(pytest.Item):
@@ -110,7 +130,7 @@ class CaseItem(pytest.Item):
             raise CaseFailure(why)
 
     def repr_failure(self, excinfo, style=None):
-        if isinstance(excinfo.value, CaseFailure):
+        if isinstance(excinfo.value, (CaseFailure, RunFailure)):
             return f"{self.name}: {excinfo.value}"
         return super().repr_failure(excinfo, style)
 

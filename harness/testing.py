@@ -2,6 +2,7 @@
 its interval, the sample count, alpha and what was expected, so pytest shows why."""
 from __future__ import annotations
 
+import numbers
 import warnings
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -12,6 +13,7 @@ from scipy import stats as sps
 from harness import stats
 from harness.samplers.check import check_sampler
 from harness.samplers.result import SamplerCheck
+from harness.stats import validate
 from harness.usercode import callable_name
 
 __all__ = ["HarnessWarning", "assert_unbiased", "assert_biased", "assert_converges", "assert_sampler",
@@ -79,9 +81,12 @@ def assert_rare(count: int, n: int, p: float, *, alpha: float = 0.01) -> float:
     """pbrt's CHECK_RARE as a test: an event that should happen with probability at most p
     happened ``count`` times in n trials; fails when that is too many at false-alarm rate
     alpha (one-sided binomial test).  Returns the p-value."""
-    if not (0 <= p <= 1 and n > 0 and 0 <= count <= n):
-        raise ValueError(f"need 0 <= p <= 1, n > 0 and 0 <= count <= n, got p = {p}, n = {n}, "
-                         f"count = {count}")
+    n = validate.count(n, "n")
+    if isinstance(count, bool) or not isinstance(count, numbers.Integral) or not 0 <= count <= n:
+        raise ValueError(f"'count' must be a whole number from 0 to n = {n}, got {count!r}")
+    if isinstance(p, bool) or not isinstance(p, numbers.Real) or not 0 <= p <= 1:
+        raise ValueError(f"'p' must be a probability in [0, 1], got {p!r}")
+    validate.level(alpha, "alpha")
     pvalue = float(sps.binom.sf(count - 1, n, p))
     if pvalue < alpha:
         raise AssertionError(f"{count} events in {n} trials where at most a rate of {p:g} is allowed "

@@ -63,3 +63,26 @@ def test_only_suite_files_matching_harness_suites_are_collected(tmp_path):
     r = pytest_run("--harness-db", str(tmp_path / "mine.sqlite"), cwd=tmp_path)
     assert r.returncode == 0, r.stdout[-3000:]
     assert "2 passed" in r.stdout and "broken" not in r.stdout
+
+
+def test_sampler_only_suites_are_collected_and_a_stopped_run_fails_once_in_one_line(tmp_path):
+    """A suite of [[sampler]] tables alone had not been collected (CI green without its checks);
+    a .toml that is not UTF-8 had stopped the session; a team's estimator failing in the run
+    had failed every case with a long traceback, the suite rerun for each."""
+    (tmp_path / "pytest.ini").write_text("[pytest]\nharness_suites = checks/*.toml\n")
+    checks = tmp_path / "checks"
+    checks.mkdir()
+    (checks / "samplers.toml").write_text('[[sampler]]\nname = "linear"\nsamples = 20000\n')
+    (checks / "latin1.toml").write_bytes(b'a = "\xff"\n')
+    (checks / "myest.py").write_text("calls = []\n\ndef good(u):\n    return u[:, 0]\n\n"
+                                     "def late(u):\n    if len(u) > 8:\n        calls.append(1)\n"
+                                     "        raise RuntimeError(f'kaput {len(calls)}')\n"
+                                     "    return u[:, 0]\n")
+    (checks / "late.toml").write_text('[suite]\nsamples = 4096\nbatches = 8\nmeasurements = ["bias"]\n\n'
+                                      '[[case]]\nestimator = "myest:good"\ndim = 1\nreference = 0.5\n\n'
+                                      '[[case]]\nestimator = "myest:late"\ndim = 1\nreference = 0.5\n')
+    r = pytest_run("--harness-db", str(tmp_path / "r.sqlite"), cwd=tmp_path)
+    out = r.stdout
+    assert "1 passed" in out and "2 failed" in out, out[-3000:]          # the sampler check ran
+    assert out.count("the suite's run stopped: myest:late raised RuntimeError: kaput 1 (called on shape") == 2
+    assert "kaput 2" not in out and "Traceback" not in out and len(out.splitlines()) < 40, out

@@ -10,6 +10,7 @@ import pytest
 
 import reference_estimators as rest
 
+from harness import stats as hs
 from harness import testing
 
 GAUSS = rest.integrand("gaussian").reference
@@ -52,5 +53,12 @@ def test_assert_rare():
     assert testing.assert_rare(3, 10_000, 1e-3) > 0.01
     with pytest.raises(AssertionError, match=r"40 events in 10000 trials where at most a rate of 0.001"):
         testing.assert_rare(40, 10_000, 1e-3)
-    with pytest.raises(ValueError, match="need 0 <= p <= 1"):
-        testing.assert_rare(3, 10, 2.0)
+    for args, kwargs, message in (((3, 10, 2.0), {}, r"'p' must be a probability in \[0, 1\], got 2.0"),
+                                  ((10, 10, 0.001), {"alpha": -1}, r"'alpha' must be in \(0, 1\), got -1"),
+                                  ((3, 10.5, 0.1), {}, r"'n' must be a positive whole number, got 10.5"),
+                                  ((11, 10, 0.1), {}, r"'count' must be a whole number from 0 to n = 10")):
+        with pytest.raises(ValueError, match=message):   # alpha -1 and n 10.5 had passed
+            testing.assert_rare(*args, **kwargs)
+    for alpha in (0, 5):   # alpha 0 had passed a biased technique, 5 failed a correct one
+        with pytest.raises(ValueError, match=r"'alpha' must be in \(0, 1\)"):
+            hs.check_technique("gaussian", "uniform", 10_000, alpha=alpha)

@@ -26,8 +26,13 @@ def drawn_points(sample: Callable[[np.ndarray], Any], u: np.ndarray,
     n = u.shape[0]
     want = (n,) if dom.point_dim == 1 else (n, dom.point_dim)
     out = call(sample, name, u, what=f"points of shape {want} on the {dom.kind}")
+    if isinstance(out, tuple) and not out:
+        raise UserCodeError(f"{name} returned an empty tuple for uniforms of shape {u.shape}; expected "
+                            f"points of shape {want} on the {dom.kind}, or (points, pdf)")
     x = array_result(out[0] if isinstance(out, tuple) else out, None, name, f"uniforms of shape {u.shape}")
-    if x.size != n * dom.point_dim:
+    # the shape as it is (an interval's (N, 1) aside): a (point_dim, N) array reshaped had
+    # scrambled the coordinates of a correct sampler into a failing one
+    if x.shape != want and not (dom.point_dim == 1 and x.shape == (n, 1)):
         raise UserCodeError(f"{name} returned points of shape {x.shape} for uniforms of shape {u.shape}; "
                             f"expected shape {want} on the {dom.kind}")
     reported = None

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -22,6 +23,7 @@ from harness.stats.merge import merge_moments
 from harness.stats.results import ConfidenceInterval, Failure, failures_from_counts, summed_counts, t_interval
 from harness.stats.tails import Side, TailEnd, TailSample
 from harness.stats.validate import count, integer_in, level
+from harness.usercode import array_result, call, callable_name
 
 __all__ = ["UnbiasedResult", "check_unbiased", "check_technique", "judge_batches", "batch_points"]
 
@@ -188,8 +190,9 @@ def check_unbiased(contributions: Callable[[np.ndarray], np.ndarray], dim: int, 
     integer_in(dim, "dim", 1)
     level(alpha, "alpha")
     integer_in(batches, "batches", 8, n)
-    if not math.isfinite(reference):
-        raise ValueError(f"'reference' must be finite, got {reference!r}")
+    if isinstance(reference, bool) or not isinstance(reference, numbers.Real) or not math.isfinite(reference):
+        raise ValueError(f"'reference' must be a finite number, got {reference!r}")
+    name = callable_name(contributions)
 
     parts: list[list[tuple[int, float, float, float]]] = [[] for _ in range(batches)]
     counts: dict[str, int] = {}
@@ -198,10 +201,8 @@ def check_unbiased(contributions: Callable[[np.ndarray], np.ndarray], dim: int, 
     max_abs = 0.0
     for k, first, u in batch_points(n, dim, seed=seed, batches=batches):
         rows = u.shape[0]
-        y = np.asarray(contributions(u), dtype=np.float64)
-        if y.shape != (rows,):
-            raise ValueError(f"'contributions' must return shape ({rows},) for uniforms of shape "
-                             f"({rows}, {dim}), returned {y.shape}")
+        y = call(contributions, name, u, what=f"contributions of shape ({rows},)")   # errors name it
+        y = array_result(y, (rows,), name, f"uniforms of shape {u.shape}, {u.dtype}")
         est = rest.accumulate(y)
         for key, v in est.issues.items():
             counts[key] = counts.get(key, 0) + v
@@ -379,6 +380,7 @@ def check_technique(integrand: str | rest.Integrand, technique: str | rest.Techn
     f = rest.integrand(integrand)
     t = rest.technique(f, technique)
     n = count(sample_count, "sample_count")
+    level(alpha, "alpha")
     integer_in(batches, "batches", 8, n)
     size = n // batches
     ests = [rest.integrate(f, t, size, seed=seed, case_id=case_id, replica=k, threads=threads)

@@ -25,7 +25,7 @@ from harness.stats.validate import count
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["Replicates", "replicate", "ConvergenceResult", "convergence_rate",
+__all__ = ["Replicates", "replicate", "ConvergenceResult", "convergence_rate", "MIN_CONVERGENCE_REPLICAS",
            "fit_convergence", "error_vs_time"]
 
 
@@ -190,6 +190,17 @@ def replicate(integrand: Any, technique: Any = None, n: int | None = None, repli
 
 
 # --- convergence rate ------------------------------------------------------------------------
+#: Replicas per budget from which the slope's test holds its level: with fewer, the bootstrap
+#: over replicas understates the slope's spread.  Correct uniform MC of the Gaussian (slope
+#: -0.5 against the bound -0.45), 2000 seeds, false alarms at p < 0.002 / 0.01 / 0.025: over
+#: 3 budgets 110 / 143 / 185 at 2 replicas, 25 / 48 / 84 at 4, 15 / 35 / 52 at 8, 5 / 10 / 26
+#: at 16, 1 / 5 / 13 at 32; over 4 budgets 18 / 33 / 52 at 4, 7 / 16 / 28 at 8, 0 / 2 / 10 at 16
+#: (2026-12-06).  Below it a fit is "inconclusive", and convergence_rate refuses it.
+MIN_CONVERGENCE_REPLICAS = 16
+#: Bootstrap resamples a slope's interval takes at least
+MIN_BOOTSTRAP = 100
+
+
 @dataclass(frozen=True)
 class ConvergenceResult:
     """RMSE against the exact reference at geometric budgets, and the fitted log-log slope;
@@ -204,6 +215,9 @@ class ConvergenceResult:
     its z), for judging many cases at once with holm(); the two agree except where the
     bootstrap slopes are skewed.  ``n`` counts the replica estimates over all budgets; there are
     no deterministic ``failures`` (faulty contributions stop :meth:`Replicates.from_estimates`).
+    With fewer than :data:`MIN_CONVERGENCE_REPLICAS` replicas at some budget the test does not
+    hold its level: the verdict is "inconclusive" (``inconclusive`` says why; it passes, and its
+    ``pvalue`` is 1: nothing is rejected).
     """
 
     integrand: str
@@ -233,14 +247,25 @@ class ConvergenceResult:
         return int(self.table["replicas"].sum())
 
     @property
+    def inconclusive(self) -> str:
+        """Why no rate is judged ("" where one is): too few replicas at some budget."""
+        fewest = int(self.table["replicas"].min())
+        if fewest >= MIN_CONVERGENCE_REPLICAS or self.at_rounding_level:
+            return ""
+        return (f"{fewest} replicas at a budget: the slope's test holds its level from "
+                f"{MIN_CONVERGENCE_REPLICAS} (the bootstrap understates the spread of fewer)")
+
+    @property
     def verdict(self) -> str:
+        if self.inconclusive:
+            return "inconclusive"
         low = self.confidence_interval(self.confidence_level).low
         slow = low > self.expected + self.tolerance and not self.at_rounding_level
         return "slower than expected" if slow else "as expected"
 
     @property
     def passed(self) -> bool:
-        return self.verdict == "as expected"
+        return self.verdict in ("as expected", "inconclusive")
 
     @property
     def statistic(self) -> float:
@@ -253,8 +278,9 @@ class ConvergenceResult:
     def pvalue(self) -> float:
         """One-sided p-value of H0 "slope <= expected + tolerance" (normal approximation with
         the bootstrap standard error): small when the error falls measurably too slowly.  For
-        many cases at once, correct these with holm().  1 at the rounding level."""
-        if self.at_rounding_level:
+        many cases at once, correct these with holm().  1 at the rounding level and where
+        inconclusive."""
+        if self.at_rounding_level or self.inconclusive:
             return 1.0
         if not self.slope_se > 0:
             return 1.0 if self.slope <= self.expected + self.tolerance else 0.0
@@ -271,7 +297,8 @@ class ConvergenceResult:
                 f"expected {self.expected:+.2f} or faster (tolerance {self.tolerance:g}), "
                 f"one-sided p = {self.pvalue:.3g}, {self.n} replicas over {len(self.table)} budgets"
                 + (f"; RMSE at the rounding level (<= {self.rounding_floor:.3g}): no rate to judge"
-                   if self.at_rounding_level else ""))
+                   if self.at_rounding_level else "")
+                + (f"; not judged: {self.inconclusive}" if self.inconclusive else ""))
 
 
 def _judgeable(est: Estimator) -> Estimator:
@@ -301,21 +328,50 @@ def convergence_rate(integrand: Any, technique: Any = None, budgets: Sequence[in
     ``bootstrap`` resamples from a generator seeded by ``seed``), so it needs no normality.
     Budgets should span at least a factor 16.  Zero-variance estimators give an RMSE at the
     rounding level and a slope near 0: ``at_rounding_level``, judged "as expected" (p = 1).
+    ``replicas`` is at least :data:`MIN_CONVERGENCE_REPLICAS`, where the test holds its level.
     """
     est = _judgeable(estimator(integrand, technique, dim=dim, reference=reference))
-    b = sorted({count(x, "budgets") for x in budgets or ()})
-    if len(b) < 3:
-        raise ValueError(f"'budgets' needs at least 3 distinct sizes, got {budgets!r}")
+    b = _budgets(budgets)
+    _check_fit(expected, tolerance, confidence_level, bootstrap)
+    if count(replicas, "replicas") < MIN_CONVERGENCE_REPLICAS:
+        raise ValueError(f"'replicas' must be at least {MIN_CONVERGENCE_REPLICAS} for the slope's test to "
+                         f"hold its level (the bootstrap understates the spread of fewer), got {replicas!r}")
     reps = [replicate(est, n=n, replicas=replicas, seed=seed, case_id=case_id + 7919 * i, threads=threads)
             for i, n in enumerate(b)]
     return fit_convergence(reps, expected=expected, tolerance=tolerance, confidence_level=confidence_level,
                            bootstrap=bootstrap, seed=seed)
 
 
+def _check_fit(expected: Any, tolerance: Any, confidence_level: Any, bootstrap: Any) -> None:
+    """ValueError naming the first of a slope fit's settings that is not usable."""
+    check_confidence_level(confidence_level)
+    for name, value in (("expected", expected), ("tolerance", tolerance)):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ValueError(f"'{name}' must be a finite number, got {value!r}")
+    if tolerance < 0:
+        raise ValueError(f"'tolerance' must be >= 0, got {tolerance!r}")
+    if count(bootstrap, "bootstrap") < MIN_BOOTSTRAP:
+        raise ValueError(f"'bootstrap' must be at least {MIN_BOOTSTRAP} resamples, got {bootstrap!r}")
+
+
+def _budgets(budgets: Any) -> list[int]:
+    """At least 3 distinct budgets, sorted: whole numbers, from any sequence (an array too)."""
+    try:
+        given = [] if budgets is None else list(budgets)
+    except TypeError:
+        raise ValueError(f"'budgets' must be a sequence of sample counts, got {budgets!r}") from None
+    b = sorted({count(x, "budgets") for x in given})
+    if len(b) < 3:
+        raise ValueError(f"'budgets' needs at least 3 distinct sizes, got {budgets!r}")
+    return b
+
+
 def fit_convergence(reps: Sequence[Replicates], *, expected: float = -0.5, tolerance: float = 0.05,
                     confidence_level: float = 0.95, bootstrap: int = 400, seed: int = 0) -> ConvergenceResult:
-    """The slope fit of convergence_rate, from replicates at increasing budgets."""
-    check_confidence_level(confidence_level)
+    """The slope fit of convergence_rate, from replicates at 3 or more distinct budgets;
+    ``expected`` and ``tolerance`` finite, ``bootstrap`` at least :data:`MIN_BOOTSTRAP`."""
+    _check_fit(expected, tolerance, confidence_level, bootstrap)
+    _budgets([r.n for r in reps])
     sc = min(r._scale for r in reps)  # one power-of-two scale for all budgets: the slope does not change
     errors = [r.estimates * sc - r.reference * sc for r in reps]
     x = np.log([r.n for r in reps])

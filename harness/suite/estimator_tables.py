@@ -24,13 +24,13 @@ def _judge_convergence(results: list[CaseResult], alpha: float) -> list[str]:
     """Convergence verdict per case, Holm over the suite's judged cases at family-wise
     alpha: 'as expected', 'slower than expected', or 'not judged' where no rate is promised
     (infinite variance, heavy tails seen by the bias test, or an estimate that is skewed at the
-    smallest budget: pre-asymptotic) or the technique is biased on purpose (its error stops
-    falling at the bias)."""
+    smallest budget: pre-asymptotic), the technique is biased on purpose (its error stops
+    falling at the bias) or the fit is inconclusive (too few replicas: its notes say so)."""
     def pre_asymptotic(r: CaseResult) -> bool:
         b, smallest = r.bias, int(r.convergence.table.n.min())
         return b is not None and (bool(b.flags) or b.tail_index < 3 or not b.normal_at(smallest))
 
-    judged = [r.convergence is not None and not r.estimator.biased
+    judged = [r.convergence is not None and not r.estimator.biased and not r.convergence.inconclusive
               and r.estimator.finite_variance is not False and not pre_asymptotic(r) for r in results]
     # cases not judged enter the family with p = 1 (they count in Holm's m)
     rejected, _ = family_rejections([r.convergence.pvalue if ok else 1.0 for r, ok in zip(results, judged)],
@@ -195,6 +195,8 @@ def results_table(results: list[CaseResult], alpha: float) -> list[dict[str, Any
 
 def _notes(r: CaseResult) -> str:
     notes = list(r.bias.flags) if r.bias else []
+    if r.convergence is not None and r.convergence.inconclusive:
+        notes.append(f"convergence not judged: {r.convergence.inconclusive}")
     if r.bias and r.bias.tail_end:
         notes.append(r.bias.tail_end)
     if r.bias and r.bias.failures:

@@ -39,6 +39,11 @@ def record(db: str | Path, results: Mapping[str, Any], *, suite: str = "python",
     """Stores ``results`` (name -> result of check_unbiased, check_technique, check_sampler,
     mcmc_crosscheck, convergence_rate or efficiency) in ``db`` under ``suite``; returns the
     number of rows written.  ``domain`` names a sampler check's domain in tables."""
+    if not isinstance(results, Mapping):
+        raise TypeError(f"'results' must be a mapping of names to results, got {type(results).__name__}")
+    for what, value in (("'suite'", suite), *(("a result's name", k) for k in results)):
+        if not isinstance(value, str) or not value:
+            raise ValueError(f"{what} must be a non-empty string, got {value!r}")
     rows: list[dict[str, Any]] = []
     cases: list[tuple[str, str, str, dict[str, Any]]] = []
     for name, result in results.items():

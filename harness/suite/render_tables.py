@@ -29,10 +29,10 @@ def judge(results: list[RenderResult], alpha: float) -> list[dict[str, str]]:
     "invalid" for NaN/Inf/negative pixels, "not measured") and the convergence verdict ("as
     expected", "slower than expected" where the relMSE's slope is measurably worse than
     spp^-1/2 (one-sided, Holm over the cases expected unbiased), "not judged" for cases biased on
-    purpose, "not measured")."""
+    purpose and fits with too few replicas (the case's notes say so), "not measured")."""
     bias_rej, _ = family_rejections([r.bias.pvalue if r.bias is not None else None for r in results], alpha)
-    conv_rej, _ = family_rejections([r.convergence.pvalue
-                                     if r.convergence is not None and r.case.expect == "unbiased" else None
+    conv_rej, _ = family_rejections([r.convergence.pvalue if r.convergence is not None and r.case.expect ==
+                                     "unbiased" and not r.convergence.inconclusive else None
                                      for r in results], alpha)
     out = []
     for r, rej, crej in zip(results, bias_rej, conv_rej):

@@ -372,6 +372,8 @@ def _measure(rc: RenderCase, key: str, store: Store, reference: ist.Reference,
         if "convergence" in wanted and len(reps) >= 3:
             convergence = stats.fit_convergence([ist.as_replicates(rc.scene, rc.label, s, e, t)
                                                  for s, e, t in reps])
+            if convergence.inconclusive:
+                notes.append(f"convergence not judged: {convergence.inconclusive}")
         if "bias" not in wanted and "variance" not in wanted:  # the top budget's images, read last above
             store.put_image(f"{key}/estimate", images.mean(axis=0))
     if reps and noise > 0.1 * max(reps[-1][1].mean() + noise, 1e-300):

@@ -217,7 +217,15 @@ class Store:
 
     def record_run(self, suite: str) -> int:
         """The run that results recorded from Python (harness.record) go to: the suite's latest
-        run if it is a recording, else a new one."""
+        run if it is a recording, else a new one.  ValueError for the name of a suite that a
+        suite file ran here: a recording would replace its plan (harness gc then removes its
+        units) and hide its results."""
+        ran = self.db.execute("SELECT file FROM runs WHERE suite = ? AND file != ? LIMIT 1",
+                              (suite, RECORDED)).fetchone()
+        if ran is not None:
+            raise ValueError(f"'suite': {suite!r} names the suite of {ran[0]} in {self.path}; record under "
+                             "another name (a recording would replace that suite's plan and hide its "
+                             "results)")
         row = self.db.execute("SELECT run, file FROM runs WHERE suite = ? ORDER BY run DESC LIMIT 1",
                               (suite,)).fetchone()
         if row is not None and row[1] == RECORDED:

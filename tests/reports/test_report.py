@@ -414,3 +414,26 @@ def test_an_efficiency_in_clock_ticks_is_recorded_as_its_own_measurement(tmp_pat
     assert json.loads(s["detail"])["interval"] == "this run's machine state"
     assert json.loads(k["detail"])["interval"].startswith("across runs")
     assert k["lo"] < k["value"] < k["hi"] and s["lo"] < s["value"] < s["hi"]
+
+
+def test_recording_under_a_suite_files_name_is_refused(tmp_path):
+    # it had replaced that suite's plan (harness gc then removed its units) and hidden its results
+    import harness
+    from harness.suite.parse import loads_suite
+    from harness.suite.run import run_suite
+
+    db = tmp_path / "t.sqlite"
+    run_suite(loads_suite('[suite]\nname = "tiny"\nsamples = 4096\nmeasurements = ["bias"]\n\n[[case]]\n'
+                          'integrand = "gaussian"\ntechniques = "uniform"\n', path=tmp_path / "tiny.toml"),
+              db, threads=1)
+    before = load(db)
+    r = harness.check_unbiased(lambda u: u[:, 0], 1, 0.5, sample_count=10_000)
+    with pytest.raises(ValueError, match=r"'suite': 'tiny' names the suite of .*tiny.toml in .*t.sqlite; "
+                                         r"record under another name"):
+        harness.record(db, {"mine": r}, suite="tiny")
+    assert load(db).equals(before)
+    with pytest.raises(TypeError, match="'results' must be a mapping of names to results, got list"):
+        harness.record(db, [r])
+    with pytest.raises(ValueError, match="a result's name must be a non-empty string, got None"):
+        harness.record(db, {None: r})
+    assert harness.record(db, {"mine": r}, suite="mine") == 1

@@ -93,3 +93,15 @@ def test_cli_check_sampler(tmp_path):
         r = run(target)
         assert r.returncode == 2 and f"harness: cannot load {said}" in r.stderr, r.stderr
         assert "Traceback" not in r.stderr
+
+
+def test_points_with_their_axes_swapped_are_refused_not_reshaped():
+    # a correct sampler returning (2, N) had been reshaped into scrambled points and failed
+    sample = lambda u: np.stack([np.sqrt(u[:, 0]), u[:, 1]])      # noqa: E731
+    with pytest.raises(ValueError, match=r"<lambda> returned points of shape \(2, 5000\) for uniforms of "
+                                         r"shape \(5000, 2\); expected shape \(5000, 2\) on the square"):
+        check_sampler(sample, lambda x: 2 * x[:, 0], "square", sample_count=5000)
+    with pytest.raises(ValueError, match=r"<lambda> returned an empty tuple"):
+        check_sampler(lambda u: (), lambda x: np.ones(len(x)), "square", sample_count=5000)
+    one_column = check_sampler(lambda u: u[:, :1], lambda x: np.ones(len(x)), "interval", sample_count=5000)
+    assert one_column.passed                                     # an interval's (N, 1) is N points

@@ -34,7 +34,7 @@ def _image_runs(bias: float = 0.0, bad_pixel: bool = False) -> tuple[np.ndarray,
 def _results() -> dict[str, object]:
     f = lambda u: np.exp(-u[:, 0] ** 2)  # noqa: E731
     nan_at_start = lambda u: np.where(u[:, 0] < 0.01, np.nan, u[:, 0])  # noqa: E731
-    reps = [stats.replicate("gaussian", "uniform", n, 8, seed=1, case_id=i) for i, n in enumerate(BUDGETS)]
+    reps = [stats.replicate("gaussian", "uniform", n, 16, seed=1, case_id=i) for i, n in enumerate(BUDGETS)]
     x, ref = _image_runs()
     return {
         "unbiased": stats.check_unbiased(f, 1, GAUSS, sample_count=20_000, seed=1),
@@ -42,7 +42,7 @@ def _results() -> dict[str, object]:
         "invalid": stats.check_unbiased(nan_at_start, 1, 0.5, sample_count=20_000, seed=1),
         "technique": stats.check_technique("gaussian", "uniform/sobol", 8192, seed=0),
         "convergence": stats.fit_convergence(reps, seed=1),
-        "slow convergence": stats.convergence_rate("gaussian", "clamped:uniform(0.9)", BUDGETS, 8, seed=0),
+        "slow convergence": stats.convergence_rate("gaussian", "clamped:uniform(0.9)", BUDGETS, 16, seed=0),
         "efficiency": stats.efficiency(reps[-1]),
         "image": images.pixel_bias_test(x, ref, 8),
         "biased image": images.pixel_bias_test(_image_runs(bias=0.05)[0], ref, 8),
@@ -116,11 +116,11 @@ def test_intervals_cover_what_they_say(results):
     assert all(math.isnan(v) for v in results["invalid"].confidence_interval())
     c = results["convergence"]
     assert c.confidence_interval(0.5).low >= c.confidence_interval(0.95).low
-    assert c.alpha == pytest.approx(0.025) and c.n == 8 * len(BUDGETS)
+    assert c.alpha == pytest.approx(0.025) and c.n == 16 * len(BUDGETS)
     e = results["efficiency"]
     assert e.confidence_interval().low < e.value < e.confidence_interval().high
     assert math.isnan(e.pvalue) and math.isnan(e.alpha) and math.isnan(e.statistic)
-    assert e.n == e.budget * e.replicas == BUDGETS[-1] * 8
+    assert e.n == e.budget * e.replicas == BUDGETS[-1] * 16
     img = results["biased image"]
     assert img.confidence_interval(0.999).low > 0 and img.n == 16 * 8 and math.isnan(img.statistic)
     ratio, (rlo, rhi) = stats.efficiency_ratio(e, e)
