@@ -82,8 +82,7 @@ def assert_rare(count: int, n: int, p: float, *, alpha: float = 0.01) -> float:
     happened ``count`` times in n trials; fails when that is too many at false-alarm rate
     alpha (one-sided binomial test).  Returns the p-value."""
     n = validate.count(n, "n")
-    if isinstance(count, bool) or not isinstance(count, numbers.Integral) or not 0 <= count <= n:
-        raise ValueError(f"'count' must be a whole number from 0 to n = {n}, got {count!r}")
+    validate.integer_in(count, "count", 0, n)
     if isinstance(p, bool) or not isinstance(p, numbers.Real) or not 0 <= p <= 1:
         raise ValueError(f"'p' must be a probability in [0, 1], got {p!r}")
     validate.level(alpha, "alpha")

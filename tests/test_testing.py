@@ -56,7 +56,7 @@ def test_assert_rare():
     for args, kwargs, message in (((3, 10, 2.0), {}, r"'p' must be a probability in \[0, 1\], got 2.0"),
                                   ((10, 10, 0.001), {"alpha": -1}, r"'alpha' must be in \(0, 1\), got -1"),
                                   ((3, 10.5, 0.1), {}, r"'n' must be a positive whole number, got 10.5"),
-                                  ((11, 10, 0.1), {}, r"'count' must be a whole number from 0 to n = 10")):
+                                  ((11, 10, 0.1), {}, r"'count' must be an integer in \[0, 10\], got 11")):
         with pytest.raises(ValueError, match=message):   # alpha -1 and n 10.5 had passed
             testing.assert_rare(*args, **kwargs)
     for alpha in (0, 5):   # alpha 0 had passed a biased technique, 5 failed a correct one

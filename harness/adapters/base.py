@@ -36,8 +36,8 @@ import numpy as np
 from harness.usercode import USER_ERRORS, raised
 
 __all__ = ["Render", "Renderer", "RenderError", "ImageFaults", "image_faults", "read_image", "renderer",
-           "checked_render", "adapter_names", "check_spec", "file_digest", "ExactImage", "ADAPTERS",
-           "ENTRY_POINTS", "ENVIRONMENT"]
+           "checked_render", "image_array", "adapter_names", "check_spec", "file_digest", "ExactImage",
+           "ADAPTERS", "ENTRY_POINTS", "ENVIRONMENT"]
 
 # adapter name -> module that defines `make_renderer(spec: dict[, base=]) -> Renderer`
 ADAPTERS = {"mitsuba": "harness.adapters.mitsuba.render", "pyrender": "harness.adapters.pyrender.render",
@@ -160,13 +160,33 @@ def renderer(adapter: str, spec: dict[str, Any], *, base: Path | None = None) ->
         raise ValueError(f"adapter {adapter!r}: its factory {found[0].value!r} {raised(e)}") from e
 
 
+def image_array(image: Any) -> np.ndarray:
+    """A renderer's image as float64 (height, width, channels), a (height, width) one with one
+    channel; otherwise a ValueError saying what it is ("a list that is no array (...)", "a
+    ndarray of complex128 values": numpy's cast would keep their real part, with only a
+    warning; "an image of shape (2,)"), for the caller to say what was expected."""
+    try:
+        a = np.asarray(image)
+    except (TypeError, ValueError) as e:   # a ragged list, an object whose __array__ raises
+        raise ValueError(f"a {type(image).__name__} that is no array ({e})") from None
+    if a.dtype.kind not in "fiu":
+        raise ValueError(f"a {type(image).__name__} of {a.dtype} values")
+    a = a.astype(np.float64, copy=False)
+    if a.ndim == 2:
+        a = a[:, :, None]
+    if a.ndim != 3 or 0 in a.shape:
+        raise ValueError(f"an image of shape {a.shape}")
+    return a
+
+
 def checked_render(r: Renderer, adapter: str, spp: int, seed: int) -> Render:
     """``r.render(spp, seed)``, its image checked before anything stores it: a Render (or an
-    object with its fields) whose image is a non-empty array (height, width, channels), of the
-    exact image's shape where ``r`` has one (a render of another size, stored, had failed
-    every later run of the suite).  A registered adapter's exception becomes a RenderError
-    naming the call; the harness's own adapters raise RenderError for their renderers'
-    failures, and anything else from them is a defect of the harness, left as it is."""
+    object with its fields) whose image :func:`image_array` takes (a Dr.Jit tensor, a list and
+    a (height, width) array too), of the exact image's shape where ``r`` has one (a render of
+    another size, stored, had failed every later run of the suite).  A registered adapter's
+    exception becomes a RenderError naming the call; the harness's own adapters raise
+    RenderError for their renderers' failures, and anything else from them is a defect of the
+    harness, left as it is."""
     what = f"adapter {adapter!r}: render(spp={spp}, seed={seed})"
     try:
         out = r.render(spp, seed)
@@ -176,17 +196,17 @@ def checked_render(r: Renderer, adapter: str, spp: int, seed: int) -> Render:
         if adapter in ADAPTERS:
             raise
         raise RenderError(f"{what} {raised(e)}") from e
-    image = getattr(out, "image", None)
-    if not isinstance(image, np.ndarray) or image.ndim != 3 or not image.size or not (
-            hasattr(out, "spp") and hasattr(out, "seconds")):
-        got = f"an image of shape {image.shape}" if isinstance(image, np.ndarray) else type(out).__name__
-        raise RenderError(f"{what} returned {got}; expected a Render (image (height, width, channels), "
-                          "spp, seconds)")
+    if not all(hasattr(out, f) for f in ("image", "spp", "seconds")):
+        raise RenderError(f"{what} returned a {type(out).__name__}; expected a Render (image, spp, seconds)")
+    try:
+        image = image_array(out.image)
+    except ValueError as e:
+        raise RenderError(f"{what} returned {e}; expected an image (height, width[, channels])") from None
     exact = r.exact()
     if exact is not None and image.shape != exact.shape:
         raise RenderError(f"{what} returned an image of shape {image.shape}; the exact image's is "
                           f"{exact.shape}")
-    return out
+    return Render(image, out.spp, out.seconds)
 
 
 def check_spec(spec: dict[str, Any], keys: dict[str, Any], adapter: str) -> None:

@@ -16,13 +16,14 @@ change of the code invalidates its stored renders.
 """
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from harness.adapters.base import ENVIRONMENT, ExactImage, Render, RenderError, check_spec
+from harness.adapters.base import ENVIRONMENT, ExactImage, Render, RenderError, check_spec, image_array
 from harness.usercode import USER_ERRORS, UserCodeError, load_attr, raised, source_fingerprint
 
 __all__ = ["PythonRenderer", "make_renderer"]
@@ -60,22 +61,17 @@ class PythonRenderer:
         wall = time.perf_counter() - start
         image, seconds = (out if isinstance(out, tuple) and len(out) == 2 else (out, wall))
         try:
-            a = np.asarray(image)
-            if np.iscomplexobj(a):   # numpy's cast would keep the real part, with only a warning
-                raise TypeError("complex values")
-            a = a.astype(np.float64, copy=False)
-            seconds = float(seconds)
-        except (TypeError, ValueError) as e:
-            raise RenderError(f"{call}) returned {type(out).__name__}; expected an image (height, width[, "
-                              f"channels]) or (image, seconds): {e}") from None
-        if a.ndim == 2:
-            a = a[:, :, None]
-        if a.ndim != 3 or 0 in a.shape:
-            raise RenderError(f"{call}) returned an array of shape {a.shape}; expected an image "
-                              "(height, width[, channels])")
-        if not seconds >= 0:
+            a = image_array(image)
+        except ValueError as e:
+            raise RenderError(f"{call}) returned {e}; expected an image (height, width[, channels]) or "
+                              "(image, seconds)") from None
+        try:
+            t = float(seconds)
+        except (TypeError, ValueError):
+            t = math.nan
+        if not t >= 0:
             raise RenderError(f"{call}) returned a time of {seconds!r} s")
-        return Render(a, spp, seconds)
+        return Render(a, spp, t)
 
     def exact(self) -> np.ndarray | None:
         return self._exact.image()

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import numbers
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -22,7 +21,7 @@ from harness.stats import distributions
 from harness.stats.merge import merge_moments
 from harness.stats.results import ConfidenceInterval, Failure, failures_from_counts, summed_counts, t_interval
 from harness.stats.tails import Side, TailEnd, TailSample
-from harness.stats.validate import count, integer_in, level
+from harness.stats.validate import count, finite, integer_in, level
 from harness.usercode import array_result, call, callable_name
 
 __all__ = ["UnbiasedResult", "check_unbiased", "check_technique", "judge_batches", "batch_points"]
@@ -190,12 +189,11 @@ def check_unbiased(contributions: Callable[[np.ndarray], np.ndarray], dim: int, 
     integer_in(dim, "dim", 1)
     level(alpha, "alpha")
     integer_in(batches, "batches", 8, n)
-    if isinstance(reference, bool) or not isinstance(reference, numbers.Real) or not math.isfinite(reference):
-        raise ValueError(f"'reference' must be a finite number, got {reference!r}")
+    reference = finite(reference, "reference")
     name = callable_name(contributions)
 
     parts: list[list[tuple[int, float, float, float]]] = [[] for _ in range(batches)]
-    counts: dict[str, int] = {}
+    issues: list[dict[str, int]] = []
     examples: list[dict[str, Any]] = []
     tails = TailSample.for_count(n)
     max_abs = 0.0
@@ -204,19 +202,19 @@ def check_unbiased(contributions: Callable[[np.ndarray], np.ndarray], dim: int, 
         y = call(contributions, name, u, what=f"contributions of shape ({rows},)")   # errors name it
         y = array_result(y, (rows,), name, f"uniforms of shape {u.shape}, {u.dtype}")
         est = rest.accumulate(y)
-        for key, v in est.issues.items():
-            counts[key] = counts.get(key, 0) + v
+        issues.append(est.issues)
         for ex in est.examples:
             if len(examples) < _MAX_EXAMPLES:
                 examples.append({**ex, "index": int(ex["index"]) + first})
-        finite = y[np.isfinite(y)]
-        if finite.size == 0:
+        good = y[np.isfinite(y)]
+        if good.size == 0:
             continue
-        tails.add(finite)
-        max_abs = max(max_abs, float(np.max(np.abs(finite))))
+        tails.add(good)
+        max_abs = max(max_abs, float(np.max(np.abs(good))))
         # a batch's pieces as (n, mean, stderr, skewness): _decide merges them in scaled units,
         # where the standard error stays finite for contributions near 1e+-300
         parts[k].append((est.n, est.mean, est.stderr, est.skewness))
+    counts = summed_counts(issues)
     if counts:
         return UnbiasedResult.invalid(counts, examples, reference=reference, n=n, alpha=alpha,
                                       batches=batches)

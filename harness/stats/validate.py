@@ -10,7 +10,7 @@ import math
 import numbers
 from typing import Any
 
-__all__ = ["count", "integer_in", "level"]
+__all__ = ["count", "finite", "integer_in", "level"]
 
 
 def count(x: Any, name: str) -> int:
@@ -36,4 +36,11 @@ def level(x: Any, name: str) -> float:
     ``confidence_level`` (NaN is refused)."""
     if isinstance(x, bool) or not isinstance(x, numbers.Real) or not 0 < x < 1:
         raise ValueError(f"'{name}' must be in (0, 1), got {x!r}")
+    return float(x)
+
+
+def finite(x: Any, name: str) -> float:
+    """A finite real number (a numpy scalar too; not a bool, NaN or an infinity)."""
+    if isinstance(x, bool) or not isinstance(x, numbers.Real) or not math.isfinite(x):
+        raise ValueError(f"'{name}' must be a finite number, got {x!r}")
     return float(x)

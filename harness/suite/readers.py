@@ -52,8 +52,11 @@ def run_filter(con: sqlite3.Connection, db: str | Path, *, suite: str | None = N
     where: list[str] = []
     params: list[Any] = []
     if suite:
-        if con.execute("SELECT 1 FROM measurements WHERE suite = ? LIMIT 1", (suite,)).fetchone() is None:
-            known = [s for (s,) in con.execute("SELECT DISTINCT suite FROM measurements ORDER BY suite")]
+        # a suite is known by its measurements, or by a run (one still running or interrupted)
+        named = "SELECT suite FROM measurements" + (" UNION SELECT suite FROM runs" if "runs" in tables
+                                                    else "")
+        known = [s for (s,) in con.execute(f"SELECT DISTINCT suite FROM ({named}) ORDER BY suite")]
+        if suite not in known:
             raise ValueError(f"{db} has no suite {suite!r}; its suites: {', '.join(known) or 'none'}")
         where.append("m.suite = ?")
         params.append(suite)

@@ -60,9 +60,10 @@ def record(db: str | Path, results: Mapping[str, Any], *, suite: str = "python",
     store = Store(db)
     try:
         with store.translated():
+            run = store.record_run(suite)   # first: a suite file's name is refused before anything is written
             for key, integrand, technique, definition in cases:
                 store.add_case(key, suite, integrand, technique, definition)
-            store.put_measurements(rows, run=store.record_run(suite))
+            store.put_measurements(rows, run=run)
     finally:
         store.close()
     return len(rows)

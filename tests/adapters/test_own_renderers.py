@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from harness.adapters import base
-from harness.adapters.base import RenderError, renderer
+from harness.adapters.base import Render, RenderError, renderer
 from harness.suite.parse import SuiteError, load_suite
 from harness.suite.run import run_suite
 from harness.suite.store import Store, write_exr
@@ -171,7 +171,8 @@ def test_a_python_function_renders_and_its_errors_name_the_call(repo):
     assert out.seconds == 0.04 and out.image.shape == (4, 6, 3) and out.image.mean() > 1.5
     with pytest.raises(RenderError, match=r"fn:broken\(spp=4, seed=1\) raised KeyError: 'material'"):
         renderer("python", {"function": "fn:broken"}, base=repo).render(4, 1)
-    with pytest.raises(RenderError, match=r"fn:flat\(spp=4, seed=1\) returned an array of shape \(2,\)"):
+    with pytest.raises(RenderError,
+                       match=r"fn:flat\(spp=4, seed=1\) returned an image of shape \(2,\); expected an"):
         renderer("python", {"function": "fn:flat"}, base=repo).render(4, 1)
 
 
@@ -359,3 +360,25 @@ def test_a_registered_adapters_own_failures_name_it(repo, monkeypatch):
                                      'replicas = 4\nmeasurements = ["bias"]\n')
         with pytest.raises(RenderError, match=r"adapter 'fragile': " + message):
             run_suite(load_suite(repo / "s.toml"), repo / f"{scene}.sqlite", threads=1)
+
+
+def test_a_render_is_taken_as_the_store_takes_it_and_complex_values_are_refused():
+    # a (height, width) image, a list or a tensor had been stored as given: checked_render takes
+    # them as images with one channel or as arrays, not as mistakes
+    class Returns:
+        def __init__(self, image):
+            self.image = image
+
+        def render(self, spp, seed):
+            return Render(self.image, spp, 0.01)
+
+        def exact(self):
+            return None
+
+    flat = base.checked_render(Returns([[1.0, 2.0], [3.0, 4.0]]), "flat", 4, 1)
+    assert flat.image.shape == (2, 2, 1) and flat.image.dtype == np.float64 and flat.seconds == 0.01
+    for image, message in ((np.ones((2, 2, 3)) * 1j, r"returned a ndarray of complex128 values; expected"),
+                           ([[1.0], [2.0, 3.0]], r"returned a list that is no array"),
+                           (np.ones(4), r"returned an image of shape \(4,\)")):
+        with pytest.raises(RenderError, match=r"adapter 'flat': render\(spp=4, seed=1\) " + message):
+            base.checked_render(Returns(image), "flat", 4, 1)

@@ -8,6 +8,7 @@ import io
 import json
 import math
 import shutil
+import sqlite3
 import textwrap
 from pathlib import Path
 
@@ -432,6 +433,8 @@ def test_recording_under_a_suite_files_name_is_refused(tmp_path):
                                          r"record under another name"):
         harness.record(db, {"mine": r}, suite="tiny")
     assert load(db).equals(before)
+    with sqlite3.connect(db) as con:   # nothing written: no case of the recording under the suite's name
+        assert con.execute("SELECT COUNT(*) FROM cases WHERE technique = 'check_unbiased'").fetchone() == (0,)
     with pytest.raises(TypeError, match="'results' must be a mapping of names to results, got list"):
         harness.record(db, [r])
     with pytest.raises(ValueError, match="a result's name must be a non-empty string, got None"):

@@ -95,6 +95,12 @@ def test_each_run_is_recorded_with_the_suite_revision_it_measured(tmp_path, suit
     for command in ("show", "report"):
         one_line_error(cli(command, "--db", str(db), "--suite", "nosuch", cwd=tmp_path),
                        f"has no suite 'nosuch'; its suites: {suite_name}")
+    store = Store(db)      # a suite whose first run has not finished is known, with no rows yet
+    try:
+        store.start_run("fresh", "fresh.toml", "")
+    finally:
+        store.close()
+    assert harness.load(db, suite="fresh").empty
 
 
 def test_an_interrupted_run_leaves_the_last_finished_one_shown(tmp_path, suite_file):

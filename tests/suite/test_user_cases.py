@@ -256,5 +256,5 @@ def test_a_suites_convergence_with_too_few_replicas_is_not_judged_and_says_why(t
     o = run_suite(load_suite(tmp_path / "few.toml"), tmp_path / "r.sqlite", threads=1)["estimator"]
     row = o.frame.iloc[0]
     assert row["convergence"] == "not judged", row
-    assert "convergence not judged: 4 replicas at a budget: the slope's test holds its level from 16" \
+    assert "convergence not judged: 4 replicas at a budget: the slope's test is judged from 16" \
         in row["notes"]
