@@ -49,9 +49,9 @@ def assert_biased(contributions: Callable[[np.ndarray], np.ndarray], dim: int, r
 def assert_converges(integrand: Any, technique: Any = None, budgets: Sequence[int] | None = None, *,
                      dim: int | None = None, reference: float | None = None, rate: float = -0.5,
                      tolerance: float = 0.05, replicas: int = 32, seed: int = 0) -> stats.ConvergenceResult:
-    """Fails when the RMSE's log-log slope is measurably worse than ``rate`` (its whole 95 %
-    bootstrap interval above rate + tolerance: verdict "slower than expected", a one-sided
-    test at level 0.025).  The estimator is a catalogue integrand with its technique, or a
+    """Fails when the RMSE's log-log slope is measurably worse than ``rate`` (one-sided p of
+    "slope <= rate + tolerance" under 0.025, from the slope's own law: verdict "slower than
+    expected").  The estimator is a catalogue integrand with its technique, or a
     contributions callable with ``dim`` and ``reference``:
     ``assert_converges(my_estimator, budgets=[256, 1024, 4096], dim=2, reference=0.349)``."""
     c = stats.convergence_rate(integrand, technique, budgets, replicas, dim=dim, reference=reference,

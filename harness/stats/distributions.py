@@ -9,12 +9,14 @@ NaN and df = inf), and broadcasts like it.
 """
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 from scipy import special
 
-__all__ = ["t_ppf", "t_cdf", "t_sf", "norm_ppf", "norm_sf", "chi2_ppf", "chi2_sf", "f_cdf"]
+__all__ = ["t_ppf", "t_cdf", "t_sf", "norm_ppf", "norm_sf", "chi2_ppf", "chi2_sf", "f_cdf",
+           "log_gamma_sum_sf"]
 
 
 def _out(v: Any) -> Any:
@@ -65,3 +67,51 @@ def f_cdf(x: Any, d1: Any, d2: Any) -> Any:
     """P(F <= x) for Fisher's F with (d1, d2) degrees of freedom."""
     return _out(special.fdtr(d1, d2, x))
 
+
+
+def log_gamma_sum_sf(z: float, weights: Any, shapes: Any) -> float:
+    """P(sum_b w_b log G_b >= z) for independent G_b ~ Gamma(shape a_b, scale 1 / a_b) (mean
+    1): the law of a log-log slope fitted to mean squared errors of normal estimates (their
+    mean over R replicas is sigma^2 Gamma(R / 2, 2 / R)), whose right tail is heavier than a
+    normal's.  By the Lugannani-Rice saddlepoint formula on the exact cumulant generating
+    function K(t) = sum_b [lgamma(a_b + w_b t) - lgamma(a_b) - w_b t log a_b]: within 1 % of
+    a Monte Carlo of 2e7 draws down to 1e-5 for three terms of shape 8 (tests/stats).  Written
+    here (no scipy.stats law is this sum); the saddlepoint t solves K'(t) = z by Newton steps
+    kept inside the domain a_b + w_b t > 0, where K' is increasing."""
+    w = np.asarray(weights, dtype=np.float64)
+    a = np.asarray(shapes, dtype=np.float64)
+    if not math.isfinite(z):
+        return 0.0 if z > 0 else 1.0
+
+    def k(t: float) -> tuple[float, float, float]:   # K, K', K''
+        at = a + w * t
+        return (float(np.sum(special.gammaln(at) - special.gammaln(a) - w * t * np.log(a))),
+                float(np.sum(w * (special.digamma(at) - np.log(a)))),
+                float(np.sum(w * w * special.polygamma(1, at))))
+
+    k0, mean, var = k(0.0)
+    if abs(z - mean) <= 1e-9 * math.sqrt(var):
+        return 0.5
+    # the domain of t, and Newton's steps on K'(t) = z bracketed within it
+    lo = float(np.max(-a[w > 0] / w[w > 0])) if np.any(w > 0) else -math.inf
+    hi = float(np.min(-a[w < 0] / w[w < 0])) if np.any(w < 0) else math.inf
+    left, right = (0.0, hi) if z > mean else (lo, 0.0)
+    t = 0.0
+    for _ in range(200):
+        _, slope, curve = k(t)
+        if abs(slope - z) <= 1e-12 * max(1.0, abs(z)):
+            break
+        if slope < z:
+            left = t
+        else:
+            right = t
+        step = t - (slope - z) / curve
+        if not left < step < right:   # Newton left the bracket: halve it, or widen an open side
+            step = (0.5 * (left + right) if math.isfinite(left) and math.isfinite(right) else
+                    max(2 * t, 1.0) if right == math.inf else min(2 * t, -1.0))
+        t = step
+    kt, _, curve = k(t)
+    r = math.copysign(math.sqrt(max(2.0 * (t * z - kt), 0.0)), t)
+    u = t * math.sqrt(curve)
+    return float(min(max(special.ndtr(-r) + math.exp(-0.5 * r * r) / math.sqrt(2 * math.pi) * (1 / u - 1 / r),
+                         0.0), 1.0))

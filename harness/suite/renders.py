@@ -371,7 +371,7 @@ def _measure(rc: RenderCase, key: str, store: Store, reference: ist.Reference,
         eff = ist.image_efficiency(rc.label, spp, err, seconds)
         if "convergence" in wanted and len(reps) >= 3:
             convergence = stats.fit_convergence([ist.as_replicates(rc.scene, rc.label, s, e, t)
-                                                 for s, e, t in reps])
+                                                 for s, e, t in reps], pooled=True)
             if convergence.inconclusive:
                 notes.append(f"convergence not judged: {convergence.inconclusive}")
         if "bias" not in wanted and "variance" not in wanted:  # the top budget's images, read last above
