@@ -251,13 +251,35 @@ class ConvergenceResult:
 
     @property
     def inconclusive(self) -> str:
-        """Why no rate is judged ("" where one is): pooled errors with too few replicas at some
-        budget (:data:`MIN_CONVERGENCE_REPLICAS`)."""
+        """Why no rate is judged ("" where one is): a slope that is not a number; single
+        estimates so few that not even a flat RMSE (slope 0) would be rejected at ``alpha`` (a
+        test without power: it had passed a clamped estimator with 2 replicas); pooled errors
+        with fewer than :data:`MIN_CONVERGENCE_REPLICAS` replicas at some budget."""
+        if self.at_rounding_level:
+            return ""
+        if not math.isfinite(self.slope):
+            return "the slope is not a number (an RMSE of 0 at some budget)"
         fewest = int(self.table["replicas"].min())
-        if self.shapes or fewest >= MIN_CONVERGENCE_REPLICAS or self.at_rounding_level:
+        if self.shapes:
+            if self._law_sf(0.0) < self.alpha:
+                return ""
+            return (f"{fewest} replicas at a budget over {len(self.table)} budgets: not even a flat RMSE "
+                    f"would be rejected at alpha = {self.alpha:g}; take more replicas or budgets")
+        if fewest >= MIN_CONVERGENCE_REPLICAS:
             return ""
         return (f"{fewest} replicas at a budget: a slope of pooled errors is judged from "
                 f"{MIN_CONVERGENCE_REPLICAS} (the bootstrap understates the spread of fewer)")
+
+    def _weights(self) -> np.ndarray:
+        """The slope's weights on each budget's 0.5 log mean squared error."""
+        x = np.log(self.table["n"].to_numpy(dtype=np.float64))
+        x = x - x.mean()
+        return 0.5 * x / (x @ x)
+
+    def _law_sf(self, slope: float) -> float:
+        """P(fitted slope >= ``slope``) under the bound, by the slope's law (``shapes``)."""
+        return distributions.log_gamma_sum_sf(slope - self.expected - self.tolerance, self._weights(),
+                                              self.shapes)
 
     @property
     def verdict(self) -> str:
@@ -271,7 +293,13 @@ class ConvergenceResult:
 
     @property
     def statistic(self) -> float:
-        """z = (slope - expected - tolerance) / slope_se; NaN where the bootstrap has no spread."""
+        """z of the slope against the bound: the normal quantile of ``pvalue`` by the slope's
+        law (``shapes``), else (slope - bound) / slope_se; NaN where it has no spread or the fit
+        is inconclusive."""
+        if self.inconclusive:
+            return math.nan
+        if self.shapes:
+            return float(-distributions.norm_ppf(self._law_sf(self.slope)))
         if not self.slope_se > 0:
             return math.nan
         return (self.slope - self.expected - self.tolerance) / self.slope_se
@@ -288,16 +316,22 @@ class ConvergenceResult:
             return 1.0
         bound = self.expected + self.tolerance
         if self.shapes:
-            x = np.log(self.table["n"].to_numpy(dtype=np.float64))
-            x = x - x.mean()
-            return distributions.log_gamma_sum_sf(self.slope - bound, 0.5 * x / (x @ x), self.shapes)
+            return self._law_sf(self.slope)
         if not self.slope_se > 0:
             return 1.0 if self.slope <= bound else 0.0
         return float(distributions.norm_sf((self.slope - bound) / self.slope_se))
 
     def confidence_interval(self, confidence_level: float = 0.95) -> ConfidenceInterval:
-        """Percentile-bootstrap interval of the slope (resampling replicas within each budget)."""
-        return _percentile_interval(self.bootstrap_slopes, confidence_level)
+        """Interval of the slope: by the slope's law where there are ``shapes`` (the slope less
+        the law's upper and lower quantiles: its low end lies above the bound exactly when p <
+        alpha at this level), else the percentile bootstrap's (resampling replicas within each
+        budget)."""
+        if not self.shapes or not math.isfinite(self.slope):
+            return _percentile_interval(self.bootstrap_slopes, confidence_level)
+        tail = (1 - check_confidence_level(confidence_level)) / 2
+        w = self._weights()
+        return ConfidenceInterval(self.slope - distributions.log_gamma_sum_isf(tail, w, self.shapes),
+                                  self.slope - distributions.log_gamma_sum_isf(1 - tail, w, self.shapes))
 
     def __str__(self) -> str:
         lo, hi = self.confidence_interval(self.confidence_level)
@@ -392,7 +426,7 @@ def fit_convergence(reps: Sequence[Replicates], *, expected: float = -0.5, toler
 
     def slopes(sq: np.ndarray) -> np.ndarray:
         """Least-squares slopes of log RMSE on log n, one per row of mean squared errors."""
-        y = 0.5 * np.log(np.maximum(sq, floor * floor))
+        y = 0.5 * np.log(np.maximum(sq, floor))
         return (y - y.mean(axis=-1, keepdims=True)) @ x / (x @ x)
 
     slope = float(slopes(np.array([np.mean(e * e) for e in errors])))

@@ -5,7 +5,7 @@ import sys
 
 import numpy as np
 import pytest
-from scipy import stats
+from scipy import special, stats
 
 from harness.stats import distributions as d
 
@@ -73,3 +73,13 @@ def test_the_log_gamma_sum_tail_matches_a_monte_carlo_far_out():
         assert abs(p - q) <= 0.1 * q + 3 * math.sqrt(q / 2e6), (q, p)
     assert d.log_gamma_sum_sf(math.inf, w, a) == 0.0
     assert d.log_gamma_sum_sf(-math.inf, w, a) == 1.0
+    assert math.isnan(d.log_gamma_sum_sf(math.nan, w, a))
+    # near the mean (where the saddlepoint formula cancels) and for huge shapes: smooth, in [0, 1]
+    for shapes in (a, np.array([2.0, 8.0, 16.0]), np.full(3, 1e6)):
+        mean = float(np.sum(w * (special.digamma(shapes) - np.log(shapes))))
+        sd = math.sqrt(float(np.sum(w * w * special.polygamma(1, shapes))))
+        p = [d.log_gamma_sum_sf(mean + k * sd, w, shapes) for k in (-2e-2, -1e-3, -1e-9, 0, 1e-9, 1e-3, 2e-2)]
+        assert all(0.4 < v < 0.6 for v in p) and all(np.diff(p) <= 1e-3), (shapes, p)
+        for q in (0.5, 0.1, 1e-3):
+            z = d.log_gamma_sum_isf(q, w, shapes)
+            assert d.log_gamma_sum_sf(z, w, shapes) == pytest.approx(q, rel=1e-6)

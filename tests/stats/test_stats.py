@@ -458,6 +458,17 @@ def test_a_convergence_slope_is_judged_by_its_own_law_and_pooled_errors_need_16_
     reps = [hs.replicate("gaussian", "uniform", n, 4, seed=2, case_id=i) for i, n in enumerate(BUDGETS[:3])]
     fit = hs.fit_convergence(reps)
     assert len(set(fit.shapes)) == 1 and 0 < fit.shapes[0] <= 2.0    # 4 replicas x at most 1/2
+    # the interval is the law's: its low end above the bound exactly where p < alpha
+    for seed in range(40):
+        c = hs.convergence_rate("gaussian", "uniform", BUDGETS[:3], 16, seed=seed)
+        low = c.confidence_interval(0.95).low
+        assert (low > -0.45) == (c.pvalue < c.alpha) == (c.verdict == "slower than expected")
+    # 2 replicas over 3 budgets could not reject even a flat RMSE (a clamped estimator had passed)
+    flat = hs.convergence_rate("gaussian", "clamped:uniform(0.9)", BUDGETS[:3], 2)
+    assert flat.verdict == "inconclusive" and "not even a flat RMSE would be rejected" in flat.inconclusive
+    assert math.isnan(flat.statistic) and flat.pvalue == 1.0
+    slow = hs.convergence_rate("gaussian", "clamped:uniform(0.9)", BUDGETS[:3], 16)
+    assert slow.verdict == "slower than expected"
     pooled = hs.fit_convergence(reps, pooled=True)   # an image's relMSE: the bootstrap's spread judges it
     assert pooled.verdict == "inconclusive" and pooled.passed and pooled.pvalue == 1.0
     assert "4 replicas at a budget: a slope of pooled errors is judged from 16" in pooled.inconclusive
