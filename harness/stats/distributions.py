@@ -128,21 +128,40 @@ def log_gamma_sum_sf(z: float, weights: Any, shapes: Any) -> float:
 
 
 def log_gamma_sum_isf(q: float, weights: Any, shapes: Any) -> float:
-    """The z with :func:`log_gamma_sum_sf` (z) = q (0 < q < 1), by bisection on the monotone
-    tail (to 1e-12 of the law's standard deviation)."""
+    """The z with :func:`log_gamma_sum_sf` (z) = q (0 < q < 1): a bracket widened from the
+    mean, then the Illinois variant of regula falsi on log sf (a dozen evaluations, to 1e-10 of
+    the law's standard deviation)."""
     w = np.asarray(weights, dtype=np.float64)
     a = np.asarray(shapes, dtype=np.float64)
     mean = float(np.sum(w * (special.digamma(a) - np.log(a))))
     sd = math.sqrt(float(np.sum(w * w * special.polygamma(1, a))))
+    target = math.log(q)
+
+    def f(z: float) -> float:   # decreasing in z
+        return math.log(max(log_gamma_sum_sf(z, w, a), 1e-300)) - target
+
     lo, hi = mean - sd, mean + sd
-    while log_gamma_sum_sf(lo, w, a) < q:
+    f_lo, f_hi = f(lo), f(hi)
+    while f_lo < 0:
         lo -= 2 * (hi - lo)
-    while log_gamma_sum_sf(hi, w, a) > q:
+        f_lo = f(lo)
+    while f_hi > 0:
         hi += 2 * (hi - lo)
-    while hi - lo > 1e-12 * sd:
-        mid = 0.5 * (lo + hi)
-        if log_gamma_sum_sf(mid, w, a) > q:
-            lo = mid
+        f_hi = f(hi)
+    side = 0
+    for _ in range(100):
+        z = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+        fz = f(z)
+        if fz == 0 or hi - lo <= 1e-10 * sd:
+            return z
+        if fz > 0:
+            lo, f_lo = z, fz
+            if side == 1:
+                f_hi /= 2
+            side = 1
         else:
-            hi = mid
+            hi, f_hi = z, fz
+            if side == -1:
+                f_lo /= 2
+            side = -1
     return 0.5 * (lo + hi)

@@ -234,6 +234,7 @@ class ConvergenceResult:
     # scale's (the slope's law: distributions.log_gamma_sum_sf); () for pooled errors (an
     # image's relMSE), judged by the normal approximation with the bootstrap's spread
     shapes: tuple[float, ...] = ()
+    _memo: dict = field(default_factory=dict, repr=False, compare=False)   # the law's tails, computed once
 
     @property
     def at_rounding_level(self) -> bool:
@@ -278,8 +279,11 @@ class ConvergenceResult:
 
     def _law_sf(self, slope: float) -> float:
         """P(fitted slope >= ``slope``) under the bound, by the slope's law (``shapes``)."""
-        return distributions.log_gamma_sum_sf(slope - self.expected - self.tolerance, self._weights(),
-                                              self.shapes)
+        key = ("sf", slope)
+        if key not in self._memo:
+            self._memo[key] = distributions.log_gamma_sum_sf(slope - self.expected - self.tolerance,
+                                                             self._weights(), self.shapes)
+        return self._memo[key]
 
     @property
     def verdict(self) -> str:
@@ -329,9 +333,13 @@ class ConvergenceResult:
         if not self.shapes or not math.isfinite(self.slope):
             return _percentile_interval(self.bootstrap_slopes, confidence_level)
         tail = (1 - check_confidence_level(confidence_level)) / 2
-        w = self._weights()
-        return ConfidenceInterval(self.slope - distributions.log_gamma_sum_isf(tail, w, self.shapes),
-                                  self.slope - distributions.log_gamma_sum_isf(1 - tail, w, self.shapes))
+        key = ("interval", tail)
+        if key not in self._memo:
+            w = self._weights()
+            self._memo[key] = ConfidenceInterval(
+                self.slope - distributions.log_gamma_sum_isf(tail, w, self.shapes),
+                self.slope - distributions.log_gamma_sum_isf(1 - tail, w, self.shapes))
+        return self._memo[key]
 
     def __str__(self) -> str:
         lo, hi = self.confidence_interval(self.confidence_level)
