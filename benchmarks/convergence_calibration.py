@@ -1,0 +1,82 @@
+"""False alarms of the convergence slope test (harness.stats.fit_convergence) at the tolerance's
+bound and at the promised rate, by replica count and number of budgets.
+
+    .venv/bin/python benchmarks/convergence_calibration.py [--seeds 20000] [--replicas 4 16 32]
+                                                           [--budgets 3 5] [--harness-seeds 2000]
+
+Two tables:
+  at the bound   synthetic replicas whose errors fall exactly as n^(-0.45), the bound of the
+                 default H0 (expected -0.5, tolerance 0.05), fitted by fit_convergence itself:
+                 normal errors, t(5) errors (heavier than a mean of many contributions gives)
+                 and pooled errors (each replica a mean of 3072 squared t(3) "pixels", as a
+                 render's relMSE: fit_convergence(pooled=True)).  The share rejected at p < 5 %,
+                 1 %, 0.1 % is the test's level there; "inconclusive" counts fits it refuses.
+  the harness    convergence_rate("gaussian", "uniform", ...) over seeds: a correct estimator
+                 at the promised rate (inside the bound); rejections at 2.5 % (its verdict),
+                 1 % and 0.2 %.
+A rejection share well above its level (beyond the binomial 0.99 quantile) is a test that does
+not hold it.  About 2 ms a synthetic fit, 3-8 ms a harness fit.
+"""
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from harness import stats
+
+LEVELS = (0.05, 0.01, 0.001)
+
+
+def synthetic(kind: str, replicas: int, budgets: int, seed: int) -> stats.ConvergenceResult:
+    """One fit of replicas whose RMSE falls as n^-0.45 exactly (``kind``: normal, t5, pooled)."""
+    rng = np.random.default_rng(seed)
+    n = 256 * 4.0 ** np.arange(budgets)
+    reps = []
+    for b, size in enumerate(n):
+        if kind == "pooled":
+            pixels = rng.standard_t(3, (replicas, 3072)) / np.sqrt(3.0)
+            errors = np.sqrt((pixels * pixels).mean(axis=1)) * size ** -0.45
+        else:
+            draw = (rng.standard_normal(replicas) if kind == "normal" else
+                    rng.standard_t(5, replicas) / np.sqrt(5 / 3))
+            errors = draw * size ** -0.45
+        reps.append(stats.Replicates("synthetic", kind, int(size), 0.0, errors, np.full(replicas, 1e-3),
+                                     np.nan, np.nan, False, 1))
+    return stats.fit_convergence(reps, pooled=kind == "pooled", seed=seed)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--seeds", type=int, default=20_000)
+    ap.add_argument("--replicas", type=int, nargs="+", default=[4, 16, 32])
+    ap.add_argument("--budgets", type=int, nargs="+", default=[3, 5])
+    ap.add_argument("--harness-seeds", type=int, default=2000)
+    args = ap.parse_args()
+    print(f"seeds: {args.seeds} at the bound, {args.harness_seeds} with the harness")
+    print("at the bound (slope -0.45): rejected at p < 5 % / 1 % / 0.1 %, inconclusive")
+    for kind in ("normal", "t5", "pooled"):
+        for budgets in args.budgets:
+            for replicas in args.replicas:
+                fits = [synthetic(kind, replicas, budgets, s) for s in range(args.seeds)]
+                p = np.array([f.pvalue for f in fits])
+                shares = " / ".join(f"{100 * np.mean(p < level):.2f}" for level in LEVELS)
+                undecided = sum(f.verdict == "inconclusive" for f in fits)
+                print(f"  {kind:7s} {budgets} budgets x {replicas:3d} replicas: {shares} %, "
+                      f"{undecided} inconclusive", flush=True)
+    print("the harness, gaussian/uniform at the promised rate: rejected at p < 2.5 % / 1 % / 0.2 %, "
+          "inconclusive")
+    for budgets in args.budgets:
+        b = [1024 * 4 ** k for k in range(budgets)]
+        for replicas in args.replicas:
+            fits = [stats.convergence_rate("gaussian", "uniform", b, replicas, seed=s)
+                    for s in range(args.harness_seeds)]
+            p = np.array([f.pvalue for f in fits])
+            counts = " / ".join(str(int(np.sum(p < level))) for level in (0.025, 0.01, 0.002))
+            undecided = sum(f.verdict == "inconclusive" for f in fits)
+            print(f"  {budgets} budgets x {replicas:3d} replicas: {counts} of {args.harness_seeds}, "
+                  f"{undecided} inconclusive", flush=True)
+
+
+if __name__ == "__main__":
+    main()
