@@ -228,16 +228,26 @@ def environment(db: Path) -> dict[str, str]:
     return {**os.environ, "TMPDIR": str(tmp)}
 
 
-def run_to_completion(suite: Path, db: Path) -> subprocess.CompletedProcess:
+def run_to_completion(suite: Path, db: Path) -> float:
+    """A run to the end, checked; returns the seconds from its first commit to its exit (the
+    span the kill tests draw their moments from: this machine's, not a constant's)."""
     kept = stored_count(db)
-    r = subprocess.run(command(suite, db), capture_output=True, text=True, timeout=300, env=environment(db))
-    assert r.returncode == 0, r.stdout + r.stderr
-    assert re.search(r"summary: \d+ passed, 0 failed", r.stdout), r.stdout
-    ran, planned = map(int, re.search(r"(\d+) of (\d+) work units computed", r.stdout).groups())
+    proc = subprocess.Popen(command(suite, db), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=environment(db))
+    first = None
+    while proc.poll() is None:
+        if first is None and stored_count(db) > kept:
+            first = time.monotonic()
+        time.sleep(0.01)
+    end = time.monotonic()
+    out, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, out + err
+    assert re.search(r"summary: \d+ passed, 0 failed", out), out
+    ran, planned = map(int, re.search(r"(\d+) of (\d+) work units computed", out).groups())
     assert ran == stored_count(db) - kept, (ran, kept, stored_count(db))  # only what was not stored
     assert plan(db) == (planned, planned)
     assert runs_table(db)[-1][:3] == (1, planned, ran), runs_table(db)
-    return r
+    return end - (first if first is not None else end)
 
 
 def kill_once(suite: Path, db: Path, sig: signal.Signals, delay: float, full: int) -> str | None:
@@ -277,16 +287,18 @@ def kill_once(suite: Path, db: Path, sig: signal.Signals, delay: float, full: in
 
 
 def kill_and_resume(suite: Path, ref_db: Path, db: Path, sig: signal.Signals, seed: int,
-                    delays: list[tuple[float, float]]) -> list[str]:
+                    delays: list[tuple[float, float]], span: float) -> list[str]:
     """Runs on a fresh ``db``, each sent ``sig`` at a random moment (seeded: the moments, not the
-    outcome) from its range after the run's first commit, then a run to completion; asserts the
-    stored results equal the uninterrupted run's in ``ref_db``.  Returns notes on signals that
-    came after a run had finished."""
+    outcome) after the run's first commit, from its range of fractions of ``span`` (the
+    uninterrupted run's seconds from its first commit to its exit: a fixed range in seconds had
+    outlasted the run on a faster machine, and no run was interrupted), then a run to
+    completion; asserts the stored results equal the uninterrupted run's in ``ref_db``.
+    Returns notes on signals that came after a run had finished."""
     full = stored_count(ref_db)
     rng = random.Random(seed)
     notes, interrupted = [], 0
     for lo, hi in delays:
-        note = kill_once(suite, db, sig, rng.uniform(lo, hi), full)
+        note = kill_once(suite, db, sig, span * rng.uniform(lo, hi), full)
         if note:
             notes.append(note)
             break  # finished: nothing left to interrupt
@@ -310,37 +322,38 @@ def kill_and_resume(suite: Path, ref_db: Path, db: Path, sig: signal.Signals, se
 
 # --- the suites ------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
-def sampler_suite(tmp_path_factory) -> tuple[Path, Path]:
-    """The sampler-check suite and its uninterrupted run's database."""
+def sampler_suite(tmp_path_factory) -> tuple[Path, Path, float]:
+    """The sampler-check suite, its uninterrupted run's database and that run's seconds from its
+    first commit to its exit."""
     folder = tmp_path_factory.mktemp("samplers")
     suite = folder / "samplers.toml"
     suite.write_text(SAMPLERS)
     db = folder / "reference" / "r.sqlite"
-    run_to_completion(suite, db)
-    return suite, db
+    return suite, db, run_to_completion(suite, db)
 
 
 @pytest.fixture(scope="module")
-def render_suite(tmp_path_factory) -> tuple[Path, Path]:
-    """The render suite beside a copy of examples/own-renderer's renderer, and its uninterrupted
-    run's database (in its own folder: references/ is shared by the databases of a folder)."""
+def render_suite(tmp_path_factory) -> tuple[Path, Path, float]:
+    """The render suite beside a copy of examples/own-renderer's renderer, its uninterrupted
+    run's database (in its own folder: references/ is shared by the databases of a folder) and
+    that run's seconds from its first commit to its exit."""
     folder = tmp_path_factory.mktemp("renders")
     for name in ("myrenderer.py", "mysampler.py", "ref.exr"):
         shutil.copy(OWN_RENDERER / name, folder / name)
     suite = folder / "renders.toml"
     suite.write_text(RENDERS)
     db = folder / "reference" / "r.sqlite"
-    run_to_completion(suite, db)
+    span = run_to_completion(suite, db)
     assert len(references(db)) == 1  # the python case's rendered reference: its parts
-    return suite, db
+    return suite, db, span
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("sig", SIGNALS)
 def test_a_sampler_suite_killed_at_random_moments_resumes_to_the_same_results(sampler_suite, tmp_path, sig):
-    suite, ref_db = sampler_suite
+    suite, ref_db, span = sampler_suite
     notes = kill_and_resume(suite, ref_db, tmp_path / "killed" / "r.sqlite", sig, seed=20260101 + sig,
-                            delays=[(0.0, 0.6), (0.0, 0.8)])
+                            delays=[(0.0, 0.6), (0.0, 0.8)], span=span)
     for note in notes:
         print("note:", note)
 
@@ -348,8 +361,8 @@ def test_a_sampler_suite_killed_at_random_moments_resumes_to_the_same_results(sa
 @pytest.mark.slow
 @pytest.mark.parametrize("sig", SIGNALS)
 def test_a_render_suite_killed_at_random_moments_resumes_to_the_same_results(render_suite, tmp_path, sig):
-    suite, ref_db = render_suite
+    suite, ref_db, span = render_suite
     notes = kill_and_resume(suite, ref_db, tmp_path / "killed" / "r.sqlite", sig, seed=20260202 + sig,
-                            delays=[(0.2, 1.2), (0.2, 1.2)])
+                            delays=[(0.1, 0.8), (0.1, 0.8)], span=span)
     for note in notes:
         print("note:", note)
