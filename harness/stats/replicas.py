@@ -210,13 +210,15 @@ class ConvergenceResult:
     H0: the RMSE falls at least as fast as n^(``expected`` + ``tolerance``), i.e. slope <=
     expected + tolerance.  ``verdict`` is "slower than expected" when ``pvalue`` (one-sided,
     below) is under ``alpha`` = (1 - ``confidence_level``) / 2 (0.025 at the default 95 %),
-    else "as expected"; the interval is the percentile bootstrap's (``statistic``: the slope's
-    z against the bound with the bootstrap standard error).  ``n`` counts the replica
-    estimates over all budgets; there are no deterministic ``failures`` (faulty contributions
-    stop :meth:`Replicates.from_estimates`).
-    A fit of pooled errors (no ``shapes``) with fewer than :data:`MIN_CONVERGENCE_REPLICAS`
-    replicas at some budget is "inconclusive" (``inconclusive`` says why; it passes, and its
-    ``pvalue`` is 1: nothing is rejected).
+    else "as expected".  For single estimates (``shapes``) the p-value, the interval and
+    ``statistic`` (the normal quantile of p) all come from the slope's own law, so the interval
+    lies above the bound exactly when the test rejects; for pooled errors (an image's relMSE)
+    from the normal approximation with the bootstrap's spread and the percentile bootstrap.
+    ``n`` counts the replica estimates over all budgets; there are no deterministic
+    ``failures`` (faulty contributions stop :meth:`Replicates.from_estimates`).  "inconclusive"
+    (``inconclusive`` says why; it passes, and its ``pvalue`` is 1: nothing is rejected): single
+    estimates too few to reject even a flat RMSE, pooled errors with fewer than
+    :data:`MIN_CONVERGENCE_REPLICAS` replicas at some budget, a slope that is not a number.
     """
 
     integrand: str
