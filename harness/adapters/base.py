@@ -150,13 +150,13 @@ def renderer(adapter: str, spec: dict[str, Any], *, base: Path | None = None) ->
         takes_base = "base" in inspect.signature(make).parameters
     except (TypeError, ValueError):
         takes_base = False
-    if adapter in ADAPTERS:
-        return make(dict(spec), base=base) if takes_base else make(dict(spec))
-    try:   # a registered factory's own failure (a KeyError on a missing key, say) names it
+    try:
         return make(dict(spec), base=base) if takes_base else make(dict(spec))
     except ValueError:
         raise
-    except USER_ERRORS as e:
+    except USER_ERRORS as e:   # a registered factory's own failure (a KeyError on a missing key) names it
+        if adapter in ADAPTERS:
+            raise
         raise ValueError(f"adapter {adapter!r}: its factory {found[0].value!r} {raised(e)}") from e
 
 
