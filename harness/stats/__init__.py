@@ -18,17 +18,11 @@ Every figure here carries its uncertainty and its sample count; every test state
 false-alarm rate and what it detects.
 """
 from harness.stats.bias import UnbiasedResult, batch_points, check_technique, check_unbiased, judge_batches
+from harness.stats.convergence import ConvergenceResult, convergence_rate, fit_convergence
 from harness.stats.efficiency import Efficiency, efficiency, efficiency_ratio
 from harness.stats.estimator import CatalogueEstimator, Contributions, Estimator, estimator
 from harness.stats.multiple import holm
-from harness.stats.replicas import (
-    ConvergenceResult,
-    Replicates,
-    convergence_rate,
-    error_vs_time,
-    fit_convergence,
-    replicate,
-)
+from harness.stats.replicas import Replicates, error_vs_time, replicate
 from harness.stats.results import ConfidenceInterval, Failure, failure_counts, failures_from_counts
 from harness.stats.tails import TailSample
 from harness.stats.timing import CLOCK, clock_time, median_time, reference_clock
