@@ -238,13 +238,13 @@ def _compare(args) -> int:
     from pathlib import Path
 
     from harness.stats.compare import compare_images
-    from reports.compare import compare_page, load_replicas
+    from reports.compare import compare_page, load_pair
 
     if why := _unwritable(args.output, "-o"):
         print(f"harness: {why}", file=sys.stderr)
         return 2
     try:
-        a, b = (load_replicas(x, db=args.db) for x in (args.a, args.b))
+        a, b = load_pair(args.a, args.b, db=args.db)
         result = compare_images(a.images, b.images, alpha=args.alpha, spp=args.spp)
     except ValueError as e:
         print(f"harness: {e}", file=sys.stderr)

@@ -25,7 +25,7 @@ from harness.suite.readers import connect_read_only
 from harness.suite.store import image_dir, read_stored, same_unit
 from reports import images, plots
 
-__all__ = ["ReplicaSet", "load_replicas", "compare_page"]
+__all__ = ["ReplicaSet", "compare_page", "load_pair", "load_replicas"]
 
 _IMAGE_SUFFIXES = (".exr", ".pfm", ".hdr")
 e = html.escape
@@ -62,6 +62,18 @@ def load_replicas(source: str, *, db: str | Path | None = None) -> ReplicaSet:
                              "one configuration must have one size")
         stack.append(a)
     return ReplicaSet(folder.name, np.stack(stack), str(folder))
+
+
+def load_pair(a: str, b: str, *, db: str | Path | None = None) -> tuple[ReplicaSet, ReplicaSet]:
+    """The two replica sets ``a`` and ``b`` name (:func:`load_replicas`); a ValueError where
+    both name one set (one folder, or one render case): its replicas compared with themselves
+    had read "consistent, p = 1", a verdict about nothing."""
+    first, second = load_replicas(a, db=db), load_replicas(b, db=db)
+    same = first.source == second.source if db is not None else Path(a).resolve() == Path(b).resolve()
+    if same:
+        raise ValueError(f"{a!r} and {b!r} name one replica set ({first.source}): compare takes two, "
+                         "one for each renderer or configuration")
+    return first, second
 
 
 def _from_db(name: str, db: Path) -> ReplicaSet:

@@ -59,6 +59,7 @@ def test_compare_errors_are_one_line(tmp_path):
                           (("a", "empty"), "empty: no .exr, .pfm, .hdr images in it"),
                           (("a", "small"), "at least 4 replicas of each, got 6 and 3"),
                           (("a", "bad"), "cannot read image"),
+                          (("a", "./a/"), "'a' and './a/' name one replica set"),   # had been "consistent"
                           (("a", "b", "--db", "none.sqlite"), "no results database at none.sqlite"),
                           (("a", "a", "-o", "empty"), "-o empty: a folder; give a file name"),
                           (("a", "a", "-o", "nofolder/x.html"), "-o nofolder/x.html: no folder nofolder")):
@@ -101,3 +102,5 @@ def test_compare_two_render_cases_of_a_stored_run(tmp_path):
     assert "A: python:flat/flat:render (6 replicas" in r.stdout
     ambiguous = run("flat", "flat:render", "--db", "r.sqlite", cwd=tmp_path)
     assert ambiguous.returncode == 2 and "'flat': 2 render cases match in r.sqlite" in ambiguous.stderr
+    itself = run("flat:render", "flat:render", "--db", "r.sqlite", cwd=tmp_path)
+    assert itself.returncode == 2 and "name one replica set (r.sqlite case " in itself.stderr, itself.stderr

@@ -11,10 +11,39 @@ from typing import Any
 
 import numpy as np
 
+import reference_estimators as rest
+
 from harness.samplers.domains import Domain, Float32DirectionPdf
+from harness.stats.validate import count, integer_in
 from harness.usercode import UserCodeError, array_result, call, callable_name
 
-__all__ = ["checked_pdf", "drawn_points"]
+__all__ = ["MAX_SAMPLES", "MAX_UDIM", "checked_pdf", "checked_sample_count", "drawn_points", "uniforms"]
+
+#: The most samples a check takes: it holds them in memory (0.9 GB for a plain sampler's 1e7)
+MAX_SAMPLES = 100_000_000
+#: The most canonical uniforms a sample may take (a rejection sampler takes several tries);
+#: the uniforms of a check, sample count times udim, number at most 4 MAX_SAMPLES (3.2 GB)
+MAX_UDIM = 1024
+
+
+def checked_sample_count(sample_count: Any) -> int:
+    """A check's sample count: a whole number from 1000 to :data:`MAX_SAMPLES`."""
+    n = count(sample_count, "sample_count")
+    if not 1000 <= n <= MAX_SAMPLES:
+        raise ValueError(f"'sample_count' must be from 1000 to {MAX_SAMPLES:,} (a check holds its samples in "
+                         f"memory), got {sample_count!r}")
+    return n
+
+
+def uniforms(n: int, udim: Any, dom: Domain, seed: int, case_id: int) -> np.ndarray:
+    """The check's n canonical uniforms (stream ``seed``, ``case_id``), (n, udim): ``udim``
+    None takes the domain's default, else an integer from 1 to :data:`MAX_UDIM` (0 had been
+    taken for the default)."""
+    d = dom.udim if udim is None else integer_in(udim, "udim", 1, MAX_UDIM)
+    if n * d > 4 * MAX_SAMPLES:
+        raise ValueError(f"{n:,} samples of {d} uniforms each: a check holds at most {4 * MAX_SAMPLES:,} "
+                         "uniforms in memory; take fewer samples")
+    return rest.points(n, d, seed=seed, case_id=case_id)
 
 
 def drawn_points(sample: Callable[[np.ndarray], Any], u: np.ndarray,

@@ -24,6 +24,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
+import numbers
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -31,7 +32,7 @@ import numpy as np
 
 import reference_estimators as rest
 
-from harness.samplers.calls import checked_pdf, drawn_points
+from harness.samplers.calls import MAX_SAMPLES, checked_pdf, checked_sample_count, drawn_points, uniforms
 from harness.samplers.cramer_von_mises import cramer_von_mises_from_sums
 from harness.samplers.cubature import cell_integrals
 from harness.samplers.domains import Domain, MomentColumns, ParamDensity, as_domain, checked_breaks, pdf_floor
@@ -40,7 +41,7 @@ from harness.samplers.result import SamplerCheck
 from harness.samplers.transform import STRIPS, Transform
 from harness.stats import distributions, holm
 from harness.stats.results import Failure
-from harness.stats.validate import count
+from harness.stats.validate import level
 
 __all__ = ["MAX_SAMPLES", "SAMPLE_CASE", "SamplerTest", "check_sampler", "check_with_missing",
            "failure_pvalue", "histogram"]
@@ -59,9 +60,6 @@ DITHER_CASE = 0xD17E
 #: pdf evaluations the base grid's cubature may spend (SamplerTest)
 _MOMENT_EVALS = 12_000_000
 
-#: The most samples a check takes: it holds them in memory (0.9 GB for a plain sampler's 1e7)
-MAX_SAMPLES = 100_000_000
-
 
 # --- the check -------------------------------------------------------------------------------
 class SamplerTest:
@@ -76,10 +74,8 @@ class SamplerTest:
         self.breaks = breaks = checked_breaks(breaks, dom)
         self.pdf = self.claimed_pdf = checked_pdf(pdf)   # claimed_pdf: the pdf as given (for_total keeps it)
         self.total = 1.0    # pdf = claimed_pdf / total (for_total)
-        self.n = n = _sample_count(sample_count)
-        if not 0 < alpha < 1:
-            raise ValueError(f"'alpha' must be in (0, 1), got {alpha!r}")
-        self.alpha = alpha
+        self.n = n = checked_sample_count(sample_count)
+        self.alpha = alpha = level(alpha, "alpha")
         self.base = base = (4096,) if dom.k == 1 else (128, 256)
         pre_shape = (64,) if dom.k == 1 else (32, 64)
         # the pdf's rounding (judged on the pre-grid where not declared): a float32 pdf's own
@@ -317,7 +313,7 @@ def check_sampler(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.ndarray
     bits whatever the batch.
     """
     dom = as_domain(domain)
-    n = _sample_count(sample_count)
+    n = checked_sample_count(sample_count)
     _checked_batch(pdf_batch)
     u, x, reported = _draw(sample, dom, n, seed, udim)
     if total is None and np.isfinite(x).all():
@@ -366,7 +362,7 @@ def check_with_missing(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.nd
     check_sampler's."""
     dom = as_domain(domain)
     _checked_batch(pdf_batch)
-    u, x, reported = _draw(sample, dom, _sample_count(sample_count), seed, udim)
+    u, x, reported = _draw(sample, dom, checked_sample_count(sample_count), seed, udim)
     return _check_drawn(u, x, reported, pdf, dom, alpha, total, seed, breaks, pdf_batch)
 
 
@@ -376,7 +372,8 @@ def _check_drawn(u: np.ndarray, x: np.ndarray, reported: np.ndarray | None,
                  pdf_batch: int | None = None) -> SamplerCheck:
     """check_with_missing on points x already drawn from uniforms u (``reported``: the pdf
     values the sampler returned with them, or None)."""
-    if total is not None and not (isinstance(total, (int, float)) and 0 < total <= 1):
+    if total is not None and (isinstance(total, bool) or not isinstance(total, numbers.Real)
+                              or not 0 < total <= 1):
         raise ValueError(f"'total' must be the pdf's integral over the domain, in (0, 1], got {total!r}")
     n = x.shape[0]
     x = x.reshape(n, dom.point_dim)
@@ -449,20 +446,11 @@ def _u_examples(u: np.ndarray, mask: np.ndarray, k: int = 5) -> list[dict[str, A
     return [{"index": int(i), "u": u[i].tolist()} for i in np.flatnonzero(mask)[:k]]
 
 
-def _sample_count(sample_count: Any) -> int:
-    """A check's sample count: a whole number from 1000 to :data:`MAX_SAMPLES`."""
-    n = count(sample_count, "sample_count")
-    if not 1000 <= n <= MAX_SAMPLES:
-        raise ValueError(f"'sample_count' must be from 1000 to {MAX_SAMPLES:,} (a check holds its samples in "
-                         f"memory), got {sample_count!r}")
-    return n
-
-
 def _draw(sample: Callable[[np.ndarray], Any], dom: Domain, n: int, seed: int,
           udim: int | None) -> tuple[np.ndarray, np.ndarray]:
     """The check's uniforms (stream ``seed``, :data:`SAMPLE_CASE`) and the points ``sample``
     draws from them."""
-    u = rest.points(n, udim or dom.udim, seed=seed, case_id=SAMPLE_CASE)
+    u = uniforms(n, udim, dom, seed, SAMPLE_CASE)
     return (u, *drawn_points(sample, u, dom))
 
 

@@ -17,6 +17,7 @@ on the half line), the density the cubature integrates and the histograms are co
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -57,6 +58,15 @@ class Domain:
         if self.pole != "z" and self.kind != "sphere":
             raise ValueError(f"'pole' {self.pole!r} is for the sphere only; the {self.kind} has none "
                              "to choose")
+        ends_ok = all(isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v)
+                      for v in (self.lo, self.hi))
+        if not (ends_ok and self.lo < self.hi):   # an infinite end made every cell and map NaN
+            raise ValueError(f"an interval's ends must be finite numbers a < b (the half line is "
+                             f"'half_line'), got ({self.lo!r}, {self.hi!r})")
+        if self.kind != "interval" and (self.lo, self.hi) != (0.0, 1.0):
+            raise ValueError(f"ends are for the interval only; the {self.kind} has none to choose")
+        object.__setattr__(self, "lo", float(self.lo))
+        object.__setattr__(self, "hi", float(self.hi))
 
     @property
     def k(self) -> int:
@@ -339,9 +349,13 @@ def as_domain(d: str | tuple | Domain) -> Domain:
     if isinstance(d, Domain):
         return d
     if isinstance(d, tuple):
-        if len(d) == 3 and d[0] == "interval" and d[2] > d[1]:
-            return Domain("interval", float(d[1]), float(d[2]))
-        raise ValueError(f"'domain' must be one of {DOMAINS} or ('interval', a, b) with a < b, got {d!r}")
+        if len(d) == 3 and d[0] == "interval":
+            try:
+                return Domain("interval", d[1], d[2])
+            except ValueError:
+                pass
+        raise ValueError(f"'domain' must be one of {DOMAINS} or ('interval', a, b) with finite a < b, "
+                         f"got {d!r}")
     if d not in DOMAINS:
         raise ValueError(f"'domain' must be one of {DOMAINS} or ('interval', a, b), got {d!r}")
     return Domain(d)

@@ -44,13 +44,14 @@ from scipy import special, stats
 
 import reference_estimators as rest
 
-from harness.samplers.calls import checked_pdf, drawn_points
+from harness.samplers.calls import checked_pdf, checked_sample_count, drawn_points, uniforms
 from harness.samplers.check import histogram
 from harness.samplers.domains import Domain, as_domain
 from harness.samplers.reported import reported_pdf_failure
 from harness.samplers.result import SamplerCheck
 from harness.stats import holm
 from harness.stats.results import Failure
+from harness.stats.validate import count, integer_in, level
 
 __all__ = ["MCMC_CASE", "mcmc_crosscheck"]
 
@@ -124,22 +125,18 @@ def mcmc_crosscheck(sample: Callable[[np.ndarray], Any], pdf: Callable[[np.ndarr
     import emcee
 
     dom = as_domain(domain)
-    n = int(sample_count)
-    if n < 1000:
-        raise ValueError(f"'sample_count' must be at least 1000, got {sample_count!r}")
-    if not 0 < alpha < 1:
-        raise ValueError(f"'alpha' must be in (0, 1), got {alpha!r}")
-    if int(max_steps) < 1:
-        raise ValueError(f"'max_steps' must be a positive number of steps per walker, got {max_steps!r}")
-    nw = int(walkers) if walkers is not None else 2 * int(np.clip(-(-n // 64), 16, 256))
-    if nw < 8 or nw % 2:
+    n = checked_sample_count(sample_count)
+    alpha = level(alpha, "alpha")
+    max_steps = count(max_steps, "max_steps")
+    nw = 2 * int(np.clip(-(-n // 64), 16, 256)) if walkers is None else integer_in(walkers, "walkers", 8)
+    if nw % 2:
         raise ValueError(f"'walkers' must be an even number >= 8, got {walkers!r}")
     pdf = checked_pdf(pdf)
     rng = np.random.default_rng([seed, MCMC_CASE])
     log_q, bad_count = _log_target(pdf, dom)
 
     # the sampler's points first: a user error surfaces before the chain runs
-    u = rest.points(n, udim or dom.udim, seed=seed, case_id=MCMC_CASE)
+    u = uniforms(n, udim, dom, seed, MCMC_CASE)
     x, reported = drawn_points(sample, u, dom)
     failures, s, missing = _sampler_failures(x, reported, u, pdf, dom)
 

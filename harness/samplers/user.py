@@ -42,7 +42,7 @@ def resolve_sampler(obj: Any, params: dict[str, Any] | None = None, *, name: str
     """The sampler ``obj`` is (see the module docstring); ``name`` (its module:attr) names it
     in every error.  A factory is called with ``params`` (none: called without arguments
     when ``obj`` has no ``sample`` of its own)."""
-    if params or isinstance(obj, type) or (callable(obj) and not hasattr(obj, "sample")):
+    if params or isinstance(obj, type) or (callable(obj) and _attribute(obj, "sample", name) is None):
         if not callable(obj):
             raise UserCodeError(f"{name}: params were given, but it is a {type(obj).__name__}, not a factory")
         try:
@@ -57,10 +57,9 @@ def resolve_sampler(obj: Any, params: dict[str, Any] | None = None, *, name: str
         sample, pdf, domain, total, udim = obj[0], obj[1], obj[2] if len(obj) == 3 else None, None, None
         breaks, pole = None, "z"
     else:
-        sample, pdf = getattr(obj, "sample", None), getattr(obj, "pdf", None)
-        domain, total, udim = (getattr(obj, "domain", None), getattr(obj, "total", None),
-                               getattr(obj, "udim", None))
-        breaks, pole = getattr(obj, "breaks", None), getattr(obj, "pole", "z")
+        keys = ("sample", "pdf", "domain", "total", "udim", "breaks", "pole")
+        sample, pdf, domain, total, udim, breaks, pole = (_attribute(obj, key, name) for key in keys)
+        pole = "z" if pole is None else pole
     if not (callable(sample) and callable(pdf)):
         raise UserCodeError(f"{name}: expected an object with sample(u) and pdf(x) methods, a (sample, pdf) "
                             f"tuple or a factory of one, got a {type(obj).__name__}")
@@ -76,3 +75,12 @@ def resolve_sampler(obj: Any, params: dict[str, Any] | None = None, *, name: str
     except ValueError as e:
         raise UserCodeError(f"{name}: {e}") from None
     return UserSampler(name, sample, pdf, domain, None if total is None else float(total), udim, breaks, pole)
+
+
+def _attribute(obj: Any, key: str, name: str) -> Any:
+    """``obj.key``, None where it has none; a property that raises (or calls sys.exit) is a
+    UserCodeError naming it (had been a traceback, or the harness's exit)."""
+    try:
+        return getattr(obj, key, None)
+    except USER_ERRORS as e:
+        raise UserCodeError(f"{name}.{key} {raised(e)}") from e

@@ -12,6 +12,7 @@ pure function of its uniforms).
 from __future__ import annotations
 
 import math
+import numbers
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -121,12 +122,13 @@ class Contributions:
     def __post_init__(self) -> None:
         if not callable(self.function):
             raise TypeError(f"'function' must be callable, got {type(self.function).__name__}")
-        if isinstance(self.dim, bool) or not isinstance(self.dim, int) or self.dim < 1:
+        if isinstance(self.dim, bool) or not isinstance(self.dim, numbers.Integral) or self.dim < 1:
             raise ValueError(f"'dim' must be a positive integer (uniforms per sample), got {self.dim!r}")
+        object.__setattr__(self, "dim", int(self.dim))   # a numpy integer too (a shape's entry)
         if self.points not in POINT_SETS:
             raise ValueError(f"'points' must be one of {', '.join(POINT_SETS)}, got {self.points!r}")
         ref = self.reference
-        if isinstance(ref, bool) or not isinstance(ref, (int, float)) or math.isinf(ref):
+        if isinstance(ref, bool) or not isinstance(ref, numbers.Real) or math.isinf(ref):
             raise ValueError(f"'reference' must be a finite number (or NaN: unknown), got {ref!r}")
         object.__setattr__(self, "reference", float(ref))
         if not self.name:

@@ -21,7 +21,7 @@ from harness.stats.estimator import Contributions, Estimator, estimator
 from harness.stats.merge import chan_merge
 from harness.stats.results import ConfidenceInterval, check_confidence_level, summed_counts
 from harness.stats.timing import clock_time, median_time, reference_clock
-from harness.stats.validate import count
+from harness.stats.validate import count, sizes
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -119,7 +119,7 @@ class Replicates:
 
     def rmse_interval(self, confidence_level: float = 0.95) -> ConfidenceInterval:
         """Interval for the RMSE from the chi-square law of R squared normal errors (exact
-        for normal, unbiased estimates; the bootstrap in ``convergence_rate`` does not need that)."""
+        for normal, unbiased estimates; the slope test of ``convergence_rate`` does not need that)."""
         check_confidence_level(confidence_level)
         r = self.replicas
         a = 1 - confidence_level
@@ -203,6 +203,10 @@ def error_vs_time(integrand: Any, techniques: Sequence[Any], budgets: Sequence[i
     replicas.  Plot rmse against seconds on log-log axes to see which technique reaches a
     given error first.
     """
+    budgets = sizes(budgets, "budgets", 1)
+    techniques = list(techniques)
+    if not techniques:
+        raise ValueError("'techniques' must name at least one technique, got none")
     rows = []
     if integrand is None:
         ests = [t if isinstance(t, Contributions) else estimator(t, dim=dim, reference=reference)

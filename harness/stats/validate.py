@@ -10,7 +10,7 @@ import math
 import numbers
 from typing import Any
 
-__all__ = ["count", "finite", "integer_in", "level"]
+__all__ = ["count", "finite", "integer_in", "level", "sizes"]
 
 
 def count(x: Any, name: str) -> int:
@@ -44,3 +44,17 @@ def finite(x: Any, name: str) -> float:
     if isinstance(x, bool) or not isinstance(x, numbers.Real) or not math.isfinite(x):
         raise ValueError(f"'{name}' must be a finite number, got {x!r}")
     return float(x)
+
+
+def sizes(x: Any, name: str, least: int) -> list[int]:
+    """At least ``least`` distinct sample counts (budgets), sorted: whole numbers
+    (:func:`count`), from any sequence (an array too)."""
+    try:
+        given = [] if x is None or isinstance(x, (str, bytes)) else list(x)
+    except TypeError:
+        raise ValueError(f"'{name}' must be a sequence of sample counts, got {x!r}") from None
+    b = sorted({count(v, name) for v in given})
+    if len(b) < least:
+        what = f"{least} distinct sizes" if least > 1 else "one size"
+        raise ValueError(f"'{name}' needs at least {what}, got {x!r}")
+    return b

@@ -166,3 +166,19 @@ def test_deterministic_failures_and_user_errors():
         mcmc_crosscheck(lambda u: u, COS.pdf, "hemisphere", sample_count=2000)
     with pytest.raises(ValueError, match="'max_steps' must be a positive"):
         mcmc_crosscheck(lambda u: COS.sample(u)[0], COS.pdf, "hemisphere", max_steps=0)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    # each had been taken (a string count, a fraction cut to a whole, 1e12 ran into a MemoryError)
+    ({"sample_count": "3000"}, r"'sample_count' must be a positive whole number, got '3000'"),
+    ({"sample_count": 2500.5}, r"'sample_count' must be a positive whole number, got 2500.5"),
+    ({"sample_count": 10**12}, r"'sample_count' must be from 1000 to 100,000,000"),
+    ({"max_steps": 2.5}, r"'max_steps' must be a positive whole number, got 2.5"),
+    ({"walkers": 16.0}, r"'walkers' must be an integer >= 8, got 16.0"),
+    ({"walkers": 9}, r"'walkers' must be an even number >= 8, got 9"),
+    ({"alpha": True}, r"'alpha' must be in \(0, 1\), got True"),
+    ({"udim": 0}, r"'udim' must be an integer in \[1, 1024\], got 0"),
+])
+def test_argument_errors_name_the_argument(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        mcmc_crosscheck(lambda u: COS.sample(u)[0], COS.pdf, "hemisphere", **kwargs)

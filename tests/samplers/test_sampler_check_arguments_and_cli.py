@@ -25,12 +25,20 @@ def test_domains_by_name():
 @pytest.mark.parametrize("kwargs, error, message", [
     ({"domain": "cube"}, ValueError,
      r"'domain' must be one of \('interval', 'half_line', 'square', 'disk', 'hemisphere', 'sphere'\)"),
-    ({"domain": ("interval", 2, 1)}, ValueError, r"\('interval', a, b\) with a < b"),
+    ({"domain": ("interval", 2, 1)}, ValueError, r"\('interval', a, b\) with finite a < b"),
     ({"sample_count": 10}, ValueError, r"'sample_count' must be from 1000 to 100,000,000 \(a check holds its "
                                        r"samples in memory\), got 10"),
     ({"sample_count": 2**40}, ValueError, r"'sample_count' must be from 1000 to 100,000,000"),
     ({"sample_count": 1500.5}, ValueError, r"'sample_count' must be a positive whole number, got 1500.5"),
     ({"alpha": 0.0}, ValueError, r"'alpha' must be in \(0, 1\)"),
+    # each had been taken: an infinite end made every cell NaN, udim 0 was the default, True a total
+    ({"domain": ("interval", 0, np.inf)}, ValueError, r"with finite a < b, got \('interval', 0, inf\)"),
+    ({"domain": ("interval", "a", "b")}, ValueError, r"with finite a < b"),
+    ({"udim": 0}, ValueError, r"'udim' must be an integer in \[1, 1024\], got 0"),
+    ({"udim": 2.0}, ValueError, r"'udim' must be an integer in \[1, 1024\], got 2.0"),
+    ({"udim": 1000, "sample_count": 10**6}, ValueError, r"1,000,000 samples of 1000 uniforms each"),
+    ({"total": True}, ValueError, r"'total' must be the pdf's integral over the domain, in \(0, 1\], "
+                                  r"got True"),
 ])
 def test_bad_arguments(kwargs, error, message):
     s = correct(CORRECT[0])
@@ -44,6 +52,14 @@ def test_a_domain_of_an_unknown_kind_is_refused_where_it_is_made():
     # with a KeyError
     with pytest.raises(ValueError, match=r"'domain' must be one of \('interval', .*\), got 'torus'"):
         Domain("torus")
+
+
+def test_a_domains_ends_are_finite_and_for_the_interval_only():
+    assert Domain("interval", np.int64(1), 2) == Domain("interval", 1.0, 2.0)
+    with pytest.raises(ValueError, match=r"the half line is 'half_line'\), got \(0.0, inf\)"):
+        Domain("interval", 0.0, np.inf)
+    with pytest.raises(ValueError, match="ends are for the interval only; the disk has none"):
+        Domain("disk", 0.0, 2.0)
 
 
 def test_wrong_point_shapes_are_named():

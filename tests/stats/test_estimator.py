@@ -2,6 +2,7 @@
 streams as the catalogue, its errors named, and every measurement that takes a catalogue name
 taking it too."""
 import math
+import re
 
 import numpy as np
 import pytest
@@ -77,6 +78,24 @@ def test_faulty_contributions_are_counted_with_their_uniforms():
 def test_contributions_refuse_bad_arguments(bad, message):
     with pytest.raises(ValueError, match=message):
         stats.Contributions(importance, **{"dim": 2, **bad})
+
+
+def test_contributions_take_numpy_scalars():
+    # a dim from an array's shape, a reference from numpy: had been refused
+    c = stats.Contributions(importance, np.int64(2), np.float32(1.0))
+    assert c.dim == 2 and type(c.dim) is int and c.reference == 1.0 and type(c.reference) is float
+
+
+@pytest.mark.parametrize("techniques, budgets, message", [
+    ([importance], [], "'budgets' needs at least one size, got []"),
+    ([importance], None, "'budgets' needs at least one size, got None"),
+    ([importance], [1024, 0], "'budgets' must be a positive whole number, got 0"),
+    ([], [1024], "'techniques' must name at least one technique, got none"),
+])
+def test_error_vs_time_refuses_what_gives_no_table(techniques, budgets, message):
+    # each had returned an empty table
+    with pytest.raises(ValueError, match=re.escape(message)):
+        stats.error_vs_time(None, techniques, budgets, 8, dim=2, reference=1.0)
 
 
 def test_replicate_convergence_and_error_vs_time_take_callables():

@@ -372,6 +372,16 @@ MISTAKES = {
     "no scenes": (
         '[[render]]\nadapter = "mitsuba"\nscene = []\n', 3, "scene",
         "expected a value or a non-empty list of values, got []"),
+    # tables written without headers, and sub-tables: had been named without a line
+    "a dotted suite key": (
+        'suite.samples = -1\n\n' + CASE, 1, "samples", "expected a budget > 0 samples, got -1"),
+    "an inline suite table": (
+        'suite = { name = "t", samples = -1 }\n\n' + CASE, 1, "samples", "expected a budget > 0 samples"),
+    "an inline array of cases": (
+        'case = [\n  { integrand = "gaussian" },  # {braces} in a comment\n  { integrand = "nope" },\n]\n', 3,
+        "integrand", "unknown integrand 'nope'"),
+    "a case's sub-table": (
+        CASE + '\n[case.colour]\nred = 1\n', 5, "colour", "unknown key 'colour'"),
 }
 
 

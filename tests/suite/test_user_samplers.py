@@ -67,6 +67,13 @@ class BadPole(Steps):
     pole = "y"
 
 
+class ExitingDomain(Steps):
+    @property
+    def domain(self):
+        import sys
+        sys.exit(3)
+
+
 def broken_factory(**params):
     raise RuntimeError("no such roughness")
 
@@ -154,6 +161,9 @@ def test_user_samplers_are_checked_and_xfailed(repo):
                                         "sequence of 1 coordinate sequence(s)"),
     ('sampler = "mysampler:BadPole"',
      "bad.toml:2: sampler: mysampler:BadPole: 'pole' 'y' is for the sphere only"),
+    # a property that calls sys.exit had ended the harness
+    ('sampler = "mysampler:ExitingDomain"',
+     "bad.toml:2: sampler: mysampler:ExitingDomain.domain called sys.exit(3)"),
 ])
 def test_user_sampler_mistakes_name_file_line_and_key(repo, table, message):
     (repo / "bad.toml").write_text(textwrap.dedent(f"[[sampler]]\n{table}\n"))
