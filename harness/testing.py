@@ -50,9 +50,10 @@ def assert_converges(integrand: Any, technique: Any = None, budgets: Sequence[in
                      dim: int | None = None, reference: float | None = None, rate: float = -0.5,
                      tolerance: float = 0.05, replicas: int = 32, seed: int = 0) -> stats.ConvergenceResult:
     """Fails when the RMSE's log-log slope is measurably worse than ``rate`` (one-sided p of
-    "slope <= rate + tolerance" under 0.025, from the slope's own law: verdict "slower than
-    expected").  The estimator is a catalogue integrand with its technique, or a
-    contributions callable with ``dim`` and ``reference``:
+    "slope <= rate + tolerance" under 0.025, from the permutation test of
+    harness.stats.slope_permutation: verdict "slower than expected").  The estimator is a
+    catalogue integrand with its technique, or a contributions callable with ``dim`` and
+    ``reference``:
     ``assert_converges(my_estimator, budgets=[256, 1024, 4096], dim=2, reference=0.349)``."""
     c = stats.convergence_rate(integrand, technique, budgets, replicas, dim=dim, reference=reference,
                                seed=seed, expected=rate, tolerance=tolerance)

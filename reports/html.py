@@ -132,16 +132,16 @@ def _convergence_section(figs: dict[tuple[str, str], plots.Group], pngs: list[by
     if not figs:
         return ""
     suites = {s for s, _ in figs}
-    parts = ['<section id="convergence"><h2>Convergence, error against time, efficiency</h2>'
-             '<p class="lead">Per integrand: left, the error of each technique at geometric budgets '
-             '(points with 95&nbsp;% intervals over replicas) and its fitted log-log slope with a bootstrap '
-             '95&nbsp;% interval (legend); the dashed grey line shows the expected Monte Carlo rate. Middle, '
-             'the same errors against the measured wall time per estimate. Right, the efficiency 1/(V·T) as '
-             'a ratio against the baseline technique with its 95&nbsp;% interval (the replicas ran '
-             'interleaved, so the machine&#8217;s state cancels). The table&#8217;s '
-             'log10 1/(V·T<sub>clock</sub>) is each technique&#8217;s own efficiency with T in ticks of a '
-             'reference clock timed beside each replica: its interval holds across runs; the figure in '
-             '1/s (CSV only) has an interval of one run&#8217;s machine state.</p>']
+    parts = ['<section id="convergence"><h2>Convergence, error against time, efficiency</h2><p '
+             'class="lead">Per integrand: left, the error of each technique at geometric budgets (points '
+             'with 95&nbsp;% intervals over replicas) and its fitted log-log slope with a permutation-test '
+             '95&nbsp;% interval (legend); the dashed grey line shows the expected Monte Carlo rate. '
+             'Middle, the same errors against the measured wall time per estimate. Right, the efficiency '
+             '1/(V·T) as a ratio against the baseline technique with its 95&nbsp;% interval (the replicas '
+             'ran interleaved, so the machine&#8217;s state cancels). The table&#8217;s log10 '
+             '1/(V·T<sub>clock</sub>) is each technique&#8217;s own efficiency with T in ticks of a '
+             'reference clock timed beside each replica: its interval holds across runs; the figure in 1/s '
+             '(CSV only) has an interval of one run&#8217;s machine state.</p>']
     nav = " · ".join(f'<a href="#int-{e(s)}-{e(i)}">{e(i)}</a>' for s, i in figs)
     parts.append(f'<p class="toc">{nav}</p>')
     for ((suite, integrand), group), png in zip(figs.items(), pngs):

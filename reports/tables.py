@@ -36,7 +36,8 @@ LABELS = {
                               "or from the replicas for stratified and Sobol' points); below it the "
                               "estimate ± its standard error and n = samples"),
     "convergence_slope": ("RMSE slope [95% CI]", "log-log slope of RMSE against samples per estimate, "
-                                                 "bootstrap 95 % interval; n = replicas over all budgets"),
+                                                 "permutation-test 95 % interval; n = replicas over all "
+                                                 "budgets"),
     "convergence": ("error slope [95% CI]", "log-log slope of the error against the budget, 95 % interval"),
     "efficiency_ratio": ("1/(V·T) ratio [95% CI]", "efficiency 1/(variance × time) as a ratio "
                                                          "against the baseline technique, 95 % interval; "

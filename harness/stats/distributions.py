@@ -16,7 +16,7 @@ import numpy as np
 from scipy import special
 
 __all__ = ["t_ppf", "t_cdf", "t_sf", "norm_ppf", "norm_sf", "chi2_ppf", "chi2_sf", "f_cdf",
-           "log_gamma_sum_sf", "log_gamma_sum_isf"]
+           "log_gamma_sum_sf"]
 
 
 def _out(v: Any) -> Any:
@@ -66,7 +66,6 @@ def chi2_sf(x: Any, k: Any) -> Any:
 def f_cdf(x: Any, d1: Any, d2: Any) -> Any:
     """P(F <= x) for Fisher's F with (d1, d2) degrees of freedom."""
     return _out(special.fdtr(d1, d2, x))
-
 
 
 def log_gamma_sum_sf(z: float, weights: Any, shapes: Any) -> float:
@@ -125,43 +124,3 @@ def log_gamma_sum_sf(z: float, weights: Any, shapes: Any) -> float:
     u = t * math.sqrt(curve)
     return float(min(max(special.ndtr(-r) + math.exp(-0.5 * r * r) / math.sqrt(2 * math.pi) * (1 / u - 1 / r),
                          0.0), 1.0))
-
-
-def log_gamma_sum_isf(q: float, weights: Any, shapes: Any) -> float:
-    """The z with :func:`log_gamma_sum_sf` (z) = q (0 < q < 1): a bracket widened from the
-    mean, then the Illinois variant of regula falsi on log sf (a dozen evaluations, to 1e-10 of
-    the law's standard deviation)."""
-    w = np.asarray(weights, dtype=np.float64)
-    a = np.asarray(shapes, dtype=np.float64)
-    mean = float(np.sum(w * (special.digamma(a) - np.log(a))))
-    sd = math.sqrt(float(np.sum(w * w * special.polygamma(1, a))))
-    target = math.log(q)
-
-    def f(z: float) -> float:   # decreasing in z
-        return math.log(max(log_gamma_sum_sf(z, w, a), 1e-300)) - target
-
-    lo, hi = mean - sd, mean + sd
-    f_lo, f_hi = f(lo), f(hi)
-    while f_lo < 0:
-        lo -= 2 * (hi - lo)
-        f_lo = f(lo)
-    while f_hi > 0:
-        hi += 2 * (hi - lo)
-        f_hi = f(hi)
-    side = 0
-    for _ in range(100):
-        z = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
-        fz = f(z)
-        if fz == 0 or hi - lo <= 1e-10 * sd:
-            return z
-        if fz > 0:
-            lo, f_lo = z, fz
-            if side == 1:
-                f_hi /= 2
-            side = 1
-        else:
-            hi, f_hi = z, fz
-            if side == -1:
-                f_lo /= 2
-            side = -1
-    return 0.5 * (lo + hi)

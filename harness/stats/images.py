@@ -329,7 +329,7 @@ def pixel_variance(images: np.ndarray, reference: Reference, spp: int) -> tuple[
 def as_replicates(scene: str, label: str, spp: int, errors: np.ndarray,
                   seconds: np.ndarray) -> stats.Replicates:
     """Replicas' relMSEs as stats.Replicates (error sqrt(relMSE) against 0), so convergence
-    slopes come from the same bootstrap fit as the core's: RMSE there is sqrt(mean relMSE)."""
+    slopes come from the same permutation-tested fit as the core's: RMSE there is sqrt(mean relMSE)."""
     e = np.sqrt(np.maximum(np.asarray(errors, dtype=np.float64), 0.0))
     return stats.Replicates(scene, label, int(spp), 0.0, e, np.asarray(seconds, dtype=np.float64), math.nan,
                             math.nan, False, 1)

@@ -4,7 +4,7 @@ estimator, harness.stats.estimator), as a case kind.
 Per case, as its measurements ask: a bias verdict (check_technique's test on independent
 batches, Holm-corrected across the suite's estimator cases at its family-wise alpha) and the
 per-sample variance from the same batches; a convergence slope of the RMSE over geometric
-budgets with a bootstrap interval; the efficiency 1/(V T) as a ratio against the case named
+budgets with a permutation-test interval; the efficiency 1/(V T) as a ratio against the case named
 by ``baseline`` (default: uniform Monte Carlo on the same catalogue integrand), and per case
 with T in seconds (this run's figure: its interval holds for this run's machine state only)
 and in ticks of the reference clock timed beside each replica (harness.stats.timing.CLOCK:

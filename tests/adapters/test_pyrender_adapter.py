@@ -193,12 +193,12 @@ def edges_reference() -> np.ndarray:
                                             ("sobol", -1.0, -0.65)])
 def test_antialiasing_converges_at_the_expected_rate(edges_reference, points, lo, hi):
     """Image RMSE against the reference over 8 replicas at 4, 16, 64, 256 frames, log-log slope
-    fitted by stats.fit_convergence (bootstrap over replicas; one replica's error is its image
-    RMSE).  Expected: random -1/2 (an average of iid frames; the reference adds < +0.01);
+    fitted by stats.fit_convergence (one replica's error is its image RMSE).  Expected: random
+    -1/2 (an average of iid frames; the reference adds < +0.01);
     jittered-stratified and Owen-scrambled Sobol' -3/4 (in 2-D the variance of a
     discontinuity along a curve falls as n^-3/2: only the ~sqrt(n) strata the edge crosses
-    vary).  The ranges are -1/2 +- 0.1 and [-1, -0.65]: 0.1 is about 4 bootstrap standard
-    errors for random (measured 0.026) and 7-10 for the others (0.010-0.012), and leaves room
+    vary).  The ranges are -1/2 +- 0.1 and [-1, -0.65]: 0.1 is about 4 standard errors of
+    the slope for random (measured 0.026) and 7-10 for the others (0.010-0.012), and leaves room
     for the pre-asymptotic bend at 4 frames; -0.65 still excludes the random rate by 0.15,
     and -1 (axis-aligned edges under a (0,m,2)-net) bounds what stratification can give."""
     r = pa.make_renderer({**EDGES, "points": points})

@@ -1,6 +1,6 @@
 """harness.stats: the unbiasedness test (false alarms and power measured on the calibration
-zoo), Holm, convergence rates, efficiency and error against time.  The result family's common
-surface is tested in test_results.py."""
+zoo), Holm, efficiency and error against time.  Convergence rates are tested in
+test_convergence.py, the result family's common surface in test_results.py."""
 from __future__ import annotations
 
 import math
@@ -270,63 +270,6 @@ def test_holm_rejects_bad_input():
         hs.holm([0.1, 1.5], 0.05)
 
 
-# --- convergence ---------------------------------------------------------------------------------
-BUDGETS = [256, 1024, 4096, 16384, 65536]
-
-
-def test_monte_carlo_converges_at_minus_one_half():
-    c = hs.convergence_rate("gaussian", "uniform", BUDGETS, 32, seed=0)
-    lo, hi = c.confidence_interval()
-    assert lo <= -0.5 <= hi and c.verdict == "as expected" and c.passed, c
-    assert list(c.table["n"]) == BUDGETS and (c.table["rmse_lo"] < c.table["rmse"]).all()
-    assert (c.table["rmse"] < c.table["rmse_hi"]).all() and c.table["rmse"].is_monotonic_decreasing
-
-
-@pytest.mark.parametrize("integrand, technique, rate", [
-    ("gaussian", "uniform/stratified", -1.5),  # smooth, 1-D: n^-3/2
-    ("step", "uniform/stratified", -1.0),      # one stratum holds the jump: n^-1
-    ("gaussian2d", "uniform/stratified", -1.0),  # smooth, 2-D jittered: n^-1/2 - 1/d = n^-1
-])
-def test_stratified_rates(integrand, technique, rate):
-    c = hs.convergence_rate(integrand, technique, BUDGETS, 32, seed=0, expected=rate)
-    lo, hi = c.confidence_interval()
-    assert lo - 0.05 <= rate <= hi + 0.05, c
-
-
-def test_owen_sobol_beats_monte_carlo_on_smooth_integrands():
-    for integrand in ("gaussian", "gaussian2d", "gaussian16"):
-        c = hs.convergence_rate(integrand, "uniform/sobol", BUDGETS, 32, seed=0)
-        assert c.confidence_interval().high < -0.75, c
-
-
-def test_a_zero_variance_estimator_at_the_rounding_level_is_not_slower_than_expected():
-    """Contributions equal to 0.3 up to a few ulp: the RMSE stays near 1e-17 at every budget,
-    slope ~0, which is rounding, not slow convergence."""
-    r = hs.convergence_rate(lambda u: u[:, 0] + (0.3 - u[:, 0]), dim=1, reference=0.3,
-                            budgets=[64, 256, 1024, 4096], replicas=16)
-    assert 0 < r.table["rmse"].max() <= r.rounding_floor and r.at_rounding_level
-    assert r.verdict == "as expected" and r.pvalue == 1.0 and "rounding level" in str(r)
-    slow = hs.convergence_rate(lambda u: u[:, 0], dim=1, reference=0.5, budgets=[64, 256, 1024], replicas=16)
-    assert not slow.at_rounding_level
-
-
-def test_a_biased_estimator_stops_converging_and_is_reported():
-    c = hs.convergence_rate("gaussian", "clamped:uniform(0.9)", BUDGETS, 16, seed=0)
-    assert c.verdict == "slower than expected" and not c.passed and abs(c.slope) < 0.1
-    assert str(c).startswith("slower than expected") and c.pvalue < c.alpha
-
-
-def test_convergence_is_reproducible():
-    a = hs.convergence_rate("step", "uniform", BUDGETS[:3], 16, seed=4)
-    b = hs.convergence_rate("step", "uniform", BUDGETS[:3], 16, seed=4)
-    assert a.slope == b.slope and a.confidence_interval() == b.confidence_interval()
-
-
-def test_convergence_needs_three_budgets():
-    with pytest.raises(ValueError, match="'budgets' needs at least 3 distinct sizes"):
-        hs.convergence_rate("gaussian", "uniform", [100, 100, 200], 16)
-
-
 # --- efficiency and error against time ---------------------------------------------------
 def test_efficiency_ratio_of_importance_sampling_over_uniform():
     """linear IS cuts the variance ~40x at ~5x the time per sample: its efficiency ratio
@@ -447,51 +390,3 @@ def test_error_against_time_table():
         assert g["rmse"].iloc[1] < g["rmse"].iloc[0], t
     strat = df[df["technique"] == "uniform/stratified"]["rmse"].iloc[-1]
     assert strat < df[df["technique"] == "uniform"]["rmse"].iloc[-1] / 50
-
-
-def test_a_convergence_slope_is_judged_by_its_own_law_and_pooled_errors_need_16_replicas():
-    # with the normal approximation and a bootstrap over 4 replicas a correct uniform MC failed
-    # 34 of 1000 seeds at the stated 0.025; the slope's own law holds the level at 4 replicas
-    fails = sum(not hs.convergence_rate("gaussian", "uniform", BUDGETS[:3], 4, seed=s).passed
-                for s in range(400))
-    assert fails <= 10, fails         # expected <= 10 at 0.025 (binomial 0.99 quantile: 10)
-    reps = [hs.replicate("gaussian", "uniform", n, 4, seed=2, case_id=i) for i, n in enumerate(BUDGETS[:3])]
-    fit = hs.fit_convergence(reps)
-    assert len(set(fit.shapes)) == 1 and 0 < fit.shapes[0] <= 2.0    # 4 replicas x at most 1/2
-    # the interval is the law's: its low end above the bound exactly where p < alpha
-    for seed in range(40):
-        c = hs.convergence_rate("gaussian", "uniform", BUDGETS[:3], 16, seed=seed)
-        low = c.confidence_interval(0.95).low
-        assert (low > -0.45) == (c.pvalue < c.alpha) == (c.verdict == "slower than expected")
-    # 2 replicas over 3 budgets could not reject even a flat RMSE (a clamped estimator had passed)
-    flat = hs.convergence_rate("gaussian", "clamped:uniform(0.9)", BUDGETS[:3], 2)
-    assert flat.verdict == "inconclusive" and "not even a flat RMSE would be rejected" in flat.inconclusive
-    assert math.isnan(flat.statistic) and flat.pvalue == 1.0
-    slow = hs.convergence_rate("gaussian", "clamped:uniform(0.9)", BUDGETS[:3], 16)
-    assert slow.verdict == "slower than expected"
-    pooled = hs.fit_convergence(reps, pooled=True)   # an image's relMSE: the bootstrap's spread judges it
-    assert pooled.verdict == "inconclusive" and pooled.passed and pooled.pvalue == 1.0
-    assert "4 replicas at a budget: a slope of pooled errors is judged from 16" in pooled.inconclusive
-    assert "not judged: 4 replicas" in str(pooled) and pooled.slope == fit.slope
-
-
-@pytest.mark.parametrize("kwargs, message", [
-    ({"expected": math.nan}, "'expected' must be a finite number, got nan"),     # had passed, p = 0
-    ({"tolerance": math.inf}, "'tolerance' must be a finite number"),
-    ({"tolerance": -0.1}, "'tolerance' must be >= 0"),
-    ({"bootstrap": 0}, "'bootstrap' must be a positive whole number"),          # had been an IndexError
-    ({"bootstrap": 1}, "'bootstrap' must be at least 100 resamples"),
-])
-def test_convergence_settings_are_checked_before_any_work(kwargs, message):
-    with pytest.raises(ValueError, match=message):
-        hs.convergence_rate("gaussian", "uniform", BUDGETS[:3], 16, **kwargs)
-
-
-def test_convergence_budgets_may_be_an_array_and_a_fit_needs_three():
-    c = hs.convergence_rate("gaussian", "uniform", np.array(BUDGETS[:3]), 16)    # had been ambiguous
-    assert list(c.table["n"]) == BUDGETS[:3]
-    with pytest.raises(ValueError, match="'budgets' must be a sequence of sample counts, got 256"):
-        hs.convergence_rate("gaussian", "uniform", 256, 16)
-    one = [hs.replicate("gaussian", "uniform", 1024, 16, seed=1, case_id=i) for i in range(3)]
-    with pytest.raises(ValueError, match="'budgets' needs at least 3 distinct sizes"):   # had passed
-        hs.fit_convergence(one)

@@ -250,7 +250,7 @@ def test_a_file_that_is_not_python_source_is_named(repo):
 
 
 def test_a_suites_convergence_with_four_replicas_is_judged(tmp_path):
-    # the slope's own law holds the level with few replicas (the normal approximation had not)
+    # the permutation test holds the level with few replicas (the normal approximation had not)
     (tmp_path / "few.toml").write_text('[suite]\nsamples = 4096\nreplicas = 4\nbudgets = [256, 1024, 4096]'
                                        '\n\n[[case]]\nintegrand = "gaussian"\ntechniques = "uniform"\n'
                                        'measurements = ["convergence"]\n')
