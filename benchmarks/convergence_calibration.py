@@ -7,7 +7,8 @@ bound and at the promised rate, by replica count and number of budgets.
 Two tables:
   at the bound   synthetic replicas whose errors fall exactly as n^(-0.45), the bound of the
                  default H0 (expected -0.5, tolerance 0.05), fitted by fit_convergence itself,
-                 for each error law of KINDS (pooled ones by fit_convergence(pooled=True)).
+                 for each error law of KINDS (pooled ones by fit_convergence(pooled=True)),
+                 and the power: normal errors falling as n^-0.30 ("slow").
                  The share rejected at p < 5 %, 1 %, 0.1 % is the test's level there;
                  "inconclusive" counts fits it refuses.
   the harness    convergence_rate("gaussian", "uniform", ...) over seeds: a correct estimator
@@ -28,7 +29,8 @@ LEVELS = (0.05, 0.01, 0.001)
 
 
 def synthetic(kind: str, replicas: int, budgets: int, seed: int) -> stats.ConvergenceResult:
-    """One fit of replicas whose RMSE falls as n^-0.45 exactly (``kind``: see KINDS)."""
+    """One fit of replicas whose RMSE falls as n^-0.45 exactly (``kind``: see KINDS), or as
+    n^-0.30 for the kind "slow" (normal errors: the test's power)."""
     rng = np.random.default_rng(seed)
     n = 256 * 4.0 ** np.arange(budgets)
     reps = []
@@ -41,6 +43,7 @@ def synthetic(kind: str, replicas: int, budgets: int, seed: int) -> stats.Conver
             draw = (k - size / 256) / np.sqrt(size / 256 * (1 - 1 / 256))
         else:
             draw = {"normal": lambda: rng.standard_normal(replicas),
+                    "slow": lambda: rng.standard_normal(replicas) * size ** 0.15,
                     "t5": lambda: rng.standard_t(5, replicas) / np.sqrt(5 / 3),
                     "lognormal": lambda: rng.lognormal(0.0, 1.0, replicas) - np.exp(0.5)}[kind]()
         reps.append(stats.Replicates("synthetic", kind, int(size), 0.0, draw * size ** -0.45,
@@ -53,6 +56,8 @@ def synthetic(kind: str, replicas: int, budgets: int, seed: int) -> stats.Conver
 #: shape changes with the budget, the one case the test is not exact for) and pooled (each
 #: replica the root mean square of 3072 t(3) "pixels", as a render's relMSE)
 KINDS = ("normal", "t5", "lognormal", "rare", "pooled")
+#: The test's power: normal errors whose RMSE falls as n^-0.30, 0.15 slower than the bound
+POWER = "slow"
 
 
 def main() -> None:
@@ -63,8 +68,9 @@ def main() -> None:
     ap.add_argument("--harness-seeds", type=int, default=2000)
     args = ap.parse_args()
     print(f"seeds: {args.seeds} at the bound, {args.harness_seeds} with the harness")
-    print("at the bound (slope -0.45): rejected at p < 5 % / 1 % / 0.1 %, inconclusive")
-    for kind in KINDS:
+    print("at the bound (slope -0.45; 'slow', the power: -0.30): rejected at p < 5 % / 1 % / 0.1 %, "
+          "inconclusive")
+    for kind in (*KINDS, POWER):
         for budgets in args.budgets:
             for replicas in args.replicas:
                 fits = [synthetic(kind, replicas, budgets, s) for s in range(args.seeds)]

@@ -68,9 +68,11 @@ def load_pair(a: str, b: str, *, db: str | Path | None = None) -> tuple[ReplicaS
     """The two replica sets ``a`` and ``b`` name (:func:`load_replicas`); a ValueError where
     both name one set (one folder, or one render case): its replicas compared with themselves
     had read "consistent, p = 1", a verdict about nothing."""
+    if db is None and Path(a).resolve() == Path(b).resolve():    # before reading either
+        raise ValueError(f"{a!r} and {b!r} name one replica set ({a}): compare takes two, one for each "
+                         "renderer or configuration")
     first, second = load_replicas(a, db=db), load_replicas(b, db=db)
-    same = first.source == second.source if db is not None else Path(a).resolve() == Path(b).resolve()
-    if same:
+    if first.source == second.source:
         raise ValueError(f"{a!r} and {b!r} name one replica set ({first.source}): compare takes two, "
                          "one for each renderer or configuration")
     return first, second

@@ -17,13 +17,15 @@ from harness.samplers.domains import Domain, Float32DirectionPdf
 from harness.stats.validate import count, integer_in
 from harness.usercode import UserCodeError, array_result, call, callable_name
 
-__all__ = ["MAX_SAMPLES", "MAX_UDIM", "checked_pdf", "checked_sample_count", "drawn_points", "uniforms"]
+__all__ = ["MAX_SAMPLES", "MAX_UDIM", "MAX_UNIFORMS", "checked_pdf", "checked_sample_count", "drawn_points",
+           "uniforms"]
 
 #: The most samples a check takes: it holds them in memory (0.9 GB for a plain sampler's 1e7)
 MAX_SAMPLES = 100_000_000
-#: The most canonical uniforms a sample may take (a rejection sampler takes several tries);
-#: the uniforms of a check, sample count times udim, number at most 4 MAX_SAMPLES (3.2 GB)
+#: The most canonical uniforms a sample may take (a rejection sampler takes several tries)
 MAX_UDIM = 1024
+#: The most uniforms a check holds, sample count times udim (3.2 GB)
+MAX_UNIFORMS = 4 * MAX_SAMPLES
 
 
 def checked_sample_count(sample_count: Any) -> int:
@@ -40,8 +42,8 @@ def uniforms(n: int, udim: Any, dom: Domain, seed: int, case_id: int) -> np.ndar
     None takes the domain's default, else an integer from 1 to :data:`MAX_UDIM` (0 had been
     taken for the default)."""
     d = dom.udim if udim is None else integer_in(udim, "udim", 1, MAX_UDIM)
-    if n * d > 4 * MAX_SAMPLES:
-        raise ValueError(f"{n:,} samples of {d} uniforms each: a check holds at most {4 * MAX_SAMPLES:,} "
+    if n * d > MAX_UNIFORMS:
+        raise ValueError(f"{n:,} samples of {d} uniforms each: a check holds at most {MAX_UNIFORMS:,} "
                          "uniforms in memory; take fewer samples")
     return rest.points(n, d, seed=seed, case_id=case_id)
 

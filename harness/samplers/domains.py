@@ -58,15 +58,19 @@ class Domain:
         if self.pole != "z" and self.kind != "sphere":
             raise ValueError(f"'pole' {self.pole!r} is for the sphere only; the {self.kind} has none "
                              "to choose")
-        ends_ok = all(isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v)
-                      for v in (self.lo, self.hi))
-        if not (ends_ok and self.lo < self.hi):   # an infinite end made every cell and map NaN
-            raise ValueError(f"an interval's ends must be finite numbers a < b (the half line is "
-                             f"'half_line'), got ({self.lo!r}, {self.hi!r})")
         if self.kind != "interval" and (self.lo, self.hi) != (0.0, 1.0):
             raise ValueError(f"ends are for the interval only; the {self.kind} has none to choose")
-        object.__setattr__(self, "lo", float(self.lo))
-        object.__setattr__(self, "hi", float(self.hi))
+        try:
+            ends = [float(v) for v in (self.lo, self.hi)
+                    if isinstance(v, numbers.Real) and not isinstance(v, bool)]
+        except OverflowError:     # an integer past the doubles
+            ends = []
+        # an infinite end, or a length past the doubles, made every cell and map NaN
+        if not (len(ends) == 2 and ends[0] < ends[1] and math.isfinite(ends[1] - ends[0])):
+            raise ValueError(f"an interval's ends must be finite numbers a < b, b - a a double (the half "
+                             f"line is 'half_line'), got ({self.lo!r}, {self.hi!r})")
+        object.__setattr__(self, "lo", ends[0])
+        object.__setattr__(self, "hi", ends[1])
 
     @property
     def k(self) -> int:

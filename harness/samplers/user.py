@@ -2,17 +2,21 @@
 
 Accepted (``resolve_sampler``): an object with ``sample(u)`` and ``pdf(x)`` methods and,
 optionally, ``domain`` (a domain name), ``total`` (the integral of its pdf where some u give
-no sample), ``udim`` (uniforms per sample), ``breaks`` (where its pdf steps or kinks, per
-parameter axis: check_sampler's) and ``pole`` (the sphere's: "x", "y" or "z"); a tuple
-``(sample, pdf)`` or ``(sample, pdf, domain)``; or a factory returning either (a class, or a
-callable without ``sample``), called with ``params`` (``GGX(alpha=0.3)``).
+no sample), ``udim`` (uniforms per sample, up to 1024), ``breaks`` (where its pdf steps or
+kinks, per parameter axis: check_sampler's) and ``pole`` (the sphere's: "x", "y" or "z";
+None: "z"); a tuple ``(sample, pdf)`` or ``(sample, pdf, domain)``; or a factory returning
+either (a class, or a callable without ``sample``), called with ``params``
+(``GGX(alpha=0.3)``).
 """
 from __future__ import annotations
 
+import inspect
+import numbers
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from harness.samplers.calls import MAX_UDIM
 from harness.samplers.domains import Domain
 from harness.usercode import USER_ERRORS, UserCodeError, raised
 
@@ -65,22 +69,33 @@ def resolve_sampler(obj: Any, params: dict[str, Any] | None = None, *, name: str
                             f"tuple or a factory of one, got a {type(obj).__name__}")
     if domain is not None and not isinstance(domain, str):
         raise UserCodeError(f"{name}: 'domain' must be a domain name, got {domain!r}")
-    if total is not None and (isinstance(total, bool) or not isinstance(total, (int, float))
+    if total is not None and (isinstance(total, bool) or not isinstance(total, numbers.Real)
                               or not 0 < total <= 1):
         raise UserCodeError(f"{name}: 'total' must be the pdf's integral, in (0, 1], got {total!r}")
-    if udim is not None and (isinstance(udim, bool) or not isinstance(udim, int) or udim < 1):
-        raise UserCodeError(f"{name}: 'udim' must be a positive integer, got {udim!r}")
+    if udim is not None and (isinstance(udim, bool) or not isinstance(udim, numbers.Integral)
+                             or not 1 <= udim <= MAX_UDIM):
+        raise UserCodeError(f"{name}: 'udim' must be an integer from 1 to {MAX_UDIM}, got {udim!r}")
     try:    # the pole as Domain takes it (which domain it is for, the suite or the caller checks)
         Domain("sphere", pole=pole)
     except ValueError as e:
         raise UserCodeError(f"{name}: {e}") from None
-    return UserSampler(name, sample, pdf, domain, None if total is None else float(total), udim, breaks, pole)
+    return UserSampler(name, sample, pdf, domain, None if total is None else float(total),
+                       None if udim is None else int(udim), breaks, pole)
 
 
 def _attribute(obj: Any, key: str, name: str) -> Any:
-    """``obj.key``, None where it has none; a property that raises (or calls sys.exit) is a
-    UserCodeError naming it (had been a traceback, or the harness's exit)."""
+    """``obj.key``, None where it has none.  An attribute it has (found without running it)
+    whose property raises, AttributeError included, or calls sys.exit is a UserCodeError
+    naming it: a property's AttributeError had read as "no such attribute" (a total of None),
+    its sys.exit had ended the harness."""
     try:
-        return getattr(obj, key, None)
+        inspect.getattr_static(obj, key)
+    except AttributeError:   # none, or one __getattr__ makes: as getattr finds it
+        try:
+            return getattr(obj, key, None)
+        except USER_ERRORS as e:
+            raise UserCodeError(f"{name}.{key} {raised(e)}") from e
+    try:
+        return getattr(obj, key)
     except USER_ERRORS as e:
         raise UserCodeError(f"{name}.{key} {raised(e)}") from e

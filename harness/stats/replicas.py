@@ -200,8 +200,8 @@ def error_vs_time(integrand: Any, techniques: Sequence[Any], budgets: Sequence[i
     contributions callables (or :class:`~harness.stats.estimator.Contributions`) of one
     integral, with ``dim`` and ``reference`` for the bare callables.  Columns: technique, n,
     rmse, rmse_lo, rmse_hi (chi-square interval), seconds (median per estimate), seconds_se,
-    replicas.  Plot rmse against seconds on log-log axes to see which technique reaches a
-    given error first.
+    replicas; per technique a row per distinct budget, smallest first.  Plot rmse against
+    seconds on log-log axes to see which technique reaches a given error first.
     """
     budgets = sizes(budgets, "budgets", 1)
     techniques = list(techniques)

@@ -46,7 +46,7 @@ class Locator:
                 return start + 1
             # a key inside the table, not its header ("sampler" in [[sampler]])
             return self._key_line(start + 1, end, name + ".", key)
-        return self._inline(name, index - len(starts), key)
+        return self._inline(name, None if isinstance(table, str) else index - len(starts), key)
 
     def _key_line(self, start: int, end: int, prefix: str, key: str | None) -> int | None:
         """The first line in [start, end) that sets ``key``: ``key = ``, a dotted ``key.x =``,
@@ -59,10 +59,10 @@ class Locator:
                 return i + 1
         return None
 
-    def _inline(self, name: str, index: int, key: str | None) -> int | None:
+    def _inline(self, name: str, index: int | None, key: str | None) -> int | None:
         """The line of table ``name`` written without a header (its ``index``-th element where
-        it is an inline array of tables), at the top level: ``name.key = ``, ``name = {...}``
-        or ``name = [{...}, ...]``; None where it is not there."""
+        it is an inline array of tables; None for a table), at the top level: ``name.key = ``,
+        ``name = {...}`` or ``name = [{...}, ...]``; None where it is not there."""
         n = re.escape(name)
         if key is not None:   # a dotted key at the top level
             dotted = re.compile(r"^\s*%s\s*\.\s*%s\s*(=|\.)" % (n, re.escape(key)))
@@ -73,24 +73,27 @@ class Locator:
         first = next((i for i, line in enumerate(self.lines) if assign.match(line)), None)
         if first is None:
             return None
-        element = self._array_element(first, index)
+        element = None if index is None else self._array_element(first, index)
         return (element if element is not None else first) + 1
 
     def _array_element(self, first: int, index: int) -> int | None:
         """The line where the ``index``-th inline table of the array assigned on line
-        ``first`` opens (strings skipped: braces inside them do not count)."""
+        ``first`` opens (strings skipped, multi-line ones too: braces inside them do not
+        count)."""
         text = "\n".join(self.lines[first:])
         start = text.find("=")
         depth, seen, i, quote = 0, -1, start + 1, ""
         while i < len(text):
             c = text[i]
             if quote:
-                if c == "\\" and quote == '"':
+                if c == "\\" and quote[0] == '"':
                     i += 1
-                elif c == quote:
+                elif text.startswith(quote, i):
+                    i += len(quote) - 1
                     quote = ""
             elif c in "\"'":
-                quote = c
+                quote = c * 3 if text.startswith(c * 3, i) else c
+                i += len(quote) - 1
             elif c == "#":
                 i = text.find("\n", i) if "\n" in text[i:] else len(text)
                 continue

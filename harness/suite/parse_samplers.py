@@ -7,7 +7,7 @@ from typing import Any
 
 import reference_estimators as rest
 
-from harness.samplers.check import MAX_SAMPLES
+from harness.samplers.calls import MAX_SAMPLES, MAX_UNIFORMS
 from harness.suite.locate import Locator
 from harness.suite.model import SAMPLER_MEASUREMENTS, SamplerCase, SuiteError
 from harness.suite.rules import check_keys, named_key, xfail_reason
@@ -107,6 +107,10 @@ def _user_sampler(c: dict[str, Any], samples: int, case_id: int, base: Path, whe
     if total is not None and not 0 < total <= 1:
         raise SuiteError(where.at(table, "total", f"expected the pdf's integral, in (0, 1], got {total}"))
     n = _samples(c, samples, where, table)
+    if user.udim is not None and n * user.udim > MAX_UNIFORMS:   # the check would refuse it in the run
+        raise SuiteError(where.at(table, "samples" if "samples" in c else "sampler",
+                                  f"{n:,} samples of {user.udim} uniforms each ({target}.udim): a check "
+                                  f"holds at most {MAX_UNIFORMS:,} uniforms in memory; take fewer samples"))
     ms = c.get("measurements", ["chi_square"])
     for m in ms:
         if m not in ("chi_square", "mcmc"):

@@ -59,7 +59,10 @@ def test_a_domains_ends_are_finite_and_for_the_interval_only():
     with pytest.raises(ValueError, match=r"the half line is 'half_line'\), got \(0.0, inf\)"):
         Domain("interval", 0.0, np.inf)
     with pytest.raises(ValueError, match="ends are for the interval only; the disk has none"):
-        Domain("disk", 0.0, 2.0)
+        Domain("disk", 0.0, np.inf)
+    for ends in ((0, 10 ** 400), (-1e308, 1e308)):   # an OverflowError, and a length past the doubles
+        with pytest.raises(ValueError, match=r"finite numbers a < b, b - a a double"):
+            Domain("interval", *ends)
 
 
 def test_wrong_point_shapes_are_named():

@@ -382,6 +382,13 @@ MISTAKES = {
         "integrand", "unknown integrand 'nope'"),
     "a case's sub-table": (
         CASE + '\n[case.colour]\nred = 1\n', 5, "colour", "unknown key 'colour'"),
+    "a dotted suite key before an inline array": (   # had named the array's line
+        'suite.samples = 50\ncase = [{ integrand = "gaussian", techniques = "uniform" }]\n', 1, "batches",
+        "expected an integer in [8, samples = 50], got 64"),
+    "an inline array past multi-line strings": (     # their quotes and braces had ended the scan
+        "case = [\n  { integrand = \"gaussian\", xfail = '''it's {odd}''' },\n"
+        '  { integrand = "gaussian", xfail = """a 5" {screen}""" },\n  { integrand = "nope" },\n]\n', 4,
+        "integrand", "unknown integrand 'nope'"),
 }
 
 

@@ -74,6 +74,20 @@ class ExitingDomain(Steps):
         sys.exit(3)
 
 
+class BrokenTotal(Steps):
+    @property
+    def total(self):
+        return self._total
+
+
+class ManyUniforms(Steps):
+    udim = 500
+
+
+class TooManyUniforms(Steps):
+    udim = 2000
+
+
 def broken_factory(**params):
     raise RuntimeError("no such roughness")
 
@@ -164,6 +178,16 @@ def test_user_samplers_are_checked_and_xfailed(repo):
     # a property that calls sys.exit had ended the harness
     ('sampler = "mysampler:ExitingDomain"',
      "bad.toml:2: sampler: mysampler:ExitingDomain.domain called sys.exit(3)"),
+    # a property's own AttributeError had read as "no total"
+    ('sampler = "mysampler:BrokenTotal"',
+     "bad.toml:2: sampler: mysampler:BrokenTotal.total raised AttributeError: 'BrokenTotal' object has no "
+     "attribute '_total'"),
+    # the check's limit on the uniforms it holds: had loaded, then stopped the run with a traceback
+    ('sampler = "mysampler:ManyUniforms"\nsamples = 1_000_000',
+     "bad.toml:3: samples: 1,000,000 samples of 500 uniforms each (mysampler:ManyUniforms.udim): a check "
+     "holds at most 400,000,000 uniforms"),
+    ('sampler = "mysampler:TooManyUniforms"',
+     "bad.toml:2: sampler: mysampler:TooManyUniforms: 'udim' must be an integer from 1 to 1024, got 2000"),
 ])
 def test_user_sampler_mistakes_name_file_line_and_key(repo, table, message):
     (repo / "bad.toml").write_text(textwrap.dedent(f"[[sampler]]\n{table}\n"))
