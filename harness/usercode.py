@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["UserCodeError", "load_attr", "call", "array_result", "describe", "callable_name",
+__all__ = ["UserCodeError", "load_attr", "call", "array_result", "real_array", "describe", "callable_name",
            "source_fingerprint", "USER_ERRORS", "raised"]
 
 
@@ -126,18 +126,33 @@ def call(fn: Callable[..., Any], name: str, *args: Any, what: str = "") -> Any:
                             + (f"; expected to return {what}" if what else "") + ")") from e
 
 
+def real_array(value: Any) -> np.ndarray:
+    """A user's numbers as a float64 array: booleans, integers and floats of any width (a
+    Dr.Jit tensor or a list too), and objects that cast to float64; a ValueError saying what
+    it is otherwise: "a list that is no array (...)", "a ndarray of complex128 values" (numpy's
+    cast would keep their real part, with only a warning), "a ndarray of <U3 values" (it
+    would parse strings).  Shared by every place that takes a team's arrays (contributions,
+    points, pdf values, images), so all take the same ones."""
+    try:
+        raw = np.asarray(value)
+    except (TypeError, ValueError) as e:   # a ragged list, an object whose __array__ raises
+        raise ValueError(f"a {type(value).__name__} that is no array ({e})") from None
+    if raw.dtype.kind not in "biufO":
+        raise ValueError(f"a {type(value).__name__} of {raw.dtype} values")
+    try:
+        return raw.astype(np.float64, copy=False)
+    except (TypeError, ValueError) as e:   # objects that are no numbers
+        raise ValueError(f"a {type(value).__name__} of objects that are no numbers ({e})") from None
+
+
 def array_result(value: Any, shape: tuple[int, ...] | None, name: str, given: str) -> np.ndarray:
     """A user's return value as float64 of exactly ``shape`` (any shape where None), or a
     UserCodeError saying what came back, for which input, and what was expected."""
     want = "a float array" + (f" of shape {shape}" if shape is not None else "")
     try:
-        raw = np.asarray(value)
-        if np.iscomplexobj(raw):   # numpy's cast would keep the real part, with only a warning
-            raise TypeError("complex values")
-        a = raw.astype(np.float64, copy=False)
-    except (TypeError, ValueError) as e:
-        raise UserCodeError(f"{name} returned {type(value).__name__} for {given}; "
-                            f"expected {want} ({e})") from None
+        a = real_array(value)
+    except ValueError as e:
+        raise UserCodeError(f"{name} returned {e} for {given}; expected {want}") from None
     if shape is not None and a.shape != shape:
         raise UserCodeError(f"{name} returned shape {a.shape} for {given}; expected shape {shape}")
     return a

@@ -33,7 +33,7 @@ from typing import Any, Callable, Protocol
 
 import numpy as np
 
-from harness.usercode import USER_ERRORS, raised
+from harness.usercode import USER_ERRORS, raised, real_array
 
 __all__ = ["Render", "Renderer", "RenderError", "ImageFaults", "image_faults", "read_image", "renderer",
            "checked_render", "image_array", "adapter_names", "check_spec", "file_digest", "ExactImage",
@@ -162,16 +162,9 @@ def renderer(adapter: str, spec: dict[str, Any], *, base: Path | None = None) ->
 
 def image_array(image: Any) -> np.ndarray:
     """A renderer's image as float64 (height, width, channels), a (height, width) one with one
-    channel; otherwise a ValueError saying what it is ("a list that is no array (...)", "a
-    ndarray of complex128 values": numpy's cast would keep their real part, with only a
-    warning; "an image of shape (2,)"), for the caller to say what was expected."""
-    try:
-        a = np.asarray(image)
-    except (TypeError, ValueError) as e:   # a ragged list, an object whose __array__ raises
-        raise ValueError(f"a {type(image).__name__} that is no array ({e})") from None
-    if a.dtype.kind not in "fiu":
-        raise ValueError(f"a {type(image).__name__} of {a.dtype} values")
-    a = a.astype(np.float64, copy=False)
+    channel; otherwise a ValueError saying what it is (:func:`harness.usercode.real_array`'s
+    words, or "an image of shape (2,)"), for the caller to say what was expected."""
+    a = real_array(image)
     if a.ndim == 2:
         a = a[:, :, None]
     if a.ndim != 3 or 0 in a.shape:

@@ -56,7 +56,8 @@ def test_errors_name_the_callable_the_input_and_the_expected_output():
     with pytest.raises(UserCodeError, match=r"boom raised KeyError: 'albedo' \(called on shape \(100, 2\), "
                                             r"float64; expected to return contributions of shape \(100,\)\)"):
         stats.Contributions(boom, 2).estimate(100)
-    with pytest.raises(UserCodeError, match=r"returned str .*expected a float array of shape \(100,\)"):
+    with pytest.raises(UserCodeError,      # a string had been parsed as a number where it was one
+                       match=r"returned a str of <U1 values .*expected a float array of shape \(100,\)"):
         stats.Contributions(lambda u: "x", 2).estimate(100)
 
 

@@ -234,7 +234,8 @@ def test_wrong_output_shape_is_named():
     for bad, message in ((lambda u: 1 / 0, r"<lambda> raised ZeroDivisionError: division by zero \(called on "
                                            r"shape \(1000, 1\), float64; expected to return contributions"),
                          (lambda u: sys.exit(3), r"<lambda> called sys.exit\(3\)"),
-                         (lambda u: u[:, 0] + 1j, r"<lambda> returned ndarray .* \(complex values\)")):
+                         (lambda u: u[:, 0] + 1j, r"<lambda> returned a ndarray of complex128 values"),
+                         (lambda u: np.full(len(u), "0.5"), r"<lambda> returned a ndarray of <U3 values")):
         with pytest.raises(ValueError, match=message):
             hs.check_unbiased(bad, 1, 0.5, sample_count=64_000)
     with pytest.raises(ValueError, match=r"'reference' must be a finite number, got '0.7'"):

@@ -208,8 +208,8 @@ def _error(repo, case: str) -> str:
     ('[[case]]\nestimator = "myest:uniform"\nreference = 1.0\n',
      "bad.toml:1: missing key 'dim' (canonical uniforms per sample of the estimator)"),
     ('[[case]]\nestimator = "myest:complex_"\ndim = 1\nreference = 1.0\n',    # had kept the real part
-     "bad.toml:2: estimator: myest:complex_ returned ndarray for uniforms of shape (4, 1), float64; "
-     "expected a float array of shape (4,) (complex values)"),
+     "bad.toml:2: estimator: myest:complex_ returned a ndarray of complex128 values for uniforms of shape "
+     "(4, 1), float64; expected a float array of shape (4,)"),
     ('[[case]]\nestimator = "myest:uniform"\ndim = 0\nreference = 1.0\n',
      "bad.toml:3: dim: expected a positive number of uniforms per sample, at most 1024 (each call gets 65536 "
      "rows of them), got 0"),
