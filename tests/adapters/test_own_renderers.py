@@ -377,8 +377,11 @@ def test_a_render_is_taken_as_the_store_takes_it_and_complex_values_are_refused(
 
     flat = base.checked_render(Returns([[1.0, 2.0], [3.0, 4.0]]), "flat", 4, 1)
     assert flat.image.shape == (2, 2, 1) and flat.image.dtype == np.float64 and flat.seconds == 0.01
+    mask = base.checked_render(Returns(np.eye(2, dtype=bool)), "flat", 4, 1)   # as contributions take it
+    assert mask.image.dtype == np.float64 and mask.image.sum() == 2.0
     for image, message in ((np.ones((2, 2, 3)) * 1j, r"returned a ndarray of complex128 values; expected"),
                            ([[1.0], [2.0, 3.0]], r"returned a list that is no array"),
+                           (np.full((2, 2), "0.5"), r"returned a ndarray of <U3 values"),
                            (np.ones(4), r"returned an image of shape \(4,\)")):
         with pytest.raises(RenderError, match=r"adapter 'flat': render\(spp=4, seed=1\) " + message):
             base.checked_render(Returns(image), "flat", 4, 1)
