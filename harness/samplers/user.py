@@ -90,12 +90,10 @@ def _attribute(obj: Any, key: str, name: str) -> Any:
     its sys.exit had ended the harness."""
     try:
         inspect.getattr_static(obj, key)
+        has = True
     except AttributeError:   # none, or one __getattr__ makes: as getattr finds it
-        try:
-            return getattr(obj, key, None)
-        except USER_ERRORS as e:
-            raise UserCodeError(f"{name}.{key} {raised(e)}") from e
+        has = False
     try:
-        return getattr(obj, key)
+        return getattr(obj, key) if has else getattr(obj, key, None)
     except USER_ERRORS as e:
         raise UserCodeError(f"{name}.{key} {raised(e)}") from e

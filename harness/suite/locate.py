@@ -30,7 +30,7 @@ class Locator:
 
     def _find(self, table: Any, key: str | None) -> int | None:
         if table is None:
-            return self._key_line(0, len(self.lines), "", key)
+            return self._key_line(0, len(self.lines), None, key)
         name, index = (table, 0) if isinstance(table, str) else table
         n = re.escape(name)
         header = re.compile((r"^\s*\[\s*%s\s*\]" if isinstance(table, str) else r"^\s*\[\[\s*%s\s*\]\]") % n)
@@ -45,15 +45,14 @@ class Locator:
             if key is None:
                 return start + 1
             # a key inside the table, not its header ("sampler" in [[sampler]])
-            return self._key_line(start + 1, end, name + ".", key)
+            return self._key_line(start + 1, end, name, key)
         return self._inline(name, None if isinstance(table, str) else index - len(starts), key)
 
-    def _key_line(self, start: int, end: int, prefix: str, key: str | None) -> int | None:
+    def _key_line(self, start: int, end: int, table: str | None, key: str | None) -> int | None:
         """The first line in [start, end) that sets ``key``: ``key = ``, a dotted ``key.x =``,
-        or a header ``[key]`` / ``[prefix key]`` (``prefix``: the enclosing table's name and
-        a dot, for a sub-table)."""
-        k = re.escape(key or "")
-        pattern = re.compile(r"^\s*(\[+\s*(%s\s*\.\s*)?)?%s\s*(=|\]|\.)" % (re.escape(prefix.rstrip(".")), k))
+        or a header ``[key]``, or ``[table.key]`` for a sub-table of the enclosing ``table``."""
+        sub = r"(%s\s*\.\s*)?" % re.escape(table) if table else ""
+        pattern = re.compile(r"^\s*(\[+\s*%s)?%s\s*(=|\]|\.)" % (sub, re.escape(key or "")))
         for i in range(start, end):
             if pattern.match(self.lines[i]):
                 return i + 1
